@@ -1,0 +1,792 @@
+//! Vehicle commands and their acknowledgements.
+//!
+//! Every flight, camera and payload instruction from any gateway or engine is a
+//! [`VehicleCommand`] sample on `skymesh/vehicle/{id}/command`; `autopilot-link` is the
+//! only subscriber that acts on it and answers each one with a [`CommandAck`].
+//!
+//! The wire struct is plain data; code builds and reads it through the typed
+//! [`Command`] enum. Both directions validate: non-finite or out-of-range numbers and
+//! unknown kinds are refused with a [`CommandError`], so a corrupt or hostile sample
+//! never becomes a MAVLink message.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::fixed::FixedStr;
+use crate::header::SampleHeader;
+use crate::vehicle::FlightMode;
+use crate::wire_enum;
+
+wire_enum! {
+    /// Who sent a command. Flight authority priorities are decided by the arbiter.
+    pub enum CommandSource: u8 {
+        /// Failsafes, geofence, emergency stop.
+        Safety = 0 => "safety",
+        ManualRc = 1 => "manual_rc",
+        DjiDrc = 2 => "dji_drc",
+        ShotEngine = 3 => "shot_engine",
+        SwarmQueue = 4 => "swarm_queue",
+        Imc = 5 => "imc",
+        Vision = 6 => "vision",
+        /// Local operator tools (`skymesh` CLI) and tests.
+        Operator = 7 => "operator",
+    }
+}
+
+wire_enum! {
+    /// What a [`VehicleCommand`] asks for; selects how its parameters are read.
+    pub enum CommandKind: u8 {
+        Arm = 1 => "arm",
+        Disarm = 2 => "disarm",
+        SetMode = 3 => "set_mode",
+        Takeoff = 4 => "takeoff",
+        Land = 5 => "land",
+        ReturnToLaunch = 6 => "return_to_launch",
+        GoTo = 7 => "go_to",
+        VelocityNed = 8 => "velocity_ned",
+        SetYaw = 9 => "set_yaw",
+        SetRoi = 10 => "set_roi",
+        ClearRoi = 11 => "clear_roi",
+        Gimbal = 12 => "gimbal",
+        CameraCapture = 13 => "camera_capture",
+        RecordStart = 14 => "record_start",
+        RecordStop = 15 => "record_stop",
+        Servo = 16 => "servo",
+        Brake = 17 => "brake",
+        EmergencyStop = 18 => "emergency_stop",
+    }
+}
+
+wire_enum! {
+    /// Outcome of a command.
+    pub enum AckResult: u8 {
+        Accepted = 0 => "accepted",
+        Refused = 1 => "refused",
+        /// Accepted by the autopilot and still running (long commands).
+        InProgress = 2 => "in_progress",
+    }
+}
+
+wire_enum! {
+    /// Why a command was refused (`None` when accepted).
+    pub enum RefusalReason: u16 {
+        None = 0 => "none",
+        /// The autopilot did not answer within the command timeout.
+        Timeout = 1 => "timeout",
+        /// The autopilot answered MAV_RESULT_DENIED.
+        Denied = 2 => "denied",
+        /// The autopilot answered MAV_RESULT_UNSUPPORTED, or skymesh cannot map it.
+        Unsupported = 3 => "unsupported",
+        /// The autopilot answered MAV_RESULT_FAILED.
+        Failed = 4 => "failed",
+        /// The autopilot answered MAV_RESULT_TEMPORARILY_REJECTED.
+        TemporarilyRejected = 5 => "temporarily_rejected",
+        /// A parameter was not finite or out of range, or the kind is unknown.
+        InvalidParameter = 6 => "invalid_parameter",
+        /// No autopilot heartbeat: nothing can be executed.
+        LinkDown = 7 => "link_down",
+        /// Another source holds authority.
+        NoAuthority = 8 => "no_authority",
+        /// The target lies outside the geofence envelope.
+        Geofence = 9 => "geofence",
+        /// The sample was older than its maximum age when it arrived.
+        Stale = 10 => "stale",
+        /// Addressed to another vehicle.
+        WrongVehicle = 11 => "wrong_vehicle",
+        /// The vehicle is not in a state that allows it (e.g. not GUIDED for a setpoint).
+        WrongState = 12 => "wrong_state",
+        /// Superseded by a newer command before the autopilot answered.
+        Cancelled = 13 => "cancelled",
+    }
+}
+
+/// Flag bits of [`VehicleCommand::flags`].
+pub mod flags {
+    /// Arm/disarm bypassing the autopilot's checks (ArduPilot magic 21196).
+    pub const FORCE: u8 = 0x01;
+    /// `GoTo`: `f[1]` holds a yaw to face.
+    pub const HAS_YAW: u8 = 0x02;
+    /// `GoTo`: `f[2]` holds a ground speed.
+    pub const HAS_SPEED: u8 = 0x04;
+    /// `SetYaw`: the angle is relative to the current heading.
+    pub const RELATIVE: u8 = 0x08;
+    /// `VelocityNed`: `f[3]` holds a yaw rate.
+    pub const HAS_YAW_RATE: u8 = 0x10;
+}
+
+/// Sanity limits applied at conversion; the arbiter's envelope is stricter.
+pub mod limits {
+    pub const MAX_ALT_M: f32 = 10_000.0;
+    pub const MIN_ALT_M: f32 = -1_000.0;
+    pub const MAX_TAKEOFF_ALT_M: f32 = 1_000.0;
+    pub const MAX_SPEED_MPS: f32 = 50.0;
+    pub const MAX_YAW_RATE_DPS: f32 = 720.0;
+    pub const MAX_GIMBAL_DEG: f32 = 360.0;
+    pub const PWM_US: core::ops::RangeInclusive<u16> = 500..=2500;
+    pub const SERVO_CHANNELS: core::ops::RangeInclusive<u8> = 1..=32;
+}
+
+/// A typed command. Build a [`VehicleCommand`] from it with [`VehicleCommand::new`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    Arm {
+        force: bool,
+    },
+    Disarm {
+        force: bool,
+    },
+    SetMode(FlightMode),
+    /// Climb to `alt_rel_m` above home (vehicle must be GUIDED and armed).
+    Takeoff {
+        alt_rel_m: f32,
+    },
+    Land,
+    ReturnToLaunch,
+    /// Fly to a position (GUIDED), optionally facing `yaw_deg` at `speed_mps`.
+    GoTo {
+        lat_deg: f64,
+        lon_deg: f64,
+        alt_rel_m: f32,
+        yaw_deg: Option<f32>,
+        speed_mps: Option<f32>,
+    },
+    /// Velocity setpoint in NED, m/s, with an optional yaw rate (deg/s).
+    VelocityNed {
+        vel_ned_mps: [f32; 3],
+        yaw_rate_dps: Option<f32>,
+    },
+    /// Face `yaw_deg` (absolute 0..360, or relative ±) turning at `rate_dps` (0 = default).
+    SetYaw {
+        yaw_deg: f32,
+        rate_dps: f32,
+        relative: bool,
+    },
+    SetRoi {
+        lat_deg: f64,
+        lon_deg: f64,
+        alt_rel_m: f32,
+    },
+    ClearRoi,
+    Gimbal {
+        pitch_deg: f32,
+        yaw_deg: f32,
+    },
+    CameraCapture,
+    RecordStart,
+    RecordStop,
+    Servo {
+        channel: u8,
+        pwm_us: u16,
+    },
+    /// Stop and hold position now.
+    Brake,
+    /// Cut the motors. Kills a flying vehicle: safety source only (enforced by the arbiter).
+    EmergencyStop,
+}
+
+/// Why a command could not be converted.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    #[error("command kind {0} is unknown")]
+    UnknownKind(u8),
+    #[error("command source {0} is unknown")]
+    UnknownSource(u8),
+    #[error("parameter {name} is not a finite number")]
+    NotFinite { name: &'static str },
+    #[error("parameter {name} = {value} is outside {min}..={max}")]
+    OutOfRange {
+        name: &'static str,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+    #[error("flight mode {0} cannot be commanded")]
+    BadMode(u8),
+}
+
+impl CommandError {
+    /// The refusal reason to put in the [`CommandAck`].
+    pub fn reason(&self) -> RefusalReason {
+        RefusalReason::InvalidParameter
+    }
+}
+
+fn check(name: &'static str, value: f64, min: f64, max: f64) -> Result<(), CommandError> {
+    if !value.is_finite() {
+        return Err(CommandError::NotFinite { name });
+    }
+    if value < min || value > max {
+        return Err(CommandError::OutOfRange {
+            name,
+            value,
+            min,
+            max,
+        });
+    }
+    Ok(())
+}
+
+fn check_position(lat: f64, lon: f64, alt: f32) -> Result<(), CommandError> {
+    check("lat_deg", lat, -90.0, 90.0)?;
+    check("lon_deg", lon, -180.0, 180.0)?;
+    check(
+        "alt_rel_m",
+        alt.into(),
+        limits::MIN_ALT_M.into(),
+        limits::MAX_ALT_M.into(),
+    )
+}
+
+impl Command {
+    pub fn kind(&self) -> CommandKind {
+        match self {
+            Command::Arm { .. } => CommandKind::Arm,
+            Command::Disarm { .. } => CommandKind::Disarm,
+            Command::SetMode(_) => CommandKind::SetMode,
+            Command::Takeoff { .. } => CommandKind::Takeoff,
+            Command::Land => CommandKind::Land,
+            Command::ReturnToLaunch => CommandKind::ReturnToLaunch,
+            Command::GoTo { .. } => CommandKind::GoTo,
+            Command::VelocityNed { .. } => CommandKind::VelocityNed,
+            Command::SetYaw { .. } => CommandKind::SetYaw,
+            Command::SetRoi { .. } => CommandKind::SetRoi,
+            Command::ClearRoi => CommandKind::ClearRoi,
+            Command::Gimbal { .. } => CommandKind::Gimbal,
+            Command::CameraCapture => CommandKind::CameraCapture,
+            Command::RecordStart => CommandKind::RecordStart,
+            Command::RecordStop => CommandKind::RecordStop,
+            Command::Servo { .. } => CommandKind::Servo,
+            Command::Brake => CommandKind::Brake,
+            Command::EmergencyStop => CommandKind::EmergencyStop,
+        }
+    }
+
+    /// Refuses non-finite and out-of-range parameters.
+    pub fn validate(&self) -> Result<(), CommandError> {
+        use limits::*;
+        match *self {
+            Command::SetMode(mode) => {
+                if mode.to_copter_custom_mode().is_none() {
+                    return Err(CommandError::BadMode(mode.to_wire()));
+                }
+            }
+            Command::Takeoff { alt_rel_m } => {
+                check("alt_rel_m", alt_rel_m.into(), 0.5, MAX_TAKEOFF_ALT_M.into())?
+            }
+            Command::GoTo {
+                lat_deg,
+                lon_deg,
+                alt_rel_m,
+                yaw_deg,
+                speed_mps,
+            } => {
+                check_position(lat_deg, lon_deg, alt_rel_m)?;
+                if let Some(y) = yaw_deg {
+                    check("yaw_deg", y.into(), -360.0, 360.0)?;
+                }
+                if let Some(s) = speed_mps {
+                    check("speed_mps", s.into(), 0.0, MAX_SPEED_MPS.into())?;
+                }
+            }
+            Command::VelocityNed {
+                vel_ned_mps,
+                yaw_rate_dps,
+            } => {
+                for (name, v) in ["vn", "ve", "vd"].into_iter().zip(vel_ned_mps) {
+                    check(
+                        name,
+                        v.into(),
+                        (-MAX_SPEED_MPS).into(),
+                        MAX_SPEED_MPS.into(),
+                    )?;
+                }
+                if let Some(r) = yaw_rate_dps {
+                    check(
+                        "yaw_rate_dps",
+                        r.into(),
+                        (-MAX_YAW_RATE_DPS).into(),
+                        MAX_YAW_RATE_DPS.into(),
+                    )?;
+                }
+            }
+            Command::SetYaw {
+                yaw_deg, rate_dps, ..
+            } => {
+                check("yaw_deg", yaw_deg.into(), -360.0, 360.0)?;
+                check("rate_dps", rate_dps.into(), 0.0, MAX_YAW_RATE_DPS.into())?;
+            }
+            Command::SetRoi {
+                lat_deg,
+                lon_deg,
+                alt_rel_m,
+            } => check_position(lat_deg, lon_deg, alt_rel_m)?,
+            Command::Gimbal { pitch_deg, yaw_deg } => {
+                check("pitch_deg", pitch_deg.into(), -180.0, 180.0)?;
+                check(
+                    "yaw_deg",
+                    yaw_deg.into(),
+                    (-MAX_GIMBAL_DEG).into(),
+                    MAX_GIMBAL_DEG.into(),
+                )?;
+            }
+            Command::Servo { channel, pwm_us } => {
+                check(
+                    "channel",
+                    channel.into(),
+                    (*SERVO_CHANNELS.start()).into(),
+                    (*SERVO_CHANNELS.end()).into(),
+                )?;
+                check(
+                    "pwm_us",
+                    pwm_us.into(),
+                    (*PWM_US.start()).into(),
+                    (*PWM_US.end()).into(),
+                )?;
+            }
+            Command::Arm { .. }
+            | Command::Disarm { .. }
+            | Command::Land
+            | Command::ReturnToLaunch
+            | Command::ClearRoi
+            | Command::CameraCapture
+            | Command::RecordStart
+            | Command::RecordStop
+            | Command::Brake
+            | Command::EmergencyStop => {}
+        }
+        Ok(())
+    }
+}
+
+/// A command for one vehicle, as it travels on the bus.
+///
+/// Parameter slots by kind: `GoTo`/`SetRoi`: lat/lon, `f[0]` alt_rel, `f[1]` yaw,
+/// `f[2]` speed; `VelocityNed`: `f[0..3]` vn/ve/vd, `f[3]` yaw rate; `Takeoff`: `f[0]`;
+/// `SetYaw`: `f[0]` yaw, `f[1]` rate; `Gimbal`: `f[0]` pitch, `f[1]` yaw; `SetMode`:
+/// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("skymesh.VehicleCommand.v1")]
+#[repr(C)]
+pub struct VehicleCommand {
+    pub header: SampleHeader,
+    /// MAVLink system id of the target vehicle.
+    pub vehicle_id: u8,
+    /// [`CommandSource`] as stored on the wire.
+    pub source: u8,
+    /// [`CommandKind`] as stored on the wire.
+    pub kind: u8,
+    /// See [`flags`].
+    pub flags: u8,
+    /// Chosen by the sender, echoed in the [`CommandAck`].
+    pub command_id: u32,
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    pub f: [f32; 8],
+    pub i: [i32; 2],
+    /// Maximum age at arrival for setpoints, ms; 0 = the arbiter's default for the source.
+    pub max_age_ms: u32,
+    pub reserved: u32,
+}
+crate::assert_layout!(VehicleCommand, size = 96, align = 8);
+
+impl VehicleCommand {
+    /// Validates `command` and lays it out for the wire.
+    pub fn new(
+        vehicle_id: u8,
+        source: CommandSource,
+        command_id: u32,
+        command: &Command,
+    ) -> Result<Self, CommandError> {
+        command.validate()?;
+        let mut c = VehicleCommand {
+            vehicle_id,
+            source: source.to_wire(),
+            kind: command.kind().to_wire(),
+            command_id,
+            ..Default::default()
+        };
+        match *command {
+            Command::Arm { force } | Command::Disarm { force } => {
+                if force {
+                    c.flags |= flags::FORCE;
+                }
+            }
+            Command::SetMode(mode) => c.i[0] = mode.to_wire().into(),
+            Command::Takeoff { alt_rel_m } => c.f[0] = alt_rel_m,
+            Command::GoTo {
+                lat_deg,
+                lon_deg,
+                alt_rel_m,
+                yaw_deg,
+                speed_mps,
+            } => {
+                c.lat_deg = lat_deg;
+                c.lon_deg = lon_deg;
+                c.f[0] = alt_rel_m;
+                if let Some(y) = yaw_deg {
+                    c.flags |= flags::HAS_YAW;
+                    c.f[1] = y;
+                }
+                if let Some(s) = speed_mps {
+                    c.flags |= flags::HAS_SPEED;
+                    c.f[2] = s;
+                }
+            }
+            Command::VelocityNed {
+                vel_ned_mps,
+                yaw_rate_dps,
+            } => {
+                c.f[..3].copy_from_slice(&vel_ned_mps);
+                if let Some(r) = yaw_rate_dps {
+                    c.flags |= flags::HAS_YAW_RATE;
+                    c.f[3] = r;
+                }
+            }
+            Command::SetYaw {
+                yaw_deg,
+                rate_dps,
+                relative,
+            } => {
+                c.f[0] = yaw_deg;
+                c.f[1] = rate_dps;
+                if relative {
+                    c.flags |= flags::RELATIVE;
+                }
+            }
+            Command::SetRoi {
+                lat_deg,
+                lon_deg,
+                alt_rel_m,
+            } => {
+                c.lat_deg = lat_deg;
+                c.lon_deg = lon_deg;
+                c.f[0] = alt_rel_m;
+            }
+            Command::Gimbal { pitch_deg, yaw_deg } => {
+                c.f[0] = pitch_deg;
+                c.f[1] = yaw_deg;
+            }
+            Command::Servo { channel, pwm_us } => {
+                c.i[0] = channel.into();
+                c.i[1] = pwm_us.into();
+            }
+            Command::Land
+            | Command::ReturnToLaunch
+            | Command::ClearRoi
+            | Command::CameraCapture
+            | Command::RecordStart
+            | Command::RecordStop
+            | Command::Brake
+            | Command::EmergencyStop => {}
+        }
+        Ok(c)
+    }
+
+    pub fn source(&self) -> Result<CommandSource, CommandError> {
+        CommandSource::try_from(self.source).map_err(|_| CommandError::UnknownSource(self.source))
+    }
+
+    pub fn kind(&self) -> Result<CommandKind, CommandError> {
+        CommandKind::try_from(self.kind).map_err(|_| CommandError::UnknownKind(self.kind))
+    }
+
+    /// Reads the typed command back, refusing anything a valid sender could not have written.
+    pub fn command(&self) -> Result<Command, CommandError> {
+        let has = |bit: u8| self.flags & bit != 0;
+        let int_param = |idx: usize, name: &'static str, max: i64| -> Result<i64, CommandError> {
+            let v = i64::from(self.i[idx]);
+            if !(0..=max).contains(&v) {
+                return Err(CommandError::OutOfRange {
+                    name,
+                    value: v as f64,
+                    min: 0.0,
+                    max: max as f64,
+                });
+            }
+            Ok(v)
+        };
+        let cmd = match self.kind()? {
+            CommandKind::Arm => Command::Arm {
+                force: has(flags::FORCE),
+            },
+            CommandKind::Disarm => Command::Disarm {
+                force: has(flags::FORCE),
+            },
+            CommandKind::SetMode => {
+                let raw = int_param(0, "mode", u8::MAX.into())? as u8;
+                Command::SetMode(FlightMode::try_from(raw).map_err(|_| CommandError::BadMode(raw))?)
+            }
+            CommandKind::Takeoff => Command::Takeoff {
+                alt_rel_m: self.f[0],
+            },
+            CommandKind::Land => Command::Land,
+            CommandKind::ReturnToLaunch => Command::ReturnToLaunch,
+            CommandKind::GoTo => Command::GoTo {
+                lat_deg: self.lat_deg,
+                lon_deg: self.lon_deg,
+                alt_rel_m: self.f[0],
+                yaw_deg: has(flags::HAS_YAW).then_some(self.f[1]),
+                speed_mps: has(flags::HAS_SPEED).then_some(self.f[2]),
+            },
+            CommandKind::VelocityNed => Command::VelocityNed {
+                vel_ned_mps: [self.f[0], self.f[1], self.f[2]],
+                yaw_rate_dps: has(flags::HAS_YAW_RATE).then_some(self.f[3]),
+            },
+            CommandKind::SetYaw => Command::SetYaw {
+                yaw_deg: self.f[0],
+                rate_dps: self.f[1],
+                relative: has(flags::RELATIVE),
+            },
+            CommandKind::SetRoi => Command::SetRoi {
+                lat_deg: self.lat_deg,
+                lon_deg: self.lon_deg,
+                alt_rel_m: self.f[0],
+            },
+            CommandKind::ClearRoi => Command::ClearRoi,
+            CommandKind::Gimbal => Command::Gimbal {
+                pitch_deg: self.f[0],
+                yaw_deg: self.f[1],
+            },
+            CommandKind::CameraCapture => Command::CameraCapture,
+            CommandKind::RecordStart => Command::RecordStart,
+            CommandKind::RecordStop => Command::RecordStop,
+            CommandKind::Servo => Command::Servo {
+                channel: int_param(0, "channel", u8::MAX.into())? as u8,
+                pwm_us: int_param(1, "pwm_us", u16::MAX.into())? as u16,
+            },
+            CommandKind::Brake => Command::Brake,
+            CommandKind::EmergencyStop => Command::EmergencyStop,
+        };
+        cmd.validate()?;
+        Ok(cmd)
+    }
+}
+
+/// The answer to one [`VehicleCommand`], published by `autopilot-link`.
+///
+/// Topic: [`crate::topics::vehicle_command_ack`]. Matched to its command by
+/// `(source, command_id)`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("skymesh.CommandAck.v1")]
+#[repr(C)]
+pub struct CommandAck {
+    pub header: SampleHeader,
+    pub vehicle_id: u8,
+    /// [`CommandSource`] of the command answered.
+    pub source: u8,
+    /// [`CommandKind`] of the command answered (raw: may be an unknown value that was refused).
+    pub kind: u8,
+    /// [`AckResult`] as stored on the wire.
+    pub result: u8,
+    /// `command_id` of the command answered.
+    pub command_id: u32,
+    /// [`RefusalReason`] as stored on the wire.
+    pub reason: u16,
+    /// The MAVLink `MAV_RESULT` when the autopilot answered, 255 otherwise.
+    pub mav_result: u8,
+    pub reserved: u8,
+    /// Sequence number of the command sample answered.
+    pub command_seq: u32,
+    /// Human-readable detail for logs and operators.
+    pub detail: FixedStr<48>,
+}
+crate::assert_layout!(CommandAck, size = 88, align = 8);
+
+impl CommandAck {
+    /// Sentinel for `mav_result` when the autopilot never answered.
+    pub const NO_MAV_RESULT: u8 = 255;
+
+    pub fn result(&self) -> Option<AckResult> {
+        AckResult::try_from(self.result).ok()
+    }
+
+    pub fn reason(&self) -> Option<RefusalReason> {
+        RefusalReason::try_from(self.reason).ok()
+    }
+
+    pub fn is_accepted(&self) -> bool {
+        self.result == AckResult::Accepted.to_wire()
+    }
+}
+
+crate::impl_sample!(VehicleCommand, CommandAck);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn all_examples() -> Vec<Command> {
+        vec![
+            Command::Arm { force: true },
+            Command::Disarm { force: false },
+            Command::SetMode(FlightMode::Guided),
+            Command::Takeoff { alt_rel_m: 10.0 },
+            Command::Land,
+            Command::ReturnToLaunch,
+            Command::GoTo {
+                lat_deg: -35.0,
+                lon_deg: 149.0,
+                alt_rel_m: 20.0,
+                yaw_deg: Some(90.0),
+                speed_mps: None,
+            },
+            Command::VelocityNed {
+                vel_ned_mps: [1.0, -2.0, 0.5],
+                yaw_rate_dps: Some(10.0),
+            },
+            Command::SetYaw {
+                yaw_deg: -30.0,
+                rate_dps: 20.0,
+                relative: true,
+            },
+            Command::SetRoi {
+                lat_deg: 1.0,
+                lon_deg: 2.0,
+                alt_rel_m: 0.0,
+            },
+            Command::ClearRoi,
+            Command::Gimbal {
+                pitch_deg: -45.0,
+                yaw_deg: 10.0,
+            },
+            Command::CameraCapture,
+            Command::RecordStart,
+            Command::RecordStop,
+            Command::Servo {
+                channel: 9,
+                pwm_us: 1900,
+            },
+            Command::Brake,
+            Command::EmergencyStop,
+        ]
+    }
+
+    #[test]
+    fn every_command_round_trips_through_the_wire_struct() {
+        let examples = all_examples();
+        assert_eq!(
+            examples.len(),
+            CommandKind::ALL.len(),
+            "an example per kind"
+        );
+        for (n, cmd) in examples.into_iter().enumerate() {
+            let wire = VehicleCommand::new(3, CommandSource::ShotEngine, n as u32, &cmd).unwrap();
+            assert_eq!(wire.command().unwrap(), cmd);
+            assert_eq!(wire.source().unwrap(), CommandSource::ShotEngine);
+            assert_eq!(wire.command_id, n as u32);
+        }
+    }
+
+    #[test]
+    fn non_finite_numbers_are_refused_both_ways() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let cmd = Command::VelocityNed {
+                vel_ned_mps: [bad, 0.0, 0.0],
+                yaw_rate_dps: None,
+            };
+            assert_eq!(
+                VehicleCommand::new(1, CommandSource::Vision, 1, &cmd),
+                Err(CommandError::NotFinite { name: "vn" })
+            );
+            // A hostile or corrupt sample written without the constructor:
+            let mut wire = VehicleCommand::new(
+                1,
+                CommandSource::Vision,
+                1,
+                &Command::Takeoff { alt_rel_m: 5.0 },
+            )
+            .unwrap();
+            wire.f[0] = bad;
+            assert!(matches!(
+                wire.command(),
+                Err(CommandError::NotFinite { .. })
+            ));
+        }
+        let mut wire = VehicleCommand::new(
+            1,
+            CommandSource::Operator,
+            1,
+            &Command::GoTo {
+                lat_deg: 0.0,
+                lon_deg: 0.0,
+                alt_rel_m: 1.0,
+                yaw_deg: None,
+                speed_mps: None,
+            },
+        )
+        .unwrap();
+        wire.lat_deg = f64::NAN;
+        assert_eq!(
+            wire.command(),
+            Err(CommandError::NotFinite { name: "lat_deg" })
+        );
+    }
+
+    #[test]
+    fn out_of_range_and_unknown_values_are_refused() {
+        assert!(matches!(
+            VehicleCommand::new(
+                1,
+                CommandSource::Operator,
+                1,
+                &Command::Takeoff { alt_rel_m: 5000.0 }
+            ),
+            Err(CommandError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            VehicleCommand::new(
+                1,
+                CommandSource::Operator,
+                1,
+                &Command::Servo {
+                    channel: 0,
+                    pwm_us: 1500
+                }
+            ),
+            Err(CommandError::OutOfRange { .. })
+        ));
+        assert_eq!(
+            VehicleCommand::new(
+                1,
+                CommandSource::Operator,
+                1,
+                &Command::SetMode(FlightMode::Unknown)
+            ),
+            Err(CommandError::BadMode(0))
+        );
+        let mut wire = VehicleCommand::new(1, CommandSource::Operator, 1, &Command::Land).unwrap();
+        wire.kind = 200;
+        assert_eq!(wire.command(), Err(CommandError::UnknownKind(200)));
+        wire.source = 99;
+        assert_eq!(wire.source(), Err(CommandError::UnknownSource(99)));
+        let mut wire = VehicleCommand::new(
+            1,
+            CommandSource::Operator,
+            1,
+            &Command::SetMode(FlightMode::Loiter),
+        )
+        .unwrap();
+        wire.i[0] = -1;
+        assert!(matches!(
+            wire.command(),
+            Err(CommandError::OutOfRange { .. })
+        ));
+    }
+
+    proptest::proptest! {
+        /// Whatever bytes another process writes, reading never panics and whatever
+        /// it accepts is finite and in range.
+        #[test]
+        fn arbitrary_wire_commands_never_panic(
+            kind in 0u8..=255, flags in 0u8..=255, lat in proptest::num::f64::ANY,
+            lon in proptest::num::f64::ANY, f in proptest::array::uniform8(proptest::num::f32::ANY),
+            i in proptest::array::uniform2(proptest::num::i32::ANY),
+        ) {
+            let wire = VehicleCommand { kind, flags, lat_deg: lat, lon_deg: lon, f, i, ..Default::default() };
+            if let Ok(cmd) = wire.command() {
+                proptest::prop_assert!(cmd.validate().is_ok());
+                let again = VehicleCommand::new(0, CommandSource::Operator, 0, &cmd).unwrap();
+                proptest::prop_assert_eq!(again.command().unwrap(), cmd);
+            }
+        }
+    }
+}

@@ -1,0 +1,103 @@
+//! skymesh sample types and service names.
+//!
+//! Everything that crosses a process boundary on the skymesh bus is defined here:
+//! plain `#[repr(C)]` data with fixed capacity (no heap, no pointers), enums stored as
+//! integers and checked at the edge, a versioned iceoryx2 `type_name` and a
+//! compile-time size/alignment assertion. Change a layout → bump the version in its
+//! `type_name` (iceoryx2 compares only name, size and alignment across processes).
+//!
+//! This crate does no I/O and has no runtime: it is shared by every service, by the
+//! supervisor and by the tests.
+#![deny(unsafe_code)]
+
+pub mod command;
+pub mod fixed;
+pub mod header;
+pub mod service;
+pub mod topics;
+pub mod vehicle;
+
+pub use command::{
+    AckResult, Command, CommandAck, CommandError, CommandKind, CommandSource, RefusalReason,
+    VehicleCommand,
+};
+pub use fixed::FixedStr;
+pub use header::{Sample, SampleHeader, ServiceId};
+pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};
+pub use topics::{Topic, TopicQos};
+pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
+
+/// Declares a checked integer-backed enum: the wire holds the integer, the code sees
+/// the enum, and `TryFrom<int>` refuses anything not listed.
+#[macro_export]
+macro_rules! wire_enum {
+    ($(#[$meta:meta])* $vis:vis enum $name:ident : $repr:ty { $($(#[$vmeta:meta])* $variant:ident = $value:expr => $label:literal),+ $(,)? }) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        #[repr($repr)]
+        $vis enum $name { $($(#[$vmeta])* $variant = $value),+ }
+
+        impl $name {
+            /// Every variant, in declaration order.
+            pub const ALL: &'static [$name] = &[$($name::$variant),+];
+
+            /// The integer stored on the wire.
+            pub const fn to_wire(self) -> $repr { self as $repr }
+
+            /// A stable lower-case name for logs and metric labels.
+            pub fn as_str(self) -> &'static str {
+                match self { $($name::$variant => $label),+ }
+            }
+        }
+
+        impl TryFrom<$repr> for $name {
+            type Error = $crate::UnknownValue;
+            fn try_from(v: $repr) -> Result<Self, Self::Error> {
+                match v {
+                    $(x if x == $value => Ok($name::$variant),)+
+                    other => Err($crate::UnknownValue { type_name: stringify!($name), value: other as i64 }),
+                }
+            }
+        }
+
+        impl core::fmt::Display for $name {
+            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+    };
+}
+
+/// An integer on the wire that names no variant of the enum it should hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UnknownValue {
+    pub type_name: &'static str,
+    pub value: i64,
+}
+
+impl core::fmt::Display for UnknownValue {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{} has no variant with value {}",
+            self.type_name, self.value
+        )
+    }
+}
+
+impl std::error::Error for UnknownValue {}
+
+/// Compile-time layout assertion used next to every sample type.
+#[macro_export]
+macro_rules! assert_layout {
+    ($ty:ty, size = $size:expr, align = $align:expr) => {
+        const _: () = assert!(
+            core::mem::size_of::<$ty>() == $size,
+            "layout changed: bump the type_name version"
+        );
+        const _: () = assert!(
+            core::mem::align_of::<$ty>() == $align,
+            "alignment changed: bump the type_name version"
+        );
+    };
+}

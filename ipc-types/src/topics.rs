@@ -1,0 +1,147 @@
+//! Service names and their quality of service.
+//!
+//! No process spells a topic by hand: it calls one of these functions. Every process
+//! opens a topic with the same [`TopicQos`] (iceoryx2 refuses to open a service whose
+//! requirements exceed what its creator set), so any of them may start first.
+
+/// Capacity settings of a publish-subscribe topic and its wake-up event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicQos {
+    pub max_publishers: usize,
+    pub max_subscribers: usize,
+    pub max_nodes: usize,
+    /// Samples a late subscriber receives on connect (latest-value topics use 1).
+    pub history: usize,
+    /// Samples buffered per subscriber; the oldest is overwritten when full.
+    pub buffer: usize,
+}
+
+impl TopicQos {
+    /// A single-writer stream whose consumers want the newest value.
+    pub const STATE: TopicQos = TopicQos {
+        max_publishers: 2,
+        max_subscribers: 32,
+        max_nodes: 40,
+        history: 1,
+        buffer: 8,
+    };
+    /// Many writers (every gateway and engine), one executor; nothing should be lost.
+    pub const COMMANDS: TopicQos = TopicQos {
+        max_publishers: 24,
+        max_subscribers: 4,
+        max_nodes: 32,
+        history: 0,
+        buffer: 64,
+    };
+    /// One writer, many readers, each of which must see every answer.
+    pub const EVENTS: TopicQos = TopicQos {
+        max_publishers: 2,
+        max_subscribers: 32,
+        max_nodes: 40,
+        history: 0,
+        buffer: 64,
+    };
+    /// Per-service health and stats: one writer (two while a restart overlaps), the supervisor and tools read.
+    pub const SERVICE: TopicQos = TopicQos {
+        max_publishers: 2,
+        max_subscribers: 4,
+        max_nodes: 8,
+        history: 1,
+        buffer: 4,
+    };
+
+    /// Listeners of the topic's wake-up event: one per subscriber plus slack.
+    pub const fn event_listeners(&self) -> usize {
+        self.max_subscribers + 2
+    }
+
+    /// Notifiers of the topic's wake-up event: one per publisher plus one per
+    /// subscriber (subscribers wake themselves on shutdown), plus slack.
+    pub const fn event_notifiers(&self) -> usize {
+        self.max_publishers + self.max_subscribers + 2
+    }
+}
+
+/// A topic name with its QoS.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Topic {
+    pub name: String,
+    pub qos: TopicQos,
+}
+
+impl Topic {
+    fn new(name: String, qos: TopicQos) -> Self {
+        Topic { name, qos }
+    }
+}
+
+impl core::fmt::Display for Topic {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+/// [`crate::VehicleState`] of vehicle `id`, at the autopilot's ATTITUDE rate.
+pub fn vehicle_state(id: u8) -> Topic {
+    Topic::new(format!("skymesh/vehicle/{id}/state"), TopicQos::STATE)
+}
+
+/// [`crate::VehicleStatus`] of vehicle `id`, on change and at 1 Hz.
+pub fn vehicle_status(id: u8) -> Topic {
+    Topic::new(format!("skymesh/vehicle/{id}/status"), TopicQos::STATE)
+}
+
+/// [`crate::VehicleCommand`]s for vehicle `id`, from every gateway and engine.
+pub fn vehicle_command(id: u8) -> Topic {
+    Topic::new(format!("skymesh/vehicle/{id}/command"), TopicQos::COMMANDS)
+}
+
+/// [`crate::CommandAck`]s from vehicle `id`'s autopilot link.
+pub fn vehicle_command_ack(id: u8) -> Topic {
+    Topic::new(
+        format!("skymesh/vehicle/{id}/command_ack"),
+        TopicQos::EVENTS,
+    )
+}
+
+/// [`crate::ServiceHealth`] heartbeats of the service instance `name`.
+pub fn service_health(name: &str) -> Topic {
+    Topic::new(format!("skymesh/service/{name}/health"), TopicQos::SERVICE)
+}
+
+/// [`crate::ServiceStats`] of the service instance `name`.
+pub fn service_stats(name: &str) -> Topic {
+    Topic::new(format!("skymesh/service/{name}/stats"), TopicQos::SERVICE)
+}
+
+/// True if `name` can be a service instance name (it becomes part of topic and file names).
+pub fn is_valid_instance_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 32
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_carry_the_vehicle_id() {
+        assert_eq!(vehicle_state(3).name, "skymesh/vehicle/3/state");
+        assert_eq!(vehicle_command(255).name, "skymesh/vehicle/255/command");
+        assert_eq!(
+            service_health("vehicle-sim-2").name,
+            "skymesh/service/vehicle-sim-2/health"
+        );
+    }
+
+    #[test]
+    fn instance_names_are_checked() {
+        assert!(is_valid_instance_name("autopilot-link"));
+        assert!(!is_valid_instance_name("a/b"));
+        assert!(!is_valid_instance_name(""));
+        assert!(!is_valid_instance_name(&"x".repeat(33)));
+    }
+}
