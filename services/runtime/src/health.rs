@@ -1,0 +1,93 @@
+//! Heartbeat and stats publishing: what lets the supervisor see a service is alive.
+
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use skymesh_ipc_types::{topics, FixedStr, ServiceHealth, ServiceState, ServiceStats};
+use tokio_util::sync::CancellationToken;
+
+use crate::ipc::{Bus, IpcError};
+use crate::systemd;
+
+/// How often heartbeats are published unless `SKYMESH_HEARTBEAT_MS` says otherwise.
+pub const DEFAULT_HEARTBEAT: Duration = Duration::from_millis(500);
+/// How often the stats sample is published.
+pub const STATS_PERIOD: Duration = Duration::from_secs(1);
+
+/// The state a service reports in its heartbeat; set by the service, read by the heartbeat task.
+#[derive(Debug, Clone)]
+pub struct HealthState(Arc<AtomicU8>);
+
+impl Default for HealthState {
+    fn default() -> Self {
+        HealthState(Arc::new(AtomicU8::new(ServiceState::Starting.to_wire())))
+    }
+}
+
+impl HealthState {
+    pub fn set(&self, state: ServiceState) {
+        self.0.store(state.to_wire(), Ordering::Relaxed);
+    }
+    pub fn get(&self) -> ServiceState {
+        ServiceState::try_from(self.0.load(Ordering::Relaxed)).unwrap_or(ServiceState::Running)
+    }
+}
+
+/// Heartbeat period from `SKYMESH_HEARTBEAT_MS` (set by the supervisor), else the default.
+pub fn heartbeat_period_from_env() -> Duration {
+    std::env::var("SKYMESH_HEARTBEAT_MS")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+        .filter(|ms| (10..=60_000).contains(ms))
+        .map(Duration::from_millis)
+        .unwrap_or(DEFAULT_HEARTBEAT)
+}
+
+/// Publishes `ServiceHealth` every `period` and `ServiceStats` every second until
+/// `stop` is cancelled, then one last heartbeat saying `Stopping`. Pings the systemd
+/// watchdog with each heartbeat, so a hung runtime stops both.
+pub async fn run_heartbeat(
+    bus: Bus,
+    state: HealthState,
+    period: Duration,
+    stop: CancellationToken,
+) -> Result<(), IpcError> {
+    let name = bus.name().to_string();
+    let mut health_pub = bus.publisher::<ServiceHealth>(&topics::service_health(&name))?;
+    let mut stats_pub = bus.publisher::<ServiceStats>(&topics::service_stats(&name))?;
+    let started = Instant::now();
+    let watchdog = systemd::watchdog_interval();
+    let mut stats = Box::<ServiceStats>::default();
+    stats.name = FixedStr::new(&name);
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last_stats = Instant::now() - STATS_PERIOD;
+    let health = |state: ServiceState| ServiceHealth {
+        name: FixedStr::new(&name),
+        pid: std::process::id(),
+        state: state.to_wire(),
+        uptime_ms: started.elapsed().as_millis() as u64,
+        period_ms: period.as_millis() as u32,
+        ..Default::default()
+    };
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = stop.cancelled() => break,
+        }
+        health_pub.publish(health(state.get()))?;
+        if watchdog.is_some() {
+            systemd::notify_watchdog();
+        }
+        if last_stats.elapsed() >= STATS_PERIOD {
+            last_stats = Instant::now();
+            bus.stats().snapshot_into(&mut stats);
+            stats_pub.publish(*stats)?;
+        }
+    }
+    bus.stats().snapshot_into(&mut stats);
+    let _ = stats_pub.publish(*stats);
+    let _ = health_pub.publish(health(ServiceState::Stopping));
+    Ok(())
+}

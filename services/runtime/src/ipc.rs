@@ -1,0 +1,591 @@
+//! Every iceoryx2 call of skymesh lives here; the rest sees typed channels.
+//!
+//! Ports use `ipc_threadsafe::Service` (same shared-memory layout as `ipc::Service`,
+//! only the in-process handles are `Send + Sync`) so tokio tasks can own them.
+//! A subscriber waits on its topic's event listener through `tokio::io::unix::AsyncFd`:
+//! one kernel wake-up per burst, no polling while idle.
+
+use std::collections::HashMap;
+use std::os::fd::{AsRawFd, RawFd};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use iceoryx2::config::Config;
+use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::service::ipc_threadsafe;
+use skymesh_ipc_types::{Sample, ServiceId, Topic};
+use tokio::io::unix::AsyncFd;
+
+use crate::clock::monotonic_ns;
+use crate::config::ConfigError;
+use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
+
+/// The iceoryx2 service flavour every skymesh process uses.
+pub type Svc = ipc_threadsafe::Service;
+
+/// Environment variable naming the mesh's domain (iceoryx2 resource prefix).
+pub const DOMAIN_ENV: &str = "SKYMESH_DOMAIN";
+/// Environment variable naming the iceoryx2 config file.
+pub const IPC_CONFIG_ENV: &str = "SKYMESH_IPC_CONFIG";
+/// The domain when `SKYMESH_DOMAIN` is unset.
+pub const DEFAULT_DOMAIN: &str = "skymesh";
+/// `deploy/iceoryx2.toml`, used when no file is named.
+pub const EMBEDDED_IPC_CONFIG: &str = include_str!("../../../deploy/iceoryx2.toml");
+
+/// A failure of the shared-memory bus.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    #[error("iceoryx2 {op} `{what}` failed: {message}")]
+    Iceoryx {
+        op: &'static str,
+        what: String,
+        message: String,
+    },
+    #[error("waiting on `{topic}`: {source}")]
+    Wait {
+        topic: String,
+        source: std::io::Error,
+    },
+}
+
+fn ipc_err(op: &'static str, what: &str, e: impl core::fmt::Debug) -> IpcError {
+    IpcError::Iceoryx {
+        op,
+        what: what.to_string(),
+        message: format!("{e:?}"),
+    }
+}
+
+/// One mesh's iceoryx2 configuration: the loaded config file with the domain prefix applied.
+#[derive(Debug, Clone)]
+pub struct Domain {
+    pub name: String,
+    pub config: Config,
+    /// Where the config came from (file path or `<embedded>`), for logs.
+    pub origin: String,
+}
+
+/// True if `name` can be a domain (it prefixes file names in `/dev/shm`).
+pub fn is_valid_domain(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 24
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+}
+
+impl Domain {
+    /// Loads the iceoryx2 config (`path`, else `$SKYMESH_IPC_CONFIG`, else the embedded
+    /// `deploy/iceoryx2.toml`) and applies the domain from `$SKYMESH_DOMAIN`.
+    pub fn from_env(path: Option<&Path>) -> Result<Domain, ConfigError> {
+        let name = match std::env::var(DOMAIN_ENV) {
+            Ok(v) if !v.is_empty() => v,
+            _ => DEFAULT_DOMAIN.to_string(),
+        };
+        let path: Option<PathBuf> = path
+            .map(Path::to_path_buf)
+            .or_else(|| std::env::var_os(IPC_CONFIG_ENV).map(PathBuf::from));
+        Domain::load(&name, path.as_deref())
+    }
+
+    /// Loads the config for domain `name` from `path` (or the embedded default).
+    pub fn load(name: &str, path: Option<&Path>) -> Result<Domain, ConfigError> {
+        if !is_valid_domain(name) {
+            return Err(ConfigError::Env {
+                name: DOMAIN_ENV,
+                message: format!("`{name}` must be 1-24 characters of [A-Za-z0-9_-]"),
+            });
+        }
+        let (text, origin) = match path {
+            Some(p) => (
+                std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
+                    path: p.to_path_buf(),
+                    source,
+                })?,
+                p.display().to_string(),
+            ),
+            None => (
+                EMBEDDED_IPC_CONFIG.to_string(),
+                "<embedded deploy/iceoryx2.toml>".to_string(),
+            ),
+        };
+        let mut config: Config = toml::from_str(&text).map_err(|e| ConfigError::Ipc {
+            origin: origin.clone(),
+            message: e.to_string(),
+        })?;
+        config.global.prefix =
+            FileName::new(format!("{name}_").as_bytes()).map_err(|e| ConfigError::Ipc {
+                origin: origin.clone(),
+                message: format!("domain prefix: {e:?}"),
+            })?;
+        Ok(Domain {
+            name: name.to_string(),
+            config,
+            origin,
+        })
+    }
+
+    /// The prefix of every iceoryx2 file of this domain.
+    pub fn prefix(&self) -> String {
+        format!("{}_", self.name)
+    }
+
+    /// Removes the stale resources of every dead node of this domain. Returns the
+    /// names of the nodes cleaned and how many could not be.
+    ///
+    /// A dead node is only recognisable once its process has been reaped, so the
+    /// supervisor calls this after `waitpid`.
+    pub fn cleanup_dead_nodes(&self) -> (Vec<String>, usize) {
+        let mut cleaned = Vec::new();
+        let mut failed = 0;
+        let result = Node::<Svc>::list(&self.config, |state| {
+            if let NodeState::Dead(view) = state {
+                let name = view
+                    .details()
+                    .as_ref()
+                    .map(|d| d.name().as_str().to_string())
+                    .unwrap_or_default();
+                match view.try_remove_stale_resources() {
+                    Ok(()) => cleaned.push(name),
+                    Err(e) => {
+                        tracing::warn!(node = %name, error = ?e, "stale node cleanup failed");
+                        failed += 1;
+                    }
+                }
+            }
+            CallbackProgression::Continue
+        });
+        if let Err(e) = result {
+            tracing::warn!(error = ?e, "listing iceoryx2 nodes failed");
+        }
+        (cleaned, failed)
+    }
+
+    /// Names and pids of the live nodes of this domain.
+    pub fn live_nodes(&self) -> Vec<(String, i32)> {
+        let mut out = Vec::new();
+        let _ = Node::<Svc>::list(&self.config, |state| {
+            if let NodeState::Alive(view) = state {
+                if let Some(d) = view.details() {
+                    out.push((d.name().as_str().to_string(), d.process_id().value()));
+                }
+            }
+            CallbackProgression::Continue
+        });
+        out
+    }
+
+    /// Files this domain left in `/dev/shm` and under the iceoryx2 root path.
+    pub fn leftover_files(&self) -> Vec<PathBuf> {
+        let prefix = self.prefix();
+        let root = PathBuf::from(self.config.global.root_path().to_string());
+        let mut dirs = vec![PathBuf::from("/dev/shm")];
+        for sub in ["", "services", "nodes"] {
+            dirs.push(root.join(sub));
+        }
+        let mut out = Vec::new();
+        let mut stack: Vec<PathBuf> = dirs;
+        while let Some(dir) = stack.pop() {
+            let Ok(rd) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            for entry in rd.flatten() {
+                let name = entry.file_name();
+                if name.to_string_lossy().starts_with(&prefix) {
+                    out.push(entry.path());
+                }
+            }
+        }
+        out.sort();
+        out.dedup();
+        out
+    }
+
+    /// Removes [`Domain::leftover_files`]. Only call when no node of the domain is alive.
+    pub fn remove_leftover_files(&self) -> usize {
+        let mut removed = 0;
+        for path in self.leftover_files() {
+            let res = if path.is_dir() {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+            match res {
+                Ok(()) => removed += 1,
+                Err(e) => {
+                    tracing::warn!(path = %path.display(), error = %e, "cannot remove leftover file")
+                }
+            }
+        }
+        removed
+    }
+}
+
+struct BusInner {
+    node: Node<Svc>,
+    name: String,
+    service: ServiceId,
+    instance: u16,
+    stats: Stats,
+}
+
+/// A service's handle on the mesh: its iceoryx2 node plus the stats registry that
+/// counts every sample in and out. Cheap to clone.
+#[derive(Clone)]
+pub struct Bus {
+    inner: Arc<BusInner>,
+}
+
+impl core::fmt::Debug for Bus {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Bus")
+            .field("name", &self.inner.name)
+            .field("service", &self.inner.service)
+            .finish()
+    }
+}
+
+/// Retries `open` a few times, cleaning dead nodes in between: many processes
+/// restarting at once can race stale-resource cleanup (iceoryx2 issue #1578).
+fn with_retry<T, E: core::fmt::Debug>(
+    node: &Node<Svc>,
+    what: &str,
+    op: &'static str,
+    mut open: impl FnMut() -> Result<T, E>,
+) -> Result<T, IpcError> {
+    let mut delay = Duration::from_millis(20);
+    let mut attempt = 0;
+    loop {
+        match open() {
+            Ok(v) => return Ok(v),
+            Err(e) if attempt < 5 => {
+                tracing::debug!(what, op, error = ?e, attempt, "iceoryx2 open failed, cleaning dead nodes and retrying");
+                let _ = node.try_cleanup_dead_nodes();
+                std::thread::sleep(delay);
+                delay *= 2;
+                attempt += 1;
+            }
+            Err(e) => return Err(ipc_err(op, what, e)),
+        }
+    }
+}
+
+impl Bus {
+    /// Creates the node `name` in `domain`. Signal handling stays with the caller.
+    pub fn open(
+        domain: &Domain,
+        name: &str,
+        service: ServiceId,
+        instance: u16,
+        stats: Stats,
+    ) -> Result<Bus, IpcError> {
+        let node_name = NodeName::new(name).map_err(|e| ipc_err("node name", name, e))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&domain.config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<Svc>()
+            .map_err(|e| ipc_err("create node", name, e))?;
+        Ok(Bus {
+            inner: Arc::new(BusInner {
+                node,
+                name: name.to_string(),
+                service,
+                instance,
+                stats,
+            }),
+        })
+    }
+
+    pub fn name(&self) -> &str {
+        &self.inner.name
+    }
+
+    pub fn stats(&self) -> &Stats {
+        &self.inner.stats
+    }
+
+    fn open_event(
+        &self,
+        topic: &Topic,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
+        let service_name =
+            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
+        with_retry(&self.inner.node, &topic.name, "open event", || {
+            self.inner
+                .node
+                .service_builder(&service_name)
+                .event()
+                .max_listeners(topic.qos.event_listeners())
+                .max_notifiers(topic.qos.event_notifiers())
+                .max_nodes(topic.qos.max_nodes)
+                .open_or_create()
+        })
+    }
+
+    fn open_pubsub<T: Sample>(
+        &self,
+        topic: &Topic,
+    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, IpcError>
+    {
+        let service_name =
+            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
+        let q = topic.qos;
+        with_retry(
+            &self.inner.node,
+            &topic.name,
+            "open publish-subscribe",
+            || {
+                self.inner
+                    .node
+                    .service_builder(&service_name)
+                    .publish_subscribe::<T>()
+                    .max_publishers(q.max_publishers)
+                    .max_subscribers(q.max_subscribers)
+                    .max_nodes(q.max_nodes)
+                    .history_size(q.history)
+                    .subscriber_max_buffer_size(q.buffer)
+                    .enable_safe_overflow(true)
+                    .open_or_create()
+            },
+        )
+    }
+
+    /// A publisher on `topic` that stamps headers, sends and wakes subscribers.
+    pub fn publisher<T: Sample>(&self, topic: &Topic) -> Result<Publisher<T>, IpcError> {
+        let pubsub = self.open_pubsub::<T>(topic)?;
+        let event = self.open_event(topic)?;
+        let port = pubsub
+            .publisher_builder()
+            .create()
+            .map_err(|e| ipc_err("create publisher", &topic.name, e))?;
+        let notifier = event
+            .notifier_builder()
+            .create()
+            .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
+        let published = self.inner.stats.counter(
+            "skymesh_topic_samples_published_total",
+            &[("topic", &topic.name)],
+        );
+        Ok(Publisher {
+            port,
+            notifier,
+            seq: 0,
+            service: self.inner.service.to_wire(),
+            instance: self.inner.instance,
+            published,
+            topic: topic.name.clone(),
+            _bus: self.clone(),
+        })
+    }
+
+    /// A subscriber on `topic` that can be awaited. Must be called inside a tokio runtime.
+    pub fn subscriber<T: Sample>(&self, topic: &Topic) -> Result<Subscriber<T>, IpcError> {
+        let pubsub = self.open_pubsub::<T>(topic)?;
+        let event = self.open_event(topic)?;
+        let port = pubsub
+            .subscriber_builder()
+            .create()
+            .map_err(|e| ipc_err("create subscriber", &topic.name, e))?;
+        let listener = event
+            .listener_builder()
+            .create()
+            .map_err(|e| ipc_err("create listener", &topic.name, e))?;
+        let afd = register_listener(&listener).map_err(|source| IpcError::Wait {
+            topic: topic.name.clone(),
+            source,
+        })?;
+        let labels = [("topic", topic.name.as_str())];
+        let stats = &self.inner.stats;
+        Ok(Subscriber {
+            afd,
+            listener,
+            port,
+            received: stats.counter("skymesh_topic_samples_received_total", &labels),
+            lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
+            age: stats.histogram(
+                "skymesh_topic_sample_age_seconds",
+                &labels,
+                &LATENCY_BOUNDS_S,
+            ),
+            last_seq: HashMap::new(),
+            topic: topic.name.clone(),
+            _bus: self.clone(),
+        })
+    }
+}
+
+/// The listener's file descriptor, registered with tokio's reactor.
+///
+/// Holds only the number; the fd is owned by the [`Listener`], which outlives the
+/// registration because [`Subscriber`] declares `afd` before `listener` (fields drop
+/// in declaration order, so epoll deregistration happens before the fd closes).
+#[derive(Debug)]
+struct ListenerFd(RawFd);
+
+impl AsRawFd for ListenerFd {
+    fn as_raw_fd(&self) -> RawFd {
+        self.0
+    }
+}
+
+/// Registers the listener's fd with tokio's reactor.
+#[allow(unsafe_code)]
+fn register_listener(listener: &Listener<Svc>) -> std::io::Result<AsyncFd<ListenerFd>> {
+    // SAFETY: both calls require the fd to stay open, and not be closed by us, for as
+    // long as the number is used. We never close it, and the `AsyncFd` holding it is
+    // dropped before the `Listener` that owns the fd (see `Subscriber` field order).
+    unsafe {
+        let fd = ListenerFd(listener.file_descriptor().native_handle());
+        Ok(AsyncFd::register_with_interest(
+            fd,
+            tokio::io::Interest::READABLE,
+        )?)
+    }
+}
+
+/// Sends samples of one type on one topic.
+pub struct Publisher<T: Sample> {
+    port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
+    notifier: Notifier<Svc>,
+    seq: u64,
+    service: u16,
+    instance: u16,
+    published: Counter,
+    topic: String,
+    _bus: Bus,
+}
+
+impl<T: Sample> core::fmt::Debug for Publisher<T> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Publisher")
+            .field("topic", &self.topic)
+            .field("seq", &self.seq)
+            .finish()
+    }
+}
+
+impl<T: Sample> Publisher<T> {
+    /// Stamps the header (sequence, monotonic time, publisher id), sends, and wakes
+    /// the subscribers. Returns the sequence number used.
+    pub fn publish(&mut self, mut sample: T) -> Result<u64, IpcError> {
+        self.seq += 1;
+        let h = sample.header_mut();
+        h.seq = self.seq;
+        h.stamp_ns = monotonic_ns();
+        h.service = self.service;
+        h.instance = self.instance;
+        self.port
+            .send_copy(sample)
+            .map_err(|e| ipc_err("send", &self.topic, e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| ipc_err("notify", &self.topic, e))?;
+        self.published.inc();
+        Ok(self.seq)
+    }
+
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+}
+
+/// Receives samples of one type from one topic.
+pub struct Subscriber<T: Sample> {
+    // Declared first: must drop before `listener` (see `ListenerFd`).
+    afd: AsyncFd<ListenerFd>,
+    listener: Listener<Svc>,
+    port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
+    received: Counter,
+    lost: Counter,
+    age: Histogram,
+    /// Last sequence seen per publisher `(service, instance)`, for gap counting.
+    last_seq: HashMap<(u16, u16), u64>,
+    topic: String,
+    _bus: Bus,
+}
+
+impl<T: Sample> core::fmt::Debug for Subscriber<T> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Subscriber")
+            .field("topic", &self.topic)
+            .finish()
+    }
+}
+
+impl<T: Sample> Subscriber<T> {
+    /// Takes one pending sample without waiting.
+    pub fn try_recv(&mut self) -> Result<Option<T>, IpcError> {
+        let Some(sample) = self
+            .port
+            .receive()
+            .map_err(|e| ipc_err("receive", &self.topic, e))?
+        else {
+            return Ok(None);
+        };
+        let value: T = *sample.payload();
+        drop(sample);
+        self.account(&value);
+        Ok(Some(value))
+    }
+
+    fn account(&mut self, value: &T) {
+        let h = value.header();
+        self.received.inc();
+        self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
+        let key = (h.service, h.instance);
+        if let Some(prev) = self.last_seq.insert(key, h.seq) {
+            // A lower sequence means the publisher restarted; not a loss.
+            if h.seq > prev + 1 {
+                self.lost.add(h.seq - prev - 1);
+            }
+        }
+    }
+
+    /// Waits for the next sample. Cancel-safe: dropping the future loses nothing.
+    pub async fn recv(&mut self) -> Result<T, IpcError> {
+        loop {
+            if let Some(v) = self.try_recv()? {
+                return Ok(v);
+            }
+            let mut guard = self.afd.readable().await.map_err(|source| IpcError::Wait {
+                topic: self.topic.clone(),
+                source,
+            })?;
+            let woken = self
+                .listener
+                .try_wait(|_| {})
+                .map_err(|e| ipc_err("listener wait", &self.topic, e))?;
+            if woken == 0 {
+                // Readiness was spurious or already consumed; tokio only clears it if
+                // nothing new arrived since `readable()` returned.
+                guard.clear_ready();
+            }
+        }
+    }
+
+    /// Drains everything pending and returns the newest sample, if any.
+    pub fn latest(&mut self) -> Result<Option<T>, IpcError> {
+        let mut newest = None;
+        while let Some(v) = self.try_recv()? {
+            newest = Some(v);
+        }
+        Ok(newest)
+    }
+
+    /// Waits up to `timeout` for the next sample.
+    pub async fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<T>, IpcError> {
+        match tokio::time::timeout(timeout, self.recv()).await {
+            Ok(r) => r.map(Some),
+            Err(_) => Ok(None),
+        }
+    }
+
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+}

@@ -1,0 +1,31 @@
+//! What every skymesh service shares.
+//!
+//! A service is a library with a thin `main`: it implements [`ServiceConfig`] for its
+//! raw TOML config and calls [`service_main`] with an async `run(settings, ctx)`.
+//! The runtime then owns everything that must be identical in every process:
+//!
+//! - the command line (`--config`, `--check-config`, `--print-default-config`, `--name`),
+//! - config loading (TOML → validated settings; exit 64 when bad),
+//! - structured logs (`tracing`, text or JSON),
+//! - the iceoryx2 node, created from one explicitly loaded config file with the
+//!   domain from `SKYMESH_DOMAIN` (all iceoryx2 calls live in [`ipc`]),
+//! - typed publishers and subscribers that wake through events (no spinning),
+//! - heartbeat and stats publishing for the supervisor, systemd notify/watchdog,
+//! - SIGTERM/SIGINT → one [`CancellationToken`] → graceful shutdown.
+#![deny(unsafe_code)]
+
+pub mod clock;
+pub mod config;
+pub mod exit;
+pub mod health;
+pub mod ipc;
+mod service;
+pub mod signals;
+pub mod stats;
+pub mod systemd;
+
+pub use config::{ConfigError, ServiceConfig};
+pub use ipc::{Bus, Domain, IpcError, Publisher, Subscriber};
+pub use service::{service_main, CommonArgs, Context, ServiceSpec};
+pub use stats::{Counter, Gauge, Histogram, Stats};
+pub use tokio_util::sync::CancellationToken;

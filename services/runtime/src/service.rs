@@ -1,0 +1,225 @@
+//! `service_main`: the thin `main` every service shares.
+
+use std::future::Future;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Args, CommandFactory, FromArgMatches, Parser};
+use skymesh_ipc_types::{topics, ServiceId, ServiceState};
+use tokio_util::sync::CancellationToken;
+
+use crate::config::{self, ConfigError, ServiceConfig};
+use crate::exit;
+use crate::health::{self, HealthState};
+use crate::ipc::{Bus, Domain};
+use crate::stats::Stats;
+use crate::{signals, systemd};
+
+/// What a service tells the runtime about itself.
+#[derive(Debug, Clone, Copy)]
+pub struct ServiceSpec {
+    pub kind: ServiceId,
+    /// One line for `--help`.
+    pub about: &'static str,
+}
+
+/// Options every service accepts.
+#[derive(Debug, Clone, Args)]
+pub struct CommonArgs {
+    /// Service config file (TOML). Without it the embedded default is used.
+    #[arg(long, short = 'c', env = "SKYMESH_CONFIG")]
+    pub config: Option<PathBuf>,
+    /// Validate the configuration (service and iceoryx2) and exit: 0 if good, 64 if bad.
+    #[arg(long)]
+    pub check_config: bool,
+    /// Print the commented default configuration and exit.
+    #[arg(long)]
+    pub print_default_config: bool,
+    /// Instance name (topics and node name); defaults to the service kind.
+    #[arg(long, env = "SKYMESH_SERVICE_NAME")]
+    pub name: Option<String>,
+    /// Instance number carried in sample headers (e.g. the vehicle-sim index).
+    #[arg(long, env = "SKYMESH_INSTANCE", default_value_t = 0)]
+    pub instance: u16,
+    /// iceoryx2 config file; default `$SKYMESH_IPC_CONFIG`, else the embedded deploy/iceoryx2.toml.
+    #[arg(long)]
+    pub ipc_config: Option<PathBuf>,
+    /// Log format.
+    #[arg(long, env = "SKYMESH_LOG_FORMAT", default_value = "text", value_parser = ["text", "json"])]
+    pub log_format: String,
+}
+
+#[derive(Debug, Parser)]
+struct Cli {
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+/// What a running service gets from the runtime.
+#[derive(Debug, Clone)]
+pub struct Context {
+    /// The service's handle on the mesh.
+    pub bus: Bus,
+    /// Cancelled on SIGTERM/SIGINT; every task stops taking work when it fires.
+    pub shutdown: CancellationToken,
+    /// Metrics exported through the supervisor.
+    pub stats: Stats,
+    /// Instance name.
+    pub name: String,
+    health: HealthState,
+}
+
+impl Context {
+    /// Marks the service running (heartbeat state) and tells systemd `READY=1`.
+    pub fn ready(&self) {
+        self.health.set(ServiceState::Running);
+        systemd::notify_ready();
+        tracing::info!(service = %self.name, "ready");
+    }
+
+    /// Reports a degraded or recovered state in the heartbeat.
+    pub fn set_state(&self, state: ServiceState) {
+        self.health.set(state);
+    }
+}
+
+fn init_tracing(format: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if format == "json" {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// How long a service may take to finish after shutdown was requested.
+const GRACE: Duration = Duration::from_secs(5);
+
+/// Parses the CLI, loads and validates config (exit 64 if bad), sets up logs, the
+/// bus, heartbeats and signals, runs `run`, and maps the outcome to an exit code.
+pub fn service_main<C, F, Fut>(spec: ServiceSpec, run: F) -> ExitCode
+where
+    C: ServiceConfig,
+    F: FnOnce(C::Settings, Context) -> Fut,
+    Fut: Future<Output = anyhow::Result<()>>,
+{
+    let cmd = Cli::command().name(spec.kind.as_str()).about(spec.about);
+    let matches = cmd.get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(c) => c,
+        Err(e) => e.exit(),
+    };
+    let args = cli.common;
+    init_tracing(&args.log_format);
+
+    if args.print_default_config {
+        print!("{}", C::DEFAULT_TOML);
+        return ExitCode::from(exit::OK);
+    }
+
+    let loaded = config::load::<C>(args.config.as_deref()).and_then(|settings| {
+        let domain = Domain::from_env(args.ipc_config.as_deref())?;
+        let name = args
+            .name
+            .clone()
+            .unwrap_or_else(|| spec.kind.as_str().to_string());
+        if !topics::is_valid_instance_name(&name) {
+            return Err(ConfigError::invalid(
+                "--name",
+                format!("`{name}` must be 1-32 characters of [A-Za-z0-9_-]"),
+            ));
+        }
+        Ok((settings, domain, name))
+    });
+    let (settings, domain, name) = match loaded {
+        Ok(v) => v,
+        Err(e) => {
+            tracing::error!(error = %e, "bad configuration");
+            eprintln!("{}: bad configuration: {e}", spec.kind.as_str());
+            return ExitCode::from(exit::CONFIG);
+        }
+    };
+    if args.check_config {
+        println!(
+            "{}: configuration OK (iceoryx2 config {}, domain {})",
+            spec.kind.as_str(),
+            domain.origin,
+            domain.name
+        );
+        return ExitCode::from(exit::OK);
+    }
+
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            tracing::error!(error = %e, "cannot start tokio runtime");
+            return ExitCode::from(exit::FAILURE);
+        }
+    };
+    let code = rt.block_on(async move {
+        let stats = Stats::new();
+        let bus = match Bus::open(&domain, &name, spec.kind, args.instance, stats.clone()) {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::error!(error = %e, "cannot join the mesh");
+                return exit::FAILURE;
+            }
+        };
+        tracing::info!(service = %name, domain = %domain.name, ipc_config = %domain.origin, pid = std::process::id(), "starting");
+        let shutdown = CancellationToken::new();
+        if let Err(e) = signals::spawn_shutdown_on_signal(shutdown.clone()) {
+            tracing::error!(error = %e, "cannot install signal handlers");
+            return exit::FAILURE;
+        }
+        let health = HealthState::default();
+        let hb_stop = CancellationToken::new();
+        let hb = tokio::spawn(health::run_heartbeat(
+            bus.clone(),
+            health.clone(),
+            health::heartbeat_period_from_env(),
+            hb_stop.clone(),
+        ));
+        let ctx = Context { bus, shutdown: shutdown.clone(), stats, name: name.clone(), health: health.clone() };
+        let mut fut = std::pin::pin!(run(settings, ctx));
+        let result = tokio::select! {
+            r = &mut fut => r,
+            _ = shutdown.cancelled() => {
+                health.set(ServiceState::Stopping);
+                systemd::notify_stopping();
+                match tokio::time::timeout(GRACE, &mut fut).await {
+                    Ok(r) => r,
+                    Err(_) => Err(anyhow::anyhow!("did not stop within {GRACE:?} of the shutdown request")),
+                }
+            }
+        };
+        hb_stop.cancel();
+        match hb.await {
+            Ok(Err(e)) => tracing::warn!(error = %e, "heartbeat publishing failed"),
+            Err(e) => tracing::warn!(error = %e, "heartbeat task panicked"),
+            Ok(Ok(())) => {}
+        }
+        match result {
+            Ok(()) => {
+                tracing::info!(service = %name, "stopped");
+                exit::OK
+            }
+            Err(e) => {
+                tracing::error!(service = %name, error = format!("{e:#}"), "failed");
+                exit::FAILURE
+            }
+        }
+    });
+    // Drop the runtime (and with it every port and the node) before exiting, so
+    // iceoryx2 removes this node's resources instead of leaving them for cleanup.
+    rt.shutdown_timeout(Duration::from_secs(1));
+    ExitCode::from(code)
+}
