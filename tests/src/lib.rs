@@ -1,0 +1,370 @@
+//! End-to-end harness: starts the real `skymesh` supervisor and real services,
+//! each mesh in its own temp dir, with generated configs, its own iceoryx2 domain
+//! and its own ports; talks to it through the real bus, HTTP and CLI; kills every
+//! process of the mesh on drop and prints every process's output when a test fails.
+//!
+//! The binaries are taken from the cargo target directory this test runs from;
+//! `cargo test --workspace` builds them before any test runs.
+
+use std::fmt::Write as _;
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context as _, Result};
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use skymesh_ipc_types::ServiceId;
+use skymesh_runtime::{Bus, Domain, Stats};
+
+/// Meshes are heavy for a 2-core machine: run one at a time so timing-sensitive
+/// behaviour (heartbeats, backoff) is tested, not the scheduler.
+static ONE_MESH_AT_A_TIME: Mutex<()> = Mutex::new(());
+static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The repository root (this package lives in `<root>/tests`).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// The directory holding the workspace binaries (`target/<profile>`).
+pub fn bin_dir() -> PathBuf {
+    // current_exe = target/<profile>/deps/<test>-<hash>
+    let exe = std::env::current_exe().unwrap_or_default();
+    exe.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// Path of a workspace binary; fails with a clear message if it was not built.
+pub fn binary(name: &str) -> PathBuf {
+    let p = bin_dir().join(name);
+    assert!(p.exists(), "{} not built: run `cargo build --workspace` (or `cargo test --workspace`)", p.display());
+    p
+}
+
+/// A TCP port free on 127.0.0.1 right now (for protocols that cannot take port 0
+/// through a config file, the supervisor's children are told a concrete port).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).unwrap_or(0)
+}
+
+/// How a test wants its mesh.
+#[derive(Debug, Clone)]
+pub struct MeshOptions {
+    /// Heartbeat period handed to every service.
+    pub heartbeat_ms: u64,
+    /// Missed heartbeat periods before a hung service is killed.
+    pub missed_heartbeats: u32,
+    /// Extra TOML appended to autopilot-link's config (e.g. a bad key).
+    pub autopilot_link_extra: String,
+    /// ATTITUDE rate requested by autopilot-link.
+    pub attitude_hz: f64,
+}
+
+impl Default for MeshOptions {
+    fn default() -> Self {
+        MeshOptions { heartbeat_ms: 200, missed_heartbeats: 6, autopilot_link_extra: String::new(), attitude_hz: 50.0 }
+    }
+}
+
+/// A running mesh: the supervisor with vehicle-sim and autopilot-link.
+#[derive(Debug)]
+pub struct Mesh {
+    pub dir: tempfile::TempDir,
+    pub domain: String,
+    pub mavlink_port: u16,
+    supervisor: Option<Child>,
+    metrics_addr: Option<SocketAddr>,
+    _serial: MutexGuard<'static, ()>,
+}
+
+impl Mesh {
+    /// Writes the configs and starts `skymesh up`; returns once its HTTP endpoint answers.
+    pub fn start(opts: MeshOptions) -> Result<Mesh> {
+        let serial = ONE_MESH_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let domain = format!("e2e{}x{n}", std::process::id());
+        let dir = tempfile::Builder::new().prefix("skymesh-e2e-").tempdir()?;
+        let mavlink_port = free_port();
+        let root = repo_root();
+        let d = dir.path();
+
+        std::fs::write(
+            d.join("vehicle-sim.toml"),
+            format!("endpoint = \"tcp:127.0.0.1:{mavlink_port}\"\nsystem_id = 1\n"),
+        )?;
+        std::fs::write(
+            d.join("autopilot-link.toml"),
+            format!(
+                "connection = \"tcpout:127.0.0.1:{mavlink_port}\"\nvehicle_id = 1\nattitude_hz = {}\n{}\n",
+                opts.attitude_hz, opts.autopilot_link_extra
+            ),
+        )?;
+        let bins = bin_dir();
+        std::fs::write(
+            d.join("skymesh.toml"),
+            format!(
+                r#"[supervisor]
+metrics = "127.0.0.1:0"
+ipc_config = "{ipc}"
+heartbeat_ms = {hb}
+missed_heartbeats = {missed}
+grace_period_ms = 3000
+
+[[service]]
+name = "vehicle-sim"
+binary = "{bins}/skymesh-vehicle-sim"
+config = "vehicle-sim.toml"
+critical = true
+
+[[service]]
+name = "autopilot-link"
+binary = "{bins}/skymesh-autopilot-link"
+config = "autopilot-link.toml"
+after = ["vehicle-sim"]
+critical = true
+"#,
+                ipc = root.join("deploy/iceoryx2.toml").display(),
+                hb = opts.heartbeat_ms,
+                missed = opts.missed_heartbeats,
+                bins = bins.display(),
+            ),
+        )?;
+
+        let stdout = std::fs::File::create(d.join("supervisor.stdout"))?;
+        let stderr = std::fs::File::create(d.join("supervisor.stderr"))?;
+        let status_file = d.join("metrics.addr");
+        let child = Command::new(binary("skymesh"))
+            .arg("up")
+            .arg("--config")
+            .arg(d.join("skymesh.toml"))
+            .arg("--metrics")
+            .arg("127.0.0.1:0")
+            .arg("--status-file")
+            .arg(&status_file)
+            .env("SKYMESH_DOMAIN", &domain)
+            .env("RUST_LOG", "info")
+            .env_remove("NOTIFY_SOCKET")
+            .stdin(Stdio::null())
+            .stdout(stdout)
+            .stderr(stderr)
+            .spawn()
+            .context("spawning skymesh up")?;
+        let mut mesh = Mesh { dir, domain, mavlink_port, supervisor: Some(child), metrics_addr: None, _serial: serial };
+        let addr = mesh.wait_for(Duration::from_secs(20), "supervisor status file", |m| {
+            let text = std::fs::read_to_string(&status_file).ok()?;
+            text.trim().parse::<SocketAddr>().ok().filter(|_| m.http_get("/status").is_ok())
+        })?;
+        mesh.metrics_addr = Some(addr);
+        Ok(mesh)
+    }
+
+    /// The supervisor's HTTP address.
+    pub fn metrics_addr(&self) -> SocketAddr {
+        self.metrics_addr.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)))
+    }
+
+    /// The supervisor's pid.
+    pub fn supervisor_pid(&self) -> Option<u32> {
+        self.supervisor.as_ref().map(Child::id)
+    }
+
+    /// This mesh's iceoryx2 domain, with the shared deploy config.
+    pub fn ipc_domain(&self) -> Result<Domain> {
+        Ok(Domain::load(&self.domain, Some(&repo_root().join("deploy/iceoryx2.toml")))?)
+    }
+
+    /// A bus node for the test itself, in the mesh's domain. Call inside a tokio runtime.
+    pub fn bus(&self, name: &str) -> Result<Bus> {
+        Ok(Bus::open(&self.ipc_domain()?, name, ServiceId::Tool, 0, Stats::new())?)
+    }
+
+    /// Plain HTTP/1.0 GET against the supervisor (test-side client).
+    pub fn http_get(&self, path: &str) -> Result<String> {
+        let addr = match self.metrics_addr {
+            Some(a) => a,
+            None => std::fs::read_to_string(self.dir.path().join("metrics.addr"))?.trim().parse()?,
+        };
+        let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2))?;
+        s.set_read_timeout(Some(Duration::from_secs(5)))?;
+        write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n")?;
+        let mut resp = String::new();
+        s.read_to_string(&mut resp)?;
+        let (head, body) = resp.split_once("\r\n\r\n").ok_or_else(|| anyhow!("no HTTP header end"))?;
+        if !head.starts_with("HTTP/1.1 200") && !head.starts_with("HTTP/1.0 200") {
+            bail!("GET {path}: {}", head.lines().next().unwrap_or(""));
+        }
+        Ok(body.to_string())
+    }
+
+    /// `/status` as JSON.
+    pub fn status(&self) -> Result<Vec<serde_json::Value>> {
+        let v: serde_json::Value = serde_json::from_str(&self.http_get("/status")?)?;
+        v.as_array().cloned().ok_or_else(|| anyhow!("/status is not an array: {v}"))
+    }
+
+    /// The `/status` entry of one service.
+    pub fn service(&self, name: &str) -> Result<serde_json::Value> {
+        self.status()?
+            .into_iter()
+            .find(|s| s["name"] == name)
+            .ok_or_else(|| anyhow!("service {name} not in /status"))
+    }
+
+    /// The value of one Prometheus series (exact name and label set as rendered).
+    pub fn metric(&self, series: &str) -> Result<Option<f64>> {
+        let text = self.http_get("/metrics")?;
+        Ok(find_metric(&text, series))
+    }
+
+    /// Polls `f` every 50 ms until it returns `Some` or `timeout` passes.
+    pub fn wait_for<T>(&mut self, timeout: Duration, what: &str, mut f: impl FnMut(&mut Self) -> Option<T>) -> Result<T> {
+        let start = Instant::now();
+        loop {
+            if let Some(v) = f(self) {
+                return Ok(v);
+            }
+            if let Some(child) = self.supervisor.as_mut() {
+                if let Ok(Some(status)) = child.try_wait() {
+                    bail!("supervisor exited ({status}) while waiting for {what}");
+                }
+            }
+            if start.elapsed() > timeout {
+                bail!("timed out after {timeout:?} waiting for {what}");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Waits until `name` is `running` in `/status` and returns its pid.
+    pub fn wait_running(&mut self, name: &str, timeout: Duration) -> Result<u32> {
+        self.wait_for(timeout, &format!("{name} running"), |m| {
+            let s = m.service(name).ok()?;
+            (s["state"] == "running").then(|| s["pid"].as_u64()).flatten().map(|p| p as u32)
+        })
+    }
+
+    /// Sends SIGTERM to the supervisor and waits for it to exit.
+    pub fn stop(&mut self, timeout: Duration) -> Result<std::process::ExitStatus> {
+        let mut child = self.supervisor.take().ok_or_else(|| anyhow!("already stopped"))?;
+        signal(child.id(), Signal::SIGTERM)?;
+        let start = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait()? {
+                return Ok(status);
+            }
+            if start.elapsed() > timeout {
+                let _ = child.kill();
+                let _ = child.wait();
+                bail!("supervisor did not exit within {timeout:?} of SIGTERM");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Every process (other than this test) whose environment names this mesh's domain.
+    pub fn processes(&self) -> Vec<u32> {
+        processes_with_env("SKYMESH_DOMAIN", &self.domain)
+    }
+
+    /// All captured output, for failure reports.
+    pub fn output(&self) -> String {
+        let mut out = String::new();
+        for f in ["supervisor.stdout", "supervisor.stderr"] {
+            let text = std::fs::read_to_string(self.dir.path().join(f)).unwrap_or_default();
+            let _ = writeln!(out, "===== {f} (supervisor and its children) =====\n{text}");
+        }
+        out
+    }
+}
+
+impl Drop for Mesh {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("{}", self.output());
+        }
+        if let Some(mut child) = self.supervisor.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        // Children live in their own process groups: find them by their domain.
+        for pid in self.processes() {
+            let _ = signal(pid, Signal::SIGKILL);
+        }
+        if let Ok(d) = self.ipc_domain() {
+            std::thread::sleep(Duration::from_millis(100));
+            d.cleanup_dead_nodes();
+            if d.live_nodes().is_empty() {
+                d.remove_leftover_files();
+            }
+        }
+    }
+}
+
+/// Sends `sig` to `pid`.
+pub fn signal(pid: u32, sig: Signal) -> Result<()> {
+    kill(Pid::from_raw(pid as i32), sig).with_context(|| format!("kill({pid}, {sig})"))
+}
+
+/// Pids of live (not zombie) processes whose environment contains `key=value`, except this one.
+pub fn processes_with_env(key: &str, value: &str) -> Vec<u32> {
+    let needle = format!("{key}={value}");
+    let me = std::process::id();
+    let mut out = Vec::new();
+    let Ok(rd) = std::fs::read_dir("/proc") else { return out };
+    for e in rd.flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        if pid == me {
+            continue;
+        }
+        let Ok(env) = std::fs::read(e.path().join("environ")) else { continue };
+        if env.split(|b| *b == 0).any(|kv| kv == needle.as_bytes()) {
+            let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
+            // Field 3 (after the parenthesised comm) is the state; Z = zombie.
+            let state = stat.rsplit_once(')').map(|(_, rest)| rest.trim_start().chars().next()).flatten();
+            if state != Some('Z') {
+                out.push(pid);
+            }
+        }
+    }
+    out
+}
+
+/// Finds `series` (e.g. `skymesh_service_up{service="vehicle-sim"}`) in Prometheus text.
+/// Labels are compared as a set, so their order in the exposition does not matter.
+pub fn find_metric(text: &str, series: &str) -> Option<f64> {
+    let (want_name, want_labels) = split_series(series);
+    text.lines().filter(|l| !l.starts_with('#')).find_map(|line| {
+        let (s, value) = line.rsplit_once(' ')?;
+        let (name, labels) = split_series(s);
+        (name == want_name && labels == want_labels).then(|| value.parse().ok()).flatten()
+    })
+}
+
+fn split_series(s: &str) -> (&str, Vec<String>) {
+    match s.split_once('{') {
+        None => (s.trim(), Vec::new()),
+        Some((name, rest)) => {
+            let mut labels: Vec<String> =
+                rest.trim_end_matches('}').split(',').filter(|l| !l.is_empty()).map(str::to_string).collect();
+            labels.sort();
+            (name.trim(), labels)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metric_lookup_ignores_label_order() {
+        let text = "# HELP x y\nx_total{b=\"2\",a=\"1\"} 5\nx_total{a=\"1\"} 3\n";
+        assert_eq!(find_metric(text, "x_total{a=\"1\",b=\"2\"}"), Some(5.0));
+        assert_eq!(find_metric(text, "x_total{a=\"1\"}"), Some(3.0));
+        assert_eq!(find_metric(text, "x_total"), None);
+    }
+}
