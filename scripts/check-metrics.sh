@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Starts the default mesh in its own domain, scrapes /metrics once every service has
+# reported, validates the scrape with `promtool check metrics`, then stops the mesh
+# and checks it left nothing behind.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=target/debug
+domain="ci$$"
+work=$(mktemp -d)
+trap 'kill -KILL "${pid:-0}" 2>/dev/null || true; rm -rf "$work"' EXIT
+
+# The default configs (binaries are found next to `skymesh`), but on a free MAVLink
+# port so CI never collides with a mesh already running on this machine.
+port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+cp deploy/*.toml "$work/"
+sed -i "s#^endpoint = .*#endpoint = \"tcp:127.0.0.1:$port\"#" "$work/vehicle-sim.toml"
+sed -i "s#^connection = .*#connection = \"tcpout:127.0.0.1:$port\"#" "$work/autopilot-link.toml"
+
+SKYMESH_DOMAIN=$domain "$bin/skymesh" up --config "$work/skymesh.toml" --metrics 127.0.0.1:0 \
+  --status-file "$work/addr" > "$work/out.log" 2>&1 &
+pid=$!
+for _ in $(seq 1 300); do
+  if [ -s "$work/addr" ] && curl -sf "http://$(cat "$work/addr")/metrics" -o "$work/metrics.txt" \
+     && grep -q 'skymesh_topic_samples_received_total' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="autopilot-link"} 1' "$work/metrics.txt"; then
+    break
+  fi
+  sleep 0.2
+done
+if ! grep -q 'skymesh_topic_samples_published_total' "$work/metrics.txt" 2>/dev/null; then
+  echo "mesh did not report metrics in time"; cat "$work/out.log"; exit 1
+fi
+echo "scraped $(wc -l < "$work/metrics.txt") lines from $(cat "$work/addr")"
+promtool check metrics < "$work/metrics.txt"
+kill -TERM "$pid"
+wait "$pid"
+if ls /dev/shm | grep -q "^${domain}_"; then
+  echo "shared memory left behind:"; ls /dev/shm | grep "^${domain}_"; exit 1
+fi
+echo "mesh stopped cleanly"
