@@ -62,11 +62,19 @@ pub struct MeshOptions {
     pub autopilot_link_extra: String,
     /// ATTITUDE rate requested by autopilot-link.
     pub attitude_hz: f64,
+    /// Extra TOML placed after the `[supervisor]` table (e.g. a `[restart]` policy).
+    pub supervisor_extra: String,
 }
 
 impl Default for MeshOptions {
     fn default() -> Self {
-        MeshOptions { heartbeat_ms: 200, missed_heartbeats: 6, autopilot_link_extra: String::new(), attitude_hz: 50.0 }
+        MeshOptions {
+            heartbeat_ms: 200,
+            missed_heartbeats: 6,
+            autopilot_link_extra: String::new(),
+            attitude_hz: 50.0,
+            supervisor_extra: String::new(),
+        }
     }
 }
 
@@ -114,6 +122,8 @@ heartbeat_ms = {hb}
 missed_heartbeats = {missed}
 grace_period_ms = 3000
 
+{extra}
+
 [[service]]
 name = "vehicle-sim"
 binary = "{bins}/skymesh-vehicle-sim"
@@ -131,6 +141,7 @@ critical = true
                 hb = opts.heartbeat_ms,
                 missed = opts.missed_heartbeats,
                 bins = bins.display(),
+                extra = opts.supervisor_extra,
             ),
         )?;
 
