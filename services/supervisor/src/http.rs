@@ -1,0 +1,152 @@
+//! The supervisor's HTTP endpoint (hyper 1): `GET /metrics` (Prometheus text) and
+//! `GET /status` (JSON array of services); 404 for anything else.
+
+use std::convert::Infallible;
+use std::sync::Arc;
+
+use bytes::Bytes;
+use http_body_util::Full;
+use hyper::body::Incoming;
+use hyper::header::{HeaderValue, ALLOW, CONTENT_TYPE};
+use hyper::service::service_fn;
+use hyper::{Method, Request, Response, StatusCode};
+use hyper_util::rt::TokioIo;
+use prometheus::Registry;
+use tokio::net::TcpListener;
+use tokio_util::sync::CancellationToken;
+use tokio_util::task::TaskTracker;
+
+use crate::metrics;
+use crate::state::Mesh;
+
+/// What the handlers read.
+#[derive(Debug, Clone)]
+pub struct App {
+    pub mesh: Arc<Mesh>,
+    pub registry: Registry,
+}
+
+fn reply(
+    status: StatusCode,
+    content_type: &'static str,
+    body: impl Into<Bytes>,
+) -> Response<Full<Bytes>> {
+    let mut r = Response::new(Full::new(body.into()));
+    *r.status_mut() = status;
+    r.headers_mut()
+        .insert(CONTENT_TYPE, HeaderValue::from_static(content_type));
+    r
+}
+
+const TEXT: &str = "text/plain; charset=utf-8";
+
+impl App {
+    /// Answers one request.
+    pub fn handle<B>(&self, req: &Request<B>) -> Response<Full<Bytes>> {
+        let path = req.uri().path();
+        if !matches!(path, "/metrics" | "/status") {
+            return reply(
+                StatusCode::NOT_FOUND,
+                TEXT,
+                "not found: try /metrics or /status\n",
+            );
+        }
+        if req.method() != Method::GET && req.method() != Method::HEAD {
+            let mut r = reply(StatusCode::METHOD_NOT_ALLOWED, TEXT, "only GET\n");
+            r.headers_mut()
+                .insert(ALLOW, HeaderValue::from_static("GET, HEAD"));
+            return r;
+        }
+        if path == "/metrics" {
+            match metrics::render(&self.registry) {
+                Ok(text) => reply(
+                    StatusCode::OK,
+                    "text/plain; version=0.0.4; charset=utf-8",
+                    text,
+                ),
+                Err(e) => {
+                    tracing::error!(error = %e, "encoding metrics failed");
+                    reply(
+                        StatusCode::INTERNAL_SERVER_ERROR,
+                        TEXT,
+                        format!("encoding metrics failed: {e}\n"),
+                    )
+                }
+            }
+        } else {
+            match serde_json::to_vec(&self.mesh.status()) {
+                Ok(body) => reply(StatusCode::OK, "application/json", body),
+                Err(e) => reply(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    TEXT,
+                    format!("encoding status failed: {e}\n"),
+                ),
+            }
+        }
+    }
+}
+
+/// Serves `app` on `listener` until `stop` is cancelled. Connection tasks run on
+/// `tracker`, so the caller can wait for in-flight requests.
+pub async fn serve(listener: TcpListener, app: App, stop: CancellationToken, tracker: TaskTracker) {
+    loop {
+        let accepted = tokio::select! {
+            _ = stop.cancelled() => return,
+            r = listener.accept() => r,
+        };
+        let stream = match accepted {
+            Ok((stream, _peer)) => stream,
+            Err(e) => {
+                // Out of file descriptors and the like: back off instead of spinning.
+                tracing::warn!(error = %e, "accept failed");
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let app = app.clone();
+        let stop = stop.clone();
+        tracker.spawn(async move {
+            let svc = service_fn(move |req: Request<Incoming>| {
+                let resp = app.handle(&req);
+                async move { Ok::<_, Infallible>(resp) }
+            });
+            let conn = hyper::server::conn::http1::Builder::new()
+                .serve_connection(TokioIo::new(stream), svc);
+            let mut conn = std::pin::pin!(conn);
+            tokio::select! {
+                r = conn.as_mut() => {
+                    if let Err(e) = r {
+                        tracing::debug!(error = %e, "http connection ended with an error");
+                    }
+                }
+                _ = stop.cancelled() => {
+                    conn.as_mut().graceful_shutdown();
+                    let _ = tokio::time::timeout(std::time::Duration::from_secs(1), conn).await;
+                }
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn routes() {
+        let mesh = Arc::new(Mesh::new(&[("a".into(), false)], false));
+        let app = App {
+            registry: metrics::registry(mesh.clone()).unwrap(),
+            mesh,
+        };
+        let get = |p: &str| app.handle(&Request::get(p).body(()).unwrap());
+        assert_eq!(get("/metrics").status(), StatusCode::OK);
+        let status = get("/status");
+        assert_eq!(status.status(), StatusCode::OK);
+        assert_eq!(status.headers()[CONTENT_TYPE], "application/json");
+        assert_eq!(get("/").status(), StatusCode::NOT_FOUND);
+        assert_eq!(get("/metricsx").status(), StatusCode::NOT_FOUND);
+        let post = app.handle(&Request::post("/status").body(()).unwrap());
+        assert_eq!(post.status(), StatusCode::METHOD_NOT_ALLOWED);
+    }
+}

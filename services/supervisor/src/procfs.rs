@@ -1,0 +1,87 @@
+//! CPU time and resident memory of a process, from `/proc/<pid>/stat` and `statm`.
+
+use std::sync::OnceLock;
+
+use nix::unistd::{sysconf, SysconfVar};
+
+/// Resource usage of one process.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcUsage {
+    /// User + system CPU time.
+    pub cpu_seconds: f64,
+    pub resident_bytes: u64,
+}
+
+/// Clock ticks per second and page size, asked of the kernel once.
+fn units() -> (f64, u64) {
+    static UNITS: OnceLock<(f64, u64)> = OnceLock::new();
+    *UNITS.get_or_init(|| {
+        // Linux always answers both; the fallbacks are its universal values.
+        let ticks = sysconf(SysconfVar::CLK_TCK)
+            .ok()
+            .flatten()
+            .filter(|t| *t > 0)
+            .unwrap_or(100);
+        let page = sysconf(SysconfVar::PAGE_SIZE)
+            .ok()
+            .flatten()
+            .filter(|p| *p > 0)
+            .unwrap_or(4096);
+        (ticks as f64, page as u64)
+    })
+}
+
+/// Usage of `pid`, or `None` if it is gone or its files cannot be read.
+pub fn usage(pid: u32) -> Option<ProcUsage> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let statm = std::fs::read_to_string(format!("/proc/{pid}/statm")).ok()?;
+    let (ticks_per_s, page) = units();
+    let ticks = parse_stat_cpu_ticks(&stat)?;
+    let pages = parse_statm_resident_pages(&statm)?;
+    Some(ProcUsage {
+        cpu_seconds: ticks as f64 / ticks_per_s,
+        resident_bytes: pages.saturating_mul(page),
+    })
+}
+
+/// utime + stime (fields 14 and 15) of a `/proc/<pid>/stat` line. The command name
+/// (field 2) is in parentheses and may contain spaces and `)`, so fields are counted
+/// from the last `)`.
+pub fn parse_stat_cpu_ticks(stat: &str) -> Option<u64> {
+    let (_, rest) = stat.rsplit_once(')')?;
+    let mut fields = rest.split_ascii_whitespace();
+    // After `)`: field 3 (state) is index 0, so utime (14) is index 11.
+    let utime: u64 = fields.nth(11)?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some(utime.saturating_add(stime))
+}
+
+/// The resident set size in pages (second field of `/proc/<pid>/statm`).
+pub fn parse_statm_resident_pages(statm: &str) -> Option<u64> {
+    statm.split_ascii_whitespace().nth(1)?.parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_stat_even_with_parentheses_in_the_name() {
+        let line = "1234 (we ird) name) S 1 1234 1234 0 -1 4194560 100 0 0 0 250 50 0 0 20 0 1 0 12345 1000000 200 18446744073709551615";
+        assert_eq!(parse_stat_cpu_ticks(line), Some(300));
+        assert_eq!(parse_stat_cpu_ticks("garbage"), None);
+        assert_eq!(
+            parse_statm_resident_pages("1000 250 100 1 0 300 0\n"),
+            Some(250)
+        );
+        assert_eq!(parse_statm_resident_pages(""), None);
+    }
+
+    #[test]
+    fn reads_this_process() {
+        let u = usage(std::process::id()).expect("own /proc entry");
+        assert!(u.resident_bytes > 0);
+        assert!(u.cpu_seconds >= 0.0);
+        assert!(usage(u32::MAX).is_none());
+    }
+}

@@ -1,0 +1,118 @@
+//! `skymesh status`: asks the running supervisor's `/status` endpoint and prints a
+//! table, or the JSON array with `--json`.
+
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context as _};
+use bytes::Bytes;
+use http_body_util::{BodyExt, Empty};
+use hyper::header::HOST;
+use hyper::{Request, StatusCode};
+use hyper_util::rt::TokioIo;
+use tokio::net::TcpStream;
+
+use crate::state::StatusEntry;
+use crate::table;
+
+/// How long `status` waits for the supervisor.
+pub const TIMEOUT: Duration = Duration::from_secs(3);
+
+/// The address to connect to for a configured listen address: a wildcard listen
+/// address is reached through loopback.
+pub fn connect_addr(listen: SocketAddr) -> SocketAddr {
+    match listen.ip() {
+        IpAddr::V4(ip) if ip.is_unspecified() => {
+            SocketAddr::new(Ipv4Addr::LOCALHOST.into(), listen.port())
+        }
+        IpAddr::V6(ip) if ip.is_unspecified() => {
+            SocketAddr::new(Ipv6Addr::LOCALHOST.into(), listen.port())
+        }
+        _ => listen,
+    }
+}
+
+/// `GET path` on `addr` with a hyper HTTP/1 client; returns the status and body.
+pub async fn http_get(addr: SocketAddr, path: &str) -> anyhow::Result<(StatusCode, String)> {
+    let exchange = async {
+        let stream = TcpStream::connect(addr)
+            .await
+            .with_context(|| format!("connecting to {addr}"))?;
+        let (mut sender, conn) =
+            hyper::client::conn::http1::handshake(TokioIo::new(stream)).await?;
+        let driver = tokio::spawn(conn);
+        let req = Request::get(path)
+            .header(HOST, addr.to_string())
+            .body(Empty::<Bytes>::new())?;
+        let resp = sender.send_request(req).await?;
+        let status = resp.status();
+        let body = resp.into_body().collect().await?.to_bytes();
+        drop(sender);
+        driver.abort();
+        let text =
+            String::from_utf8(body.to_vec()).map_err(|_| anyhow!("response is not UTF-8"))?;
+        anyhow::Ok((status, text))
+    };
+    tokio::time::timeout(TIMEOUT, exchange)
+        .await
+        .map_err(|_| anyhow!("no answer from {addr} within {TIMEOUT:?}"))?
+}
+
+/// The supervisor's `/status`, as typed entries.
+pub async fn fetch(addr: SocketAddr) -> anyhow::Result<Vec<StatusEntry>> {
+    let (status, body) = http_get(addr, "/status").await?;
+    if status != StatusCode::OK {
+        bail!("{addr}/status answered {status}");
+    }
+    serde_json::from_str(&body)
+        .with_context(|| format!("{addr}/status is not a skymesh status array"))
+}
+
+/// Runs `skymesh status`: prints the table (or the JSON array) of the supervisor at `addr`.
+pub async fn run(addr: SocketAddr, json: bool) -> anyhow::Result<()> {
+    let addr = connect_addr(addr);
+    let rows = fetch(addr)
+        .await
+        .with_context(|| format!("no skymesh supervisor answers at http://{addr} (is `skymesh up` running? try --metrics ADDR)"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else if rows.is_empty() {
+        println!("the supervisor at {addr} runs no services");
+    } else {
+        print!("{}", table::render(&rows));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wildcard_listen_addresses_are_reached_through_loopback() {
+        assert_eq!(
+            connect_addr("0.0.0.0:9464".parse().unwrap()),
+            "127.0.0.1:9464".parse().unwrap()
+        );
+        assert_eq!(
+            connect_addr("[::]:1".parse().unwrap()),
+            "[::1]:1".parse().unwrap()
+        );
+        assert_eq!(
+            connect_addr("10.0.0.2:80".parse().unwrap()),
+            "10.0.0.2:80".parse().unwrap()
+        );
+    }
+
+    #[tokio::test]
+    async fn nobody_listening_is_a_clear_error() {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = l.local_addr().unwrap();
+        drop(l);
+        let e = run(addr, false).await.unwrap_err();
+        assert!(
+            format!("{e:#}").contains("no skymesh supervisor answers"),
+            "{e:#}"
+        );
+    }
+}
