@@ -1,0 +1,623 @@
+//! Vehicle commands → MAVLink: intake checks and the mapping. Pure, no I/O.
+//!
+//! Commands go to the autopilot (target component 1). Mapping:
+//!
+//! | `Command` | MAVLink | answered by |
+//! |---|---|---|
+//! | `Arm { force }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 1, p2 = 21196 if forced | COMMAND_ACK |
+//! | `Disarm { force }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196 if forced | COMMAND_ACK |
+//! | `SetMode(m)` | COMMAND_LONG `DO_SET_MODE` p1 = `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`, p2 = ArduCopter custom mode | COMMAND_ACK |
+//! | `Takeoff { alt }` | COMMAND_LONG `NAV_TAKEOFF` p7 = alt above home (GUIDED, armed) | COMMAND_ACK |
+//! | `Land` | COMMAND_LONG `NAV_LAND` (here) | COMMAND_ACK |
+//! | `ReturnToLaunch` | COMMAND_LONG `NAV_RETURN_TO_LAUNCH` | COMMAND_ACK |
+//! | `GoTo` | SET_POSITION_TARGET_GLOBAL_INT, frame `GLOBAL_RELATIVE_ALT_INT`, position (+ yaw if given) | accepted when written |
+//! | `GoTo` with speed | COMMAND_LONG `DO_CHANGE_SPEED` p1 = 1 (ground), p2 = speed, then the setpoint above | the speed command's COMMAND_ACK |
+//! | `VelocityNed` | SET_POSITION_TARGET_LOCAL_NED, frame `LOCAL_NED`, velocity (+ yaw rate if given) | accepted when written |
+//! | `SetYaw` | COMMAND_LONG `CONDITION_YAW` p1 = angle, p2 = rate, p3 = direction, p4 = relative | COMMAND_ACK |
+//! | `SetRoi` | COMMAND_INT `DO_SET_ROI_LOCATION`, frame `GLOBAL_RELATIVE_ALT` | COMMAND_ACK |
+//! | `ClearRoi` | COMMAND_LONG `DO_SET_ROI_NONE` | COMMAND_ACK |
+//! | `Gimbal` | COMMAND_LONG `DO_GIMBAL_MANAGER_PITCHYAW` p1 = pitch, p2 = yaw (vehicle frame), rates NaN | COMMAND_ACK |
+//! | `CameraCapture` | COMMAND_LONG `IMAGE_START_CAPTURE` p3 = 1 image, p4 = capture sequence | COMMAND_ACK |
+//! | `RecordStart` / `RecordStop` | COMMAND_LONG `VIDEO_START_CAPTURE` / `VIDEO_STOP_CAPTURE` | COMMAND_ACK |
+//! | `Servo` | COMMAND_LONG `DO_SET_SERVO` p1 = channel, p2 = PWM µs | COMMAND_ACK |
+//! | `Brake` in GUIDED | SET_POSITION_TARGET_LOCAL_NED zero velocity (stays GUIDED, so setpoints resume at once) | accepted when written |
+//! | `Brake` otherwise | COMMAND_LONG `DO_SET_MODE` BRAKE (17) | COMMAND_ACK |
+//! | `EmergencyStop` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196: motors stop even in flight | COMMAND_ACK |
+//!
+//! `Gimbal` has no `DO_MOUNT_CONTROL` fallback: a gimbal without gimbal protocol v2
+//! answers UNSUPPORTED, which is reported as a refusal.
+//!
+//! Answers are tracked in [`crate::acks`].
+
+use mavlink::dialects::ardupilotmega::{
+    MavCmd, MavFrame, MavMessage, MavModeFlag, PositionTargetTypemask, COMMAND_INT_DATA,
+    COMMAND_LONG_DATA, SET_POSITION_TARGET_GLOBAL_INT_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
+use skymesh_ipc_types::{Command, FlightMode, RefusalReason, VehicleCommand};
+
+/// ArduPilot's magic `param2` of COMPONENT_ARM_DISARM that bypasses arming checks
+/// (arm) or the landed check (disarm).
+pub const FORCE_MAGIC: f32 = 21196.0;
+
+/// Who a MAVLink command is addressed to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Target {
+    pub system: u8,
+    pub component: u8,
+}
+
+/// A MAVLink command that the autopilot answers with COMMAND_ACK.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MavCommand {
+    Long(COMMAND_LONG_DATA),
+    Int(COMMAND_INT_DATA),
+}
+
+impl MavCommand {
+    /// The MAV_CMD, which is what its COMMAND_ACK carries.
+    pub fn id(&self) -> MavCmd {
+        match self {
+            MavCommand::Long(c) => c.command,
+            MavCommand::Int(c) => c.command,
+        }
+    }
+
+    pub fn message(&self) -> MavMessage {
+        match self {
+            MavCommand::Long(c) => MavMessage::COMMAND_LONG(c.clone()),
+            MavCommand::Int(c) => MavMessage::COMMAND_INT(c.clone()),
+        }
+    }
+
+    /// Prepares a retransmission: COMMAND_LONG counts it in `confirmation`.
+    pub(crate) fn bump_confirmation(&mut self) {
+        if let MavCommand::Long(c) = self {
+            c.confirmation = c.confirmation.saturating_add(1);
+        }
+    }
+}
+
+/// What one [`Command`] becomes on the wire: the acknowledged command (sent first)
+/// and/or a setpoint that nothing acknowledges.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    pub command: Option<MavCommand>,
+    pub setpoint: Option<MavMessage>,
+}
+
+/// What the mapping needs to know about the vehicle and the link.
+#[derive(Debug, Clone, Copy)]
+pub struct PlanContext {
+    pub target: Target,
+    /// The autopilot's current mode (decides how `Brake` is done).
+    pub mode: FlightMode,
+    /// Sequence number for `CameraCapture` (prevents a double capture on retransmit).
+    pub capture_seq: u32,
+}
+
+fn long(t: Target, command: MavCmd, p: [f32; 7]) -> MavCommand {
+    MavCommand::Long(COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: t.system,
+        target_component: t.component,
+        confirmation: 0,
+    })
+}
+
+fn set_mode(t: Target, custom_mode: u32) -> MavCommand {
+    let flag = f32::from(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits());
+    long(
+        t,
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [flag, custom_mode as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+    )
+}
+
+fn deg_e7(deg: f64) -> i32 {
+    // Validated to ±180°, so the product fits in i32.
+    (deg * 1e7).round() as i32
+}
+
+/// Ignore-everything-but mask for SET_POSITION_TARGET_*.
+fn mask_except(use_bits: PositionTargetTypemask) -> PositionTargetTypemask {
+    let all = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    all - use_bits
+}
+
+const POSITION_BITS: PositionTargetTypemask =
+    PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
+        .union(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE)
+        .union(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE);
+const VELOCITY_BITS: PositionTargetTypemask =
+    PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        .union(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE)
+        .union(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE);
+
+fn velocity_setpoint(t: Target, vel: [f32; 3], yaw_rate_dps: Option<f32>) -> MavMessage {
+    let mut used = VELOCITY_BITS;
+    if yaw_rate_dps.is_some() {
+        used |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    }
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        vx: vel[0],
+        vy: vel[1],
+        vz: vel[2],
+        yaw_rate: yaw_rate_dps.unwrap_or(0.0).to_radians(),
+        type_mask: mask_except(used),
+        target_system: t.system,
+        target_component: t.component,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    })
+}
+
+/// Maps a validated command. `Err` names what cannot be expressed in MAVLink.
+pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> {
+    let t = ctx.target;
+    let only = |c: MavCommand| Plan {
+        command: Some(c),
+        setpoint: None,
+    };
+    let force = |f: bool| if f { FORCE_MAGIC } else { 0.0 };
+    Ok(match *command {
+        Command::Arm { force: f } => only(long(
+            t,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, force(f), 0.0, 0.0, 0.0, 0.0, 0.0],
+        )),
+        Command::Disarm { force: f } => only(long(
+            t,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [0.0, force(f), 0.0, 0.0, 0.0, 0.0, 0.0],
+        )),
+        Command::EmergencyStop => only(long(
+            t,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [0.0, FORCE_MAGIC, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )),
+        Command::SetMode(mode) => {
+            let custom = mode
+                .to_copter_custom_mode()
+                .ok_or("this flight mode has no ArduCopter mode number")?;
+            only(set_mode(t, custom))
+        }
+        Command::Takeoff { alt_rel_m } => only(long(
+            t,
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, alt_rel_m],
+        )),
+        Command::Land => only(long(t, MavCmd::MAV_CMD_NAV_LAND, [0.0; 7])),
+        Command::ReturnToLaunch => only(long(t, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH, [0.0; 7])),
+        Command::GoTo {
+            lat_deg,
+            lon_deg,
+            alt_rel_m,
+            yaw_deg,
+            speed_mps,
+        } => {
+            let mut used = POSITION_BITS;
+            if yaw_deg.is_some() {
+                used |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE;
+            }
+            // GLOBAL_RELATIVE_ALT_INT is deprecated in favour of GLOBAL_RELATIVE_ALT,
+            // but it is what every ArduPilot release accepts for this message.
+            #[allow(deprecated)]
+            let frame = MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT;
+            let setpoint =
+                MavMessage::SET_POSITION_TARGET_GLOBAL_INT(SET_POSITION_TARGET_GLOBAL_INT_DATA {
+                    lat_int: deg_e7(lat_deg),
+                    lon_int: deg_e7(lon_deg),
+                    alt: alt_rel_m,
+                    yaw: yaw_deg.unwrap_or(0.0).to_radians(),
+                    type_mask: mask_except(used),
+                    target_system: t.system,
+                    target_component: t.component,
+                    coordinate_frame: frame,
+                    ..Default::default()
+                });
+            Plan {
+                command: speed_mps.map(|s| {
+                    long(
+                        t,
+                        MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+                        [1.0, s, -1.0, 0.0, 0.0, 0.0, 0.0],
+                    )
+                }),
+                setpoint: Some(setpoint),
+            }
+        }
+        Command::VelocityNed {
+            vel_ned_mps,
+            yaw_rate_dps,
+        } => Plan {
+            command: None,
+            setpoint: Some(velocity_setpoint(t, vel_ned_mps, yaw_rate_dps)),
+        },
+        Command::SetYaw {
+            yaw_deg,
+            rate_dps,
+            relative,
+        } => {
+            let (angle, direction, rel) = if relative {
+                (yaw_deg.abs(), if yaw_deg < 0.0 { -1.0 } else { 1.0 }, 1.0)
+            } else {
+                // Absolute: 0..360, shortest way round.
+                (yaw_deg.rem_euclid(360.0), 0.0, 0.0)
+            };
+            only(long(
+                t,
+                MavCmd::MAV_CMD_CONDITION_YAW,
+                [angle, rate_dps, direction, rel, 0.0, 0.0, 0.0],
+            ))
+        }
+        Command::SetRoi {
+            lat_deg,
+            lon_deg,
+            alt_rel_m,
+        } => only(MavCommand::Int(COMMAND_INT_DATA {
+            x: deg_e7(lat_deg),
+            y: deg_e7(lon_deg),
+            z: alt_rel_m,
+            command: MavCmd::MAV_CMD_DO_SET_ROI_LOCATION,
+            target_system: t.system,
+            target_component: t.component,
+            frame: MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            ..Default::default()
+        })),
+        Command::ClearRoi => only(long(t, MavCmd::MAV_CMD_DO_SET_ROI_NONE, [0.0; 7])),
+        Command::Gimbal { pitch_deg, yaw_deg } => {
+            // GIMBAL_MANAGER_FLAGS_YAW_IN_VEHICLE_FRAME: yaw relative to the nose.
+            let flags = 32.0;
+            only(long(
+                t,
+                MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+                [pitch_deg, yaw_deg, f32::NAN, f32::NAN, flags, 0.0, 0.0],
+            ))
+        }
+        Command::CameraCapture => only(long(
+            t,
+            MavCmd::MAV_CMD_IMAGE_START_CAPTURE,
+            [0.0, 0.0, 1.0, ctx.capture_seq as f32, 0.0, 0.0, 0.0],
+        )),
+        Command::RecordStart => only(long(t, MavCmd::MAV_CMD_VIDEO_START_CAPTURE, [0.0; 7])),
+        Command::RecordStop => only(long(t, MavCmd::MAV_CMD_VIDEO_STOP_CAPTURE, [0.0; 7])),
+        Command::Servo { channel, pwm_us } => only(long(
+            t,
+            MavCmd::MAV_CMD_DO_SET_SERVO,
+            [
+                f32::from(channel),
+                f32::from(pwm_us),
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        )),
+        Command::Brake if ctx.mode == FlightMode::Guided => Plan {
+            command: None,
+            setpoint: Some(velocity_setpoint(t, [0.0; 3], None)),
+        },
+        Command::Brake => {
+            let brake = FlightMode::Brake
+                .to_copter_custom_mode()
+                .ok_or("BRAKE has no ArduCopter mode number")?;
+            only(set_mode(t, brake))
+        }
+    })
+}
+
+/// Why a command sample was not admitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refusal {
+    pub reason: RefusalReason,
+    pub detail: String,
+}
+
+/// Command intake: checks a sample before anything else looks at it.
+///
+/// Order: addressed to this vehicle, decodes to a valid [`Command`] (finite, in
+/// range, known kind and source), link up.
+pub fn admit(sample: &VehicleCommand, vehicle_id: u8, link_up: bool) -> Result<Command, Refusal> {
+    if sample.vehicle_id != vehicle_id {
+        return Err(Refusal {
+            reason: RefusalReason::WrongVehicle,
+            detail: format!(
+                "for vehicle {}, this is vehicle {vehicle_id}",
+                sample.vehicle_id
+            ),
+        });
+    }
+    let invalid = |e: skymesh_ipc_types::CommandError| Refusal {
+        reason: e.reason(),
+        detail: e.to_string(),
+    };
+    sample.source().map_err(invalid)?;
+    let command = sample.command().map_err(invalid)?;
+    if !link_up {
+        return Err(Refusal {
+            reason: RefusalReason::LinkDown,
+            detail: "no autopilot heartbeat".to_string(),
+        });
+    }
+    Ok(command)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::acks::Origin;
+    use skymesh_ipc_types::{CommandKind, CommandSource};
+
+    const T: Target = Target {
+        system: 1,
+        component: 1,
+    };
+
+    fn ctx(mode: FlightMode) -> PlanContext {
+        PlanContext {
+            target: T,
+            mode,
+            capture_seq: 7,
+        }
+    }
+
+    fn long_of(p: &Plan) -> &COMMAND_LONG_DATA {
+        match &p.command {
+            Some(MavCommand::Long(c)) => c,
+            other => panic!("expected COMMAND_LONG, got {other:?}"),
+        }
+    }
+
+    fn plan_of(c: Command) -> Plan {
+        plan(&c, &ctx(FlightMode::Loiter)).unwrap()
+    }
+
+    #[test]
+    fn arming_commands_map_to_component_arm_disarm() {
+        for (cmd, p1, p2) in [
+            (Command::Arm { force: false }, 1.0, 0.0),
+            (Command::Arm { force: true }, 1.0, FORCE_MAGIC),
+            (Command::Disarm { force: false }, 0.0, 0.0),
+            (Command::Disarm { force: true }, 0.0, FORCE_MAGIC),
+            (Command::EmergencyStop, 0.0, FORCE_MAGIC),
+        ] {
+            let p = plan_of(cmd);
+            let c = long_of(&p);
+            assert_eq!(c.command, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, "{cmd:?}");
+            assert_eq!((c.param1, c.param2), (p1, p2), "{cmd:?}");
+            assert_eq!((c.target_system, c.target_component), (1, 1));
+            assert_eq!(c.confirmation, 0);
+            assert!(p.setpoint.is_none());
+        }
+    }
+
+    #[test]
+    fn modes_takeoff_and_navigation_commands() {
+        let p = plan_of(Command::SetMode(FlightMode::Guided));
+        let c = long_of(&p);
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
+        assert_eq!((c.param1, c.param2), (1.0, 4.0));
+        let p = plan_of(Command::Takeoff { alt_rel_m: 10.0 });
+        assert_eq!(long_of(&p).command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+        assert_eq!(long_of(&p).param7, 10.0);
+        assert_eq!(
+            long_of(&plan_of(Command::Land)).command,
+            MavCmd::MAV_CMD_NAV_LAND
+        );
+        assert_eq!(
+            long_of(&plan_of(Command::ReturnToLaunch)).command,
+            MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH
+        );
+        assert!(plan(
+            &Command::SetMode(FlightMode::Unknown),
+            &ctx(FlightMode::Loiter)
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn go_to_is_a_global_position_setpoint_with_optional_yaw_and_speed() {
+        let p = plan_of(Command::GoTo {
+            lat_deg: -35.363261,
+            lon_deg: 149.16523,
+            alt_rel_m: 20.0,
+            yaw_deg: None,
+            speed_mps: None,
+        });
+        assert!(p.command.is_none());
+        let Some(MavMessage::SET_POSITION_TARGET_GLOBAL_INT(s)) = &p.setpoint else {
+            panic!("{p:?}")
+        };
+        assert_eq!(
+            (s.lat_int, s.lon_int, s.alt),
+            (-353_632_610, 1_491_652_300, 20.0)
+        );
+        #[allow(deprecated)]
+        let frame = MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT;
+        assert_eq!(s.coordinate_frame, frame);
+        assert_eq!(s.type_mask.bits(), 0b1101_1111_1000, "position only");
+        assert_eq!((s.target_system, s.target_component), (1, 1));
+
+        let p = plan_of(Command::GoTo {
+            lat_deg: 1.0,
+            lon_deg: 2.0,
+            alt_rel_m: 5.0,
+            yaw_deg: Some(90.0),
+            speed_mps: Some(3.0),
+        });
+        let Some(MavMessage::SET_POSITION_TARGET_GLOBAL_INT(s)) = &p.setpoint else {
+            panic!("{p:?}")
+        };
+        assert_eq!(s.type_mask.bits(), 0b1001_1111_1000, "position and yaw");
+        assert!((s.yaw - std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        let c = long_of(&p);
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_CHANGE_SPEED);
+        assert_eq!((c.param1, c.param2), (1.0, 3.0));
+    }
+
+    #[test]
+    fn velocity_is_a_local_ned_setpoint_with_optional_yaw_rate() {
+        let p = plan_of(Command::VelocityNed {
+            vel_ned_mps: [1.0, -2.0, 0.5],
+            yaw_rate_dps: None,
+        });
+        assert!(p.command.is_none());
+        let Some(MavMessage::SET_POSITION_TARGET_LOCAL_NED(s)) = &p.setpoint else {
+            panic!("{p:?}")
+        };
+        assert_eq!((s.vx, s.vy, s.vz), (1.0, -2.0, 0.5));
+        assert_eq!(s.coordinate_frame, MavFrame::MAV_FRAME_LOCAL_NED);
+        assert_eq!(s.type_mask.bits(), 0b1101_1100_0111, "velocity only");
+        let p = plan_of(Command::VelocityNed {
+            vel_ned_mps: [0.0; 3],
+            yaw_rate_dps: Some(-90.0),
+        });
+        let Some(MavMessage::SET_POSITION_TARGET_LOCAL_NED(s)) = &p.setpoint else {
+            panic!("{p:?}")
+        };
+        assert_eq!(
+            s.type_mask.bits(),
+            0b0101_1100_0111,
+            "velocity and yaw rate"
+        );
+        assert!((s.yaw_rate + std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn yaw_roi_gimbal_camera_and_servo() {
+        let c = plan_of(Command::SetYaw {
+            yaw_deg: -30.0,
+            rate_dps: 20.0,
+            relative: true,
+        });
+        let c = long_of(&c);
+        assert_eq!(c.command, MavCmd::MAV_CMD_CONDITION_YAW);
+        assert_eq!(
+            [c.param1, c.param2, c.param3, c.param4],
+            [30.0, 20.0, -1.0, 1.0]
+        );
+        let c = plan_of(Command::SetYaw {
+            yaw_deg: -30.0,
+            rate_dps: 0.0,
+            relative: false,
+        });
+        let c = long_of(&c);
+        assert_eq!(
+            [c.param1, c.param2, c.param3, c.param4],
+            [330.0, 0.0, 0.0, 0.0]
+        );
+
+        let p = plan_of(Command::SetRoi {
+            lat_deg: 1.5,
+            lon_deg: -2.5,
+            alt_rel_m: 3.0,
+        });
+        let Some(MavCommand::Int(c)) = &p.command else {
+            panic!("{p:?}")
+        };
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_ROI_LOCATION);
+        assert_eq!((c.x, c.y, c.z), (15_000_000, -25_000_000, 3.0));
+        assert_eq!(c.frame, MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT);
+        assert_eq!(
+            long_of(&plan_of(Command::ClearRoi)).command,
+            MavCmd::MAV_CMD_DO_SET_ROI_NONE
+        );
+
+        let g = plan_of(Command::Gimbal {
+            pitch_deg: -45.0,
+            yaw_deg: 10.0,
+        });
+        let g = long_of(&g);
+        assert_eq!(g.command, MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW);
+        assert_eq!((g.param1, g.param2, g.param5), (-45.0, 10.0, 32.0));
+        assert!(g.param3.is_nan() && g.param4.is_nan());
+
+        let cam = plan_of(Command::CameraCapture);
+        let cam = long_of(&cam);
+        assert_eq!(cam.command, MavCmd::MAV_CMD_IMAGE_START_CAPTURE);
+        assert_eq!((cam.param3, cam.param4), (1.0, 7.0));
+        assert_eq!(
+            long_of(&plan_of(Command::RecordStart)).command,
+            MavCmd::MAV_CMD_VIDEO_START_CAPTURE
+        );
+        assert_eq!(
+            long_of(&plan_of(Command::RecordStop)).command,
+            MavCmd::MAV_CMD_VIDEO_STOP_CAPTURE
+        );
+        let s = plan_of(Command::Servo {
+            channel: 9,
+            pwm_us: 1900,
+        });
+        let s = long_of(&s);
+        assert_eq!(s.command, MavCmd::MAV_CMD_DO_SET_SERVO);
+        assert_eq!((s.param1, s.param2), (9.0, 1900.0));
+    }
+
+    #[test]
+    fn brake_holds_guided_with_zero_velocity_and_switches_to_brake_otherwise() {
+        let p = plan(&Command::Brake, &ctx(FlightMode::Guided)).unwrap();
+        assert!(p.command.is_none());
+        let Some(MavMessage::SET_POSITION_TARGET_LOCAL_NED(s)) = &p.setpoint else {
+            panic!("{p:?}")
+        };
+        assert_eq!((s.vx, s.vy, s.vz), (0.0, 0.0, 0.0));
+        for mode in [FlightMode::Auto, FlightMode::Rtl, FlightMode::Unknown] {
+            let p = plan(&Command::Brake, &ctx(mode)).unwrap();
+            let c = long_of(&p);
+            assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
+            assert_eq!(c.param2, 17.0);
+        }
+    }
+
+    fn sample(kind_cmd: &Command, id: u32) -> VehicleCommand {
+        let mut s = VehicleCommand::new(1, CommandSource::Operator, id, kind_cmd).unwrap();
+        s.header.seq = u64::from(id) + 100;
+        s
+    }
+
+    #[test]
+    fn intake_checks_vehicle_validity_and_link_in_that_order() {
+        let good = sample(&Command::Land, 1);
+        assert_eq!(admit(&good, 1, true), Ok(Command::Land));
+        let r = admit(&good, 2, true).unwrap_err();
+        assert_eq!(r.reason, RefusalReason::WrongVehicle);
+        assert_eq!(
+            admit(&good, 1, false).unwrap_err().reason,
+            RefusalReason::LinkDown
+        );
+        let mut nan = sample(&Command::Takeoff { alt_rel_m: 5.0 }, 2);
+        nan.f[0] = f32::NAN;
+        let r = admit(&nan, 1, false).unwrap_err();
+        assert_eq!(r.reason, RefusalReason::InvalidParameter);
+        assert!(r.detail.contains("alt_rel_m"), "{}", r.detail);
+        let mut bad_source = good;
+        bad_source.source = 99;
+        assert_eq!(
+            admit(&bad_source, 1, true).unwrap_err().reason,
+            RefusalReason::InvalidParameter
+        );
+        let o = Origin::of(&good);
+        assert_eq!(
+            (o.kind, o.command_id, o.command_seq),
+            (CommandKind::Land.to_wire(), 1, 101)
+        );
+    }
+}

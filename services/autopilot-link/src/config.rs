@@ -1,0 +1,418 @@
+//! Configuration: the raw TOML shape ([`RawConfig`]) and the validated [`Settings`]
+//! the rest of the crate sees.
+//!
+//! Every key is optional; the shipped, commented defaults are
+//! `deploy/autopilot-link.toml` (embedded as [`ServiceConfig::DEFAULT_TOML`]).
+
+use std::fmt;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use serde::Deserialize;
+use skymesh_runtime::config::{in_range, socket_addr};
+use skymesh_runtime::{ConfigError, ServiceConfig};
+
+/// Where the autopilot is, as written in `connection`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    /// `tcpout:HOST:PORT`: we connect (ArduPilot SITL, vehicle-sim, a telemetry radio bridge).
+    TcpOut { host: String, port: u16 },
+    /// `tcpin:IP:PORT`: we listen and take one client at a time.
+    TcpIn(SocketAddr),
+    /// `udpin:IP:PORT`: we listen; replies go to whoever sent last.
+    UdpIn(SocketAddr),
+    /// `udpout:HOST:PORT`: we send to the autopilot and read its replies.
+    UdpOut { host: String, port: u16 },
+    /// `serial:DEVICE:BAUD`: a UART or USB CDC port of the flight controller.
+    Serial { device: String, baud: u32 },
+}
+
+impl Endpoint {
+    /// Parses a connection string, naming `field` in the error.
+    pub fn parse(field: &str, s: &str) -> Result<Endpoint, ConfigError> {
+        let bad = |msg: String| ConfigError::invalid(field, msg);
+        let (scheme, rest) = s.split_once(':').ok_or_else(|| {
+            bad(format!(
+                "`{s}` has no scheme; use tcpout:, tcpin:, udpin:, udpout: or serial:"
+            ))
+        })?;
+        let host_port = |rest: &str| -> Result<(String, u16), ConfigError> {
+            let (host, port) = rest
+                .rsplit_once(':')
+                .ok_or_else(|| bad(format!("`{s}` needs HOST:PORT after `{scheme}:`")))?;
+            let host = host.trim_start_matches('[').trim_end_matches(']');
+            if host.is_empty() {
+                return Err(bad(format!("`{s}` has an empty host")));
+            }
+            let port: u16 = port
+                .parse()
+                .map_err(|_| bad(format!("`{s}`: `{port}` is not a port number")))?;
+            if port == 0 {
+                return Err(bad(format!("`{s}`: port 0 cannot be connected to")));
+            }
+            Ok((host.to_string(), port))
+        };
+        match scheme {
+            "tcpout" => {
+                let (host, port) = host_port(rest)?;
+                Ok(Endpoint::TcpOut { host, port })
+            }
+            "udpout" => {
+                let (host, port) = host_port(rest)?;
+                Ok(Endpoint::UdpOut { host, port })
+            }
+            "tcpin" => Ok(Endpoint::TcpIn(socket_addr(field, rest)?)),
+            "udpin" => Ok(Endpoint::UdpIn(socket_addr(field, rest)?)),
+            "serial" => {
+                // Split at the last colon: device paths may contain colons, baud rates never do.
+                let (device, baud) = rest
+                    .rsplit_once(':')
+                    .ok_or_else(|| bad(format!("`{s}` needs serial:DEVICE:BAUD")))?;
+                if device.is_empty() {
+                    return Err(bad(format!("`{s}` has an empty device path")));
+                }
+                let baud: u32 = baud
+                    .parse()
+                    .map_err(|_| bad(format!("`{s}`: `{baud}` is not a baud rate")))?;
+                let baud = in_range(field, baud, 1200, 12_000_000)?;
+                Ok(Endpoint::Serial {
+                    device: device.to_string(),
+                    baud,
+                })
+            }
+            other => Err(bad(format!(
+                "unknown scheme `{other}:`; use tcpout:, tcpin:, udpin:, udpout: or serial:"
+            ))),
+        }
+    }
+
+    /// Stream transports end with EOF or an error; datagram ones never do.
+    pub fn is_stream(&self) -> bool {
+        matches!(
+            self,
+            Endpoint::TcpOut { .. } | Endpoint::TcpIn(_) | Endpoint::Serial { .. }
+        )
+    }
+}
+
+/// `host:port`, with an IPv6 literal in brackets.
+struct HostPort<'a>(&'a str, u16);
+
+impl fmt::Display for HostPort<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.contains(':') {
+            write!(f, "[{}]:{}", self.0, self.1)
+        } else {
+            write!(f, "{}:{}", self.0, self.1)
+        }
+    }
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Endpoint::TcpOut { host, port } => write!(f, "tcpout:{}", HostPort(host, *port)),
+            Endpoint::TcpIn(a) => write!(f, "tcpin:{a}"),
+            Endpoint::UdpIn(a) => write!(f, "udpin:{a}"),
+            Endpoint::UdpOut { host, port } => write!(f, "udpout:{}", HostPort(host, *port)),
+            Endpoint::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
+        }
+    }
+}
+
+/// Telemetry rates requested from the autopilot, Hz.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamRates {
+    pub attitude_hz: f32,
+    pub global_position_hz: f32,
+    pub local_position_hz: f32,
+    pub sys_status_hz: f32,
+    pub battery_status_hz: f32,
+    pub gps_raw_hz: f32,
+    pub ekf_status_hz: f32,
+}
+
+/// The validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub connection: Endpoint,
+    /// MAVLink system id of the autopilot; also the `{id}` of the vehicle topics.
+    pub vehicle_id: u8,
+    /// Our own MAVLink system id (component is always 191, onboard computer).
+    pub system_id: u8,
+    /// No autopilot heartbeat for this long → link down.
+    pub link_timeout: Duration,
+    /// Wait this long for a COMMAND_ACK before retransmitting / giving up.
+    pub command_timeout: Duration,
+    /// Retransmissions (confirmation + 1 each) before a command is refused with `Timeout`.
+    pub command_retries: u8,
+    /// After MAV_RESULT_IN_PROGRESS, wait this long for the final answer.
+    pub command_in_progress_timeout: Duration,
+    /// First reconnect delay; doubles per failed attempt up to `reconnect_max`.
+    pub reconnect_min: Duration,
+    pub reconnect_max: Duration,
+    /// A TCP or serial connection that delivers no MAVLink for this long is reopened.
+    pub silence_reconnect: Option<Duration>,
+    pub rates: StreamRates,
+    /// Also send REQUEST_DATA_STREAM (for firmware without SET_MESSAGE_INTERVAL).
+    pub request_data_streams: bool,
+}
+
+/// The configuration file as written. Unknown keys are an error (exit code 64).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RawConfig {
+    pub connection: String,
+    pub vehicle_id: i64,
+    /// Absent → same as `vehicle_id`.
+    pub system_id: Option<i64>,
+    pub link_timeout_s: f64,
+    pub command_timeout_s: f64,
+    pub command_retries: i64,
+    pub command_in_progress_timeout_s: f64,
+    pub reconnect_min_s: f64,
+    pub reconnect_max_s: f64,
+    /// 0 disables.
+    pub silence_reconnect_s: f64,
+    pub request_data_streams: bool,
+    /// Requested telemetry rates, Hz.
+    pub attitude_hz: f64,
+    pub global_position_hz: f64,
+    pub local_position_hz: f64,
+    pub sys_status_hz: f64,
+    pub battery_status_hz: f64,
+    pub gps_raw_hz: f64,
+    pub ekf_status_hz: f64,
+}
+
+impl Default for RawConfig {
+    fn default() -> Self {
+        RawConfig {
+            connection: "tcpout:127.0.0.1:5760".to_string(),
+            vehicle_id: 1,
+            system_id: None,
+            link_timeout_s: 2.0,
+            command_timeout_s: 1.5,
+            command_retries: 1,
+            command_in_progress_timeout_s: 30.0,
+            reconnect_min_s: 0.5,
+            reconnect_max_s: 5.0,
+            silence_reconnect_s: 10.0,
+            request_data_streams: true,
+            attitude_hz: 50.0,
+            global_position_hz: 10.0,
+            local_position_hz: 5.0,
+            sys_status_hz: 2.0,
+            battery_status_hz: 2.0,
+            gps_raw_hz: 2.0,
+            ekf_status_hz: 2.0,
+        }
+    }
+}
+
+/// A finite number of seconds within `min..=max`.
+fn seconds(field: &str, value: f64, min: f64, max: f64) -> Result<Duration, ConfigError> {
+    if !value.is_finite() {
+        return Err(ConfigError::invalid(field, "must be a finite number"));
+    }
+    Ok(Duration::from_secs_f64(in_range(field, value, min, max)?))
+}
+
+fn rate(field: &str, value: f64) -> Result<f32, ConfigError> {
+    if !value.is_finite() {
+        return Err(ConfigError::invalid(field, "must be a finite number"));
+    }
+    Ok(in_range(field, value, 0.1, 400.0)? as f32)
+}
+
+fn mav_id(field: &str, value: i64) -> Result<u8, ConfigError> {
+    Ok(in_range(field, value, 1, 255)? as u8)
+}
+
+impl ServiceConfig for RawConfig {
+    type Settings = Settings;
+    const DEFAULT_TOML: &'static str = include_str!("../../../deploy/autopilot-link.toml");
+
+    fn validate(self) -> Result<Settings, ConfigError> {
+        let vehicle_id = mav_id("vehicle_id", self.vehicle_id)?;
+        let system_id = match self.system_id {
+            Some(id) => mav_id("system_id", id)?,
+            None => vehicle_id,
+        };
+        let reconnect_min = seconds("reconnect_min_s", self.reconnect_min_s, 0.05, 60.0)?;
+        let reconnect_max = seconds("reconnect_max_s", self.reconnect_max_s, 0.05, 300.0)?;
+        if reconnect_max < reconnect_min {
+            return Err(ConfigError::invalid(
+                "reconnect_max_s",
+                "must not be smaller than reconnect_min_s",
+            ));
+        }
+        let silence = self.silence_reconnect_s;
+        let silence_reconnect = if silence == 0.0 {
+            None
+        } else {
+            Some(seconds("silence_reconnect_s", silence, 1.0, 600.0)?)
+        };
+        Ok(Settings {
+            connection: Endpoint::parse("connection", &self.connection)?,
+            vehicle_id,
+            system_id,
+            link_timeout: seconds("link_timeout_s", self.link_timeout_s, 0.5, 60.0)?,
+            command_timeout: seconds("command_timeout_s", self.command_timeout_s, 0.1, 30.0)?,
+            command_retries: in_range("command_retries", self.command_retries, 0, 5)? as u8,
+            command_in_progress_timeout: seconds(
+                "command_in_progress_timeout_s",
+                self.command_in_progress_timeout_s,
+                1.0,
+                600.0,
+            )?,
+            reconnect_min,
+            reconnect_max,
+            silence_reconnect,
+            rates: StreamRates {
+                attitude_hz: rate("attitude_hz", self.attitude_hz)?,
+                global_position_hz: rate("global_position_hz", self.global_position_hz)?,
+                local_position_hz: rate("local_position_hz", self.local_position_hz)?,
+                sys_status_hz: rate("sys_status_hz", self.sys_status_hz)?,
+                battery_status_hz: rate("battery_status_hz", self.battery_status_hz)?,
+                gps_raw_hz: rate("gps_raw_hz", self.gps_raw_hz)?,
+                ekf_status_hz: rate("ekf_status_hz", self.ekf_status_hz)?,
+            },
+            request_data_streams: self.request_data_streams,
+        })
+    }
+}
+
+impl Settings {
+    /// The defaults with `connection` replaced: what in-process tests start from.
+    pub fn with_connection(connection: Endpoint) -> Settings {
+        let mut s = RawConfig::default()
+            .validate()
+            .expect("the built-in defaults are valid");
+        s.connection = connection;
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skymesh_runtime::config::parse;
+
+    fn parse_str(text: &str) -> Result<Settings, ConfigError> {
+        parse::<RawConfig>(text, "test")
+    }
+
+    #[test]
+    fn the_shipped_file_parses_and_matches_the_built_in_defaults() {
+        let shipped = parse_str(RawConfig::DEFAULT_TOML).unwrap();
+        let built_in = RawConfig::default().validate().unwrap();
+        assert_eq!(shipped, built_in);
+        assert_eq!(
+            shipped.connection,
+            Endpoint::TcpOut {
+                host: "127.0.0.1".into(),
+                port: 5760
+            }
+        );
+        assert_eq!(shipped.system_id, shipped.vehicle_id);
+        assert_eq!(shipped.command_timeout, Duration::from_millis(1500));
+        assert_eq!(shipped.rates.attitude_hz, 50.0);
+    }
+
+    #[test]
+    fn an_empty_file_is_the_defaults() {
+        assert_eq!(
+            parse_str("").unwrap(),
+            RawConfig::default().validate().unwrap()
+        );
+    }
+
+    #[test]
+    fn connection_strings_parse() {
+        let p = |s: &str| Endpoint::parse("connection", s);
+        assert_eq!(
+            p("serial:/dev/ttyACM0:115200").unwrap(),
+            Endpoint::Serial {
+                device: "/dev/ttyACM0".into(),
+                baud: 115200
+            }
+        );
+        assert_eq!(
+            p("tcpout:sitl.local:5762").unwrap(),
+            Endpoint::TcpOut {
+                host: "sitl.local".into(),
+                port: 5762
+            }
+        );
+        assert_eq!(
+            p("udpin:0.0.0.0:14550").unwrap(),
+            Endpoint::UdpIn("0.0.0.0:14550".parse().unwrap())
+        );
+        assert!(matches!(
+            p("udpout:127.0.0.1:14555").unwrap(),
+            Endpoint::UdpOut { port: 14555, .. }
+        ));
+        assert!(matches!(
+            p("tcpin:127.0.0.1:5770").unwrap(),
+            Endpoint::TcpIn(_)
+        ));
+        let v6 = p("tcpout:[::1]:5760").unwrap();
+        assert_eq!(
+            v6,
+            Endpoint::TcpOut {
+                host: "::1".into(),
+                port: 5760
+            }
+        );
+        assert_eq!(v6.to_string(), "tcpout:[::1]:5760");
+        for bad in [
+            "",
+            "tcp:127.0.0.1:5760",
+            "tcpout:127.0.0.1",
+            "tcpout::5760",
+            "tcpout:127.0.0.1:0",
+            "tcpout:127.0.0.1:99999",
+            "udpin:nohost:14550",
+            "serial:/dev/ttyACM0",
+            "serial::57600",
+            "serial:/dev/ttyACM0:fast",
+            "file:/tmp/x.tlog",
+        ] {
+            let e = p(bad).unwrap_err();
+            assert!(e.to_string().contains("connection"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_values_are_refused_with_the_field_named() {
+        for (text, field) in [
+            ("vehicle_id = 0", "vehicle_id"),
+            ("vehicle_id = 256", "vehicle_id"),
+            ("system_id = 300", "system_id"),
+            ("link_timeout_s = 0.1", "link_timeout_s"),
+            ("command_timeout_s = nan", "command_timeout_s"),
+            ("command_retries = 9", "command_retries"),
+            (
+                "reconnect_min_s = 2.0\nreconnect_max_s = 1.0",
+                "reconnect_max_s",
+            ),
+            ("silence_reconnect_s = 0.5", "silence_reconnect_s"),
+            ("attitude_hz = 500.0", "attitude_hz"),
+            ("ekf_status_hz = 0.01", "ekf_status_hz"),
+            ("gps_raw_hz = inf", "gps_raw_hz"),
+        ] {
+            let e = parse_str(text).unwrap_err();
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
+        assert!(matches!(
+            parse_str("bogus = 1").unwrap_err(),
+            ConfigError::Parse { .. }
+        ));
+        // Integers are fine where seconds and rates are expected.
+        let s = parse_str("system_id = 42\nsilence_reconnect_s = 0\nattitude_hz = 20").unwrap();
+        assert_eq!(s.system_id, 42);
+        assert_eq!(s.rates.attitude_hz, 20.0);
+        assert_eq!(s.silence_reconnect, None);
+    }
+}

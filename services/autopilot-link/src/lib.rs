@@ -1,0 +1,136 @@
+//! skymesh autopilot-link: the one MAVLink connection to the flight controller.
+//!
+//! It connects to the autopilot ([`link`]: serial, UDP or TCP, reconnecting with
+//! backoff), identifies it, asks for telemetry rates ([`requests`]), fuses the
+//! telemetry into `VehicleState` (once per ATTITUDE) and `VehicleStatus` (on change
+//! and at 1 Hz) ([`telemetry`]), executes `VehicleCommand` samples as MAVLink
+//! commands and setpoints ([`commands`]), answers each with a `CommandAck`
+//! ([`acks`]), and marks the link down when autopilot heartbeats stop. All iceoryx2
+//! calls live in the runtime; this crate only uses its typed publishers and
+//! subscribers.
+//!
+//! | module | role |
+//! |---|---|
+//! | [`config`] | TOML → [`Settings`] |
+//! | [`link`] | transports, reader/writer threads, reconnect |
+//! | [`telemetry`] | MAVLink → samples (pure) |
+//! | [`commands`] | intake checks, `Command` → MAVLink (pure) |
+//! | [`acks`] | COMMAND_ACK matching, retransmission, timeouts (pure) |
+//! | [`requests`] | our heartbeat, stream-rate and home requests (pure) |
+//! | [`metrics`] | the exported series |
+//! | `service` | the event loop tying them together |
+#![forbid(unsafe_code)]
+
+pub mod acks;
+pub mod commands;
+pub mod config;
+pub mod link;
+pub mod metrics;
+pub mod requests;
+mod service;
+pub mod telemetry;
+
+use anyhow::Context as _;
+use skymesh_ipc_types::{
+    topics, CommandAck, ServiceState, VehicleCommand, VehicleState, VehicleStatus,
+};
+use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
+
+pub use config::{RawConfig, Settings};
+
+/// How the service reports its lifecycle: to the runtime (heartbeat state, systemd)
+/// when run by `service_main`, nowhere in tests.
+pub trait Lifecycle: Send {
+    /// The bus ports exist; the service is running.
+    fn ready(&self);
+    /// The autopilot link went up or down (down = degraded).
+    fn link_changed(&self, up: bool);
+}
+
+impl Lifecycle for Context {
+    fn ready(&self) {
+        Context::ready(self);
+    }
+
+    fn link_changed(&self, up: bool) {
+        self.set_state(if up {
+            ServiceState::Running
+        } else {
+            ServiceState::Degraded
+        });
+    }
+}
+
+/// A [`Lifecycle`] that reports nothing (in-process tests, embedding).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Detached;
+
+impl Lifecycle for Detached {
+    fn ready(&self) {}
+    fn link_changed(&self, _up: bool) {}
+}
+
+/// The service entry point for `service_main`.
+pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
+    let (bus, stats, shutdown) = (ctx.bus.clone(), ctx.stats.clone(), ctx.shutdown.clone());
+    run_with(settings, bus, stats, shutdown, ctx).await
+}
+
+/// Runs autopilot-link on `bus` until `shutdown` is cancelled.
+///
+/// Opens `skymesh/vehicle/{vehicle_id}/{state,status,command_ack}` as publisher and
+/// `.../command` as subscriber, starts the link and returns once both have stopped
+/// (well within the runtime's 5 s grace period).
+pub async fn run_with(
+    settings: Settings,
+    bus: Bus,
+    stats: Stats,
+    shutdown: CancellationToken,
+    lifecycle: impl Lifecycle,
+) -> anyhow::Result<()> {
+    let id = settings.vehicle_id;
+    let ports = service::Ports {
+        state: bus
+            .publisher::<VehicleState>(&topics::vehicle_state(id))
+            .context("opening the vehicle state topic")?,
+        status: bus
+            .publisher::<VehicleStatus>(&topics::vehicle_status(id))
+            .context("opening the vehicle status topic")?,
+        acks: bus
+            .publisher::<CommandAck>(&topics::vehicle_command_ack(id))
+            .context("opening the command ack topic")?,
+        commands: bus
+            .subscriber::<VehicleCommand>(&topics::vehicle_command(id))
+            .context("opening the vehicle command topic")?,
+    };
+    let metrics = metrics::Metrics::new(&stats);
+    tracing::info!(
+        connection = %settings.connection,
+        vehicle_id = id,
+        system_id = settings.system_id,
+        "autopilot-link starting"
+    );
+    let link_stop = shutdown.child_token();
+    let (mut events, link_task) = link::spawn(
+        link::LinkConfig {
+            endpoint: settings.connection.clone(),
+            system_id: settings.system_id,
+            component_id: requests::OWN_COMPONENT,
+            reconnect_min: settings.reconnect_min,
+            reconnect_max: settings.reconnect_max,
+            silence_reconnect: settings.silence_reconnect,
+        },
+        metrics.clone(),
+        link_stop.clone(),
+    );
+    lifecycle.ready();
+    let mut svc = service::Service::new(settings, lifecycle, metrics, ports);
+    let result = svc.run(&mut events, &shutdown).await;
+    link_stop.cancel();
+    // The reader thread may be waiting for room in the event channel: close it.
+    drop(events);
+    if let Err(e) = link_task.await {
+        tracing::warn!(error = %e, "link task failed");
+    }
+    result
+}

@@ -1,0 +1,192 @@
+//! The metrics of autopilot-link, exported through the runtime's stats sample.
+//!
+//! Label sets are bounded: message names outside [`RECEIVED`] / [`SENT`] count as
+//! `other`, and command series carry only the `as_str()` names of the ipc-types
+//! enums. Labelled series are registered on first use, so an idle link does not
+//! spend the stats sample's fixed number of entries on series that stay zero.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use skymesh_ipc_types::{AckResult, CommandKind};
+use skymesh_runtime::stats::LATENCY_BOUNDS_S;
+use skymesh_runtime::{Counter, Gauge, Histogram, Stats};
+
+/// Messages from the autopilot that autopilot-link handles (metric label `msg`).
+pub const RECEIVED: &[&str] = &[
+    "HEARTBEAT",
+    "ATTITUDE",
+    "ATTITUDE_QUATERNION",
+    "GLOBAL_POSITION_INT",
+    "LOCAL_POSITION_NED",
+    "SYS_STATUS",
+    "BATTERY_STATUS",
+    "GPS_RAW_INT",
+    "EKF_STATUS_REPORT",
+    "HOME_POSITION",
+    "STATUSTEXT",
+    "COMMAND_ACK",
+];
+
+/// Messages autopilot-link sends (metric label `msg`).
+pub const SENT: &[&str] = &[
+    "HEARTBEAT",
+    "COMMAND_LONG",
+    "COMMAND_INT",
+    "SET_POSITION_TARGET_GLOBAL_INT",
+    "SET_POSITION_TARGET_LOCAL_NED",
+    "REQUEST_DATA_STREAM",
+];
+
+fn label(known: &[&'static str], name: &str) -> &'static str {
+    known
+        .iter()
+        .copied()
+        .find(|k| *k == name)
+        .unwrap_or("other")
+}
+
+/// A counter family with one or two bounded labels, each series registered on first use.
+#[derive(Debug, Clone)]
+struct LazyCounters {
+    stats: Stats,
+    name: &'static str,
+    keys: (&'static str, Option<&'static str>),
+    cache: Arc<Mutex<HashMap<(&'static str, &'static str), Counter>>>,
+}
+
+impl LazyCounters {
+    fn new(stats: &Stats, name: &'static str, keys: (&'static str, Option<&'static str>)) -> Self {
+        LazyCounters {
+            stats: stats.clone(),
+            name,
+            keys,
+            cache: Arc::default(),
+        }
+    }
+
+    /// The series for these label values (the second is ignored for one-label families).
+    fn get(&self, first: &'static str, second: &'static str) -> Counter {
+        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
+        cache
+            .entry((first, second))
+            .or_insert_with(|| match self.keys {
+                (k1, None) => self.stats.counter(self.name, &[(k1, first)]),
+                (k1, Some(k2)) => self.stats.counter(self.name, &[(k1, first), (k2, second)]),
+            })
+            .clone()
+    }
+}
+
+/// Every series autopilot-link exports. Cheap to clone; shared with the link threads.
+#[derive(Debug, Clone)]
+pub struct Metrics {
+    /// `skymesh_autopilot_link_up`: 1 while autopilot heartbeats arrive.
+    pub link_up: Gauge,
+    /// `skymesh_autopilot_heartbeat_age_seconds`: since the last autopilot heartbeat
+    /// (since start while none was ever seen).
+    pub heartbeat_age: Gauge,
+    /// `skymesh_autopilot_mavlink_parse_errors_total`.
+    pub parse_errors: Counter,
+    /// `skymesh_autopilot_reconnects_total`: connections established after the first.
+    pub reconnects: Counter,
+    /// `skymesh_autopilot_command_latency_seconds`: command sample → COMMAND_ACK.
+    pub command_latency: Histogram,
+    received: LazyCounters,
+    sent: LazyCounters,
+    commands: LazyCounters,
+}
+
+impl Metrics {
+    pub fn new(stats: &Stats) -> Self {
+        Metrics {
+            link_up: stats.gauge("skymesh_autopilot_link_up", &[]),
+            heartbeat_age: stats.gauge("skymesh_autopilot_heartbeat_age_seconds", &[]),
+            parse_errors: stats.counter("skymesh_autopilot_mavlink_parse_errors_total", &[]),
+            reconnects: stats.counter("skymesh_autopilot_reconnects_total", &[]),
+            command_latency: stats.histogram(
+                "skymesh_autopilot_command_latency_seconds",
+                &[],
+                &LATENCY_BOUNDS_S,
+            ),
+            received: LazyCounters::new(
+                stats,
+                "skymesh_autopilot_mavlink_messages_received_total",
+                ("msg", None),
+            ),
+            sent: LazyCounters::new(
+                stats,
+                "skymesh_autopilot_mavlink_messages_sent_total",
+                ("msg", None),
+            ),
+            commands: LazyCounters::new(
+                stats,
+                "skymesh_autopilot_commands_total",
+                ("kind", Some("result")),
+            ),
+        }
+    }
+
+    /// Counts one message from the autopilot by its MAVLink name.
+    pub fn received(&self, message_name: &str) {
+        self.received.get(label(RECEIVED, message_name), "").inc();
+    }
+
+    /// Counts one message written to the link by its MAVLink name.
+    pub fn sent(&self, message_name: &str) {
+        self.sent.get(label(SENT, message_name), "").inc();
+    }
+
+    /// Counts one published CommandAck.
+    pub fn command(&self, kind: u8, result: AckResult) {
+        let kind = CommandKind::try_from(kind).map_or("unknown", CommandKind::as_str);
+        self.commands.get(kind, result.as_str()).inc();
+    }
+
+    pub fn observe_latency(&self, latency: Duration) {
+        self.command_latency.observe(latency.as_secs_f64());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skymesh_ipc_types::ServiceStats;
+
+    #[test]
+    fn labels_are_bounded_and_series_registered_on_use() {
+        let stats = Stats::new();
+        let m = Metrics::new(&stats);
+        m.received("ATTITUDE");
+        m.received("ATTITUDE");
+        m.received("VIBRATION");
+        m.received("SCALED_IMU2");
+        m.sent("COMMAND_LONG");
+        m.command(CommandKind::Arm.to_wire(), AckResult::Accepted);
+        m.command(250, AckResult::Refused);
+        let mut out = Box::<ServiceStats>::default();
+        stats.snapshot_into(&mut out);
+        let find = |name: &str, labels: &str| {
+            out.entries()
+                .iter()
+                .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
+                .map(|e| e.value)
+        };
+        let rx = "skymesh_autopilot_mavlink_messages_received_total";
+        assert_eq!(find(rx, "msg=ATTITUDE"), Some(2.0));
+        assert_eq!(find(rx, "msg=other"), Some(2.0));
+        assert_eq!(find(rx, "msg=HEARTBEAT"), None, "registered on first use");
+        assert_eq!(
+            find(
+                "skymesh_autopilot_mavlink_messages_sent_total",
+                "msg=COMMAND_LONG"
+            ),
+            Some(1.0)
+        );
+        let cmds = "skymesh_autopilot_commands_total";
+        assert_eq!(find(cmds, "kind=arm,result=accepted"), Some(1.0));
+        assert_eq!(find(cmds, "kind=unknown,result=refused"), Some(1.0));
+        assert_eq!(find("skymesh_autopilot_link_up", ""), Some(0.0));
+    }
+}

@@ -1,0 +1,439 @@
+//! autopilot-link against a scripted fake autopilot built on the same MAVLink codec:
+//! the cases vehicle-sim does not produce on demand (silence, IN_PROGRESS, an
+//! explanation after the ack, a foreign system) and what goes out on the wire.
+
+mod common;
+
+use std::net::{TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::{Mesh, PATIENCE, VEHICLE};
+use mavlink::dialects::ardupilotmega::{
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType,
+    ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, STATUSTEXT_DATA,
+};
+use mavlink::{Connectable, Connection, MavConnection, MavHeader, TcpConfig};
+use skymesh_autopilot_link::config::Endpoint;
+use skymesh_autopilot_link::Settings;
+use skymesh_ipc_types::{AckResult, Command, FlightMode, RefusalReason};
+use tokio::sync::mpsc;
+
+type Conn = Connection<MavMessage>;
+/// Decides the replies to each message the fake receives.
+type Responder = Box<dyn Fn(&MavMessage) -> Vec<Reply> + Send + Sync>;
+
+/// What the fake sends back, optionally after a pause.
+enum Reply {
+    Now(MavMessage),
+    After(Duration, MavMessage),
+}
+
+fn ack(command: MavCmd, result: MavResult) -> MavMessage {
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+}
+
+fn text(s: &str) -> MavMessage {
+    MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+        severity: MavSeverity::MAV_SEVERITY_CRITICAL,
+        text: s.into(),
+    })
+}
+
+/// A TCP "autopilot": heartbeats (GUIDED, disarmed) and ATTITUDE at 5 Hz from
+/// `system`/1, replies from `responder`, and everything it receives on `received`.
+struct Fake {
+    port: u16,
+    received: mpsc::UnboundedReceiver<(MavHeader, MavMessage)>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Fake {
+    fn start(system: u8, responder: Responder) -> Fake {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let (tx, received) = mpsc::unbounded_channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        std::thread::spawn(move || {
+            let (stream, _) = listener.accept().unwrap();
+            serve(stream, system, responder, tx, flag);
+        });
+        Fake {
+            port,
+            received,
+            stop,
+        }
+    }
+
+    /// The next received message matching `pred` (others are skipped).
+    async fn expect(
+        &mut self,
+        what: &str,
+        pred: impl Fn(&MavHeader, &MavMessage) -> bool,
+    ) -> (MavHeader, MavMessage) {
+        let deadline = tokio::time::Instant::now() + PATIENCE;
+        loop {
+            match tokio::time::timeout_at(deadline, self.received.recv()).await {
+                Ok(Some((h, m))) if pred(&h, &m) => return (h, m),
+                Ok(Some(_)) => {}
+                Ok(None) => panic!("fake autopilot stopped while waiting for {what}"),
+                Err(_) => panic!("the fake autopilot received no {what} within {PATIENCE:?}"),
+            }
+        }
+    }
+
+    /// Every COMMAND_LONG with `command` received so far (without waiting).
+    fn drain_commands(&mut self, command: MavCmd) -> Vec<COMMAND_LONG_DATA> {
+        let mut out = Vec::new();
+        while let Ok((_, m)) = self.received.try_recv() {
+            if let MavMessage::COMMAND_LONG(c) = m {
+                if c.command == command {
+                    out.push(c);
+                }
+            }
+        }
+        out
+    }
+}
+
+impl Drop for Fake {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+fn serve(
+    stream: TcpStream,
+    system: u8,
+    responder: Responder,
+    received: mpsc::UnboundedSender<(MavHeader, MavMessage)>,
+    stop: Arc<AtomicBool>,
+) {
+    stream
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    let conn: Arc<Conn> = Arc::new(
+        TcpConfig::from_stream(stream)
+            .unwrap()
+            .connect::<MavMessage>()
+            .unwrap(),
+    );
+    let header = MavHeader {
+        system_id: u32::from(system),
+        component_id: 1,
+        sequence: 0,
+    };
+    // Telemetry at 5 Hz.
+    {
+        let (conn, stop) = (conn.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut t = 0u32;
+            while !stop.load(Ordering::Relaxed) {
+                let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                    custom_mode: 4,
+                    mavtype: MavType::MAV_TYPE_QUADROTOR,
+                    autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                    system_status: MavState::MAV_STATE_STANDBY,
+                    mavlink_version: 3,
+                });
+                let att = MavMessage::ATTITUDE(ATTITUDE_DATA {
+                    time_boot_ms: t,
+                    ..Default::default()
+                });
+                if conn.send(&header, &hb).is_err() || conn.send(&header, &att).is_err() {
+                    return;
+                }
+                t += 200;
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        });
+    }
+    while !stop.load(Ordering::Relaxed) {
+        match conn.recv() {
+            Ok((h, m)) => {
+                for reply in responder(&m) {
+                    match reply {
+                        Reply::Now(r) => {
+                            let _ = conn.send(&header, &r);
+                        }
+                        Reply::After(pause, r) => {
+                            let (conn, header) = (conn.clone(), header);
+                            std::thread::spawn(move || {
+                                std::thread::sleep(pause);
+                                let _ = conn.send(&header, &r);
+                            });
+                        }
+                    }
+                }
+                if received.send((h, m)).is_err() {
+                    return;
+                }
+            }
+            Err(mavlink::error::MessageReadError::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+fn settings(port: u16) -> Settings {
+    let mut s = Settings::with_connection(Endpoint::TcpOut {
+        host: "127.0.0.1".into(),
+        port,
+    });
+    s.command_timeout = Duration::from_millis(400);
+    s.command_retries = 1;
+    s
+}
+
+/// Answers `command` (COMMAND_LONG) with `result`, everything else not at all.
+fn answering(
+    command: MavCmd,
+    replies: impl Fn(&COMMAND_LONG_DATA) -> Vec<Reply> + Send + Sync + 'static,
+) -> Responder {
+    Box::new(move |m| match m {
+        MavMessage::COMMAND_LONG(c) if c.command == command => replies(c),
+        _ => Vec::new(),
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn it_introduces_itself_and_asks_for_telemetry() {
+    let mut fake = Fake::start(VEHICLE, Box::new(|_| Vec::new()));
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    let (h, m) = fake
+        .expect("our HEARTBEAT", |_, m| {
+            matches!(m, MavMessage::HEARTBEAT(_))
+        })
+        .await;
+    assert_eq!((h.system_id, h.component_id), (u32::from(VEHICLE), 191));
+    let MavMessage::HEARTBEAT(hb) = m else {
+        unreachable!()
+    };
+    assert_eq!(hb.mavtype, MavType::MAV_TYPE_ONBOARD_CONTROLLER);
+    assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_INVALID);
+
+    let (_, m) = fake
+        .expect("ATTITUDE's SET_MESSAGE_INTERVAL", |_, m| {
+            matches!(m, MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 30.0)
+        })
+        .await;
+    let MavMessage::COMMAND_LONG(c) = m else {
+        unreachable!()
+    };
+    assert_eq!(c.param2, 20_000.0, "50 Hz");
+    assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
+    fake.expect("HOME_POSITION request", |_, m| {
+        matches!(m, MavMessage::COMMAND_LONG(c)
+            if c.command == MavCmd::MAV_CMD_REQUEST_MESSAGE && c.param1 == 242.0)
+    })
+    .await;
+    let status = mesh.wait_link_up().await;
+    assert_eq!(status.flight_mode(), FlightMode::Guided);
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_refusal_carries_the_statustext_that_follows_its_ack() {
+    // As ArduPilot does: the COMMAND_ACK at once, the queued explanation after it.
+    let mut fake = Fake::start(
+        VEHICLE,
+        answering(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, |_| {
+            vec![
+                Reply::Now(ack(
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    MavResult::MAV_RESULT_FAILED,
+                )),
+                Reply::After(
+                    Duration::from_millis(20),
+                    text("PreArm: Need Position Estimate"),
+                ),
+            ]
+        }),
+    );
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    mesh.wait_link_up().await;
+    let a = mesh.command(Command::Arm { force: false }).await;
+    assert_eq!(a.result(), Some(AckResult::Refused));
+    assert_eq!(a.reason(), Some(RefusalReason::Failed));
+    assert_eq!(a.mav_result, 4);
+    assert_eq!(a.detail.as_str(), "PreArm: Need Position Estimate");
+    fake.expect("the arm command", |_, m| matches!(m, MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM)).await;
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silence_means_one_retransmission_with_confirmation_then_timeout() {
+    let mut fake = Fake::start(VEHICLE, Box::new(|_| Vec::new()));
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    mesh.wait_link_up().await;
+    let a = mesh.command(Command::Land).await;
+    assert_eq!(a.result(), Some(AckResult::Refused));
+    assert_eq!(a.reason(), Some(RefusalReason::Timeout));
+    assert_eq!(a.mav_result, 255);
+    // Both transmissions were seen by the time the timeout was declared.
+    fake.expect("the retransmission", |_, m| {
+        matches!(m, MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_NAV_LAND && c.confirmation == 1)
+    })
+    .await;
+    let more = fake.drain_commands(MavCmd::MAV_CMD_NAV_LAND);
+    assert!(more.is_empty(), "no third transmission: {more:?}");
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn in_progress_is_reported_and_the_final_answer_follows() {
+    let fake = Fake::start(
+        VEHICLE,
+        answering(MavCmd::MAV_CMD_NAV_TAKEOFF, |_| {
+            vec![
+                Reply::Now(ack(
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    MavResult::MAV_RESULT_IN_PROGRESS,
+                )),
+                // Longer than command_timeout: no retransmission once in progress.
+                Reply::After(
+                    Duration::from_millis(900),
+                    ack(MavCmd::MAV_CMD_NAV_TAKEOFF, MavResult::MAV_RESULT_ACCEPTED),
+                ),
+            ]
+        }),
+    );
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    mesh.wait_link_up().await;
+    let sample = skymesh_ipc_types::VehicleCommand::new(
+        VEHICLE,
+        skymesh_ipc_types::CommandSource::Operator,
+        0,
+        &Command::Takeoff { alt_rel_m: 5.0 },
+    )
+    .unwrap();
+    let id = mesh.send(sample);
+    let first = loop {
+        let a = mesh
+            .acks
+            .recv_timeout(PATIENCE)
+            .await
+            .unwrap()
+            .expect("an ack");
+        if a.command_id == id {
+            break a;
+        }
+    };
+    assert_eq!(first.result(), Some(AckResult::InProgress));
+    assert_eq!(first.mav_result, 5);
+    let last = mesh.answer_to(id).await;
+    assert_eq!(last.result(), Some(AckResult::Accepted));
+    assert_eq!(last.mav_result, 0);
+    drop(fake);
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_newer_command_of_the_same_kind_cancels_the_older() {
+    // Only disarm (param1 = 0) is answered.
+    let fake = Fake::start(
+        VEHICLE,
+        answering(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, |c| {
+            if c.param1 == 0.0 {
+                vec![Reply::Now(ack(
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    MavResult::MAV_RESULT_ACCEPTED,
+                ))]
+            } else {
+                Vec::new()
+            }
+        }),
+    );
+    let mut settings = settings(fake.port);
+    settings.command_timeout = Duration::from_secs(5);
+    let mut mesh = Mesh::start_with(settings).await;
+    mesh.wait_link_up().await;
+    let arm = skymesh_ipc_types::VehicleCommand::new(
+        VEHICLE,
+        skymesh_ipc_types::CommandSource::Operator,
+        0,
+        &Command::Arm { force: false },
+    )
+    .unwrap();
+    let arm_id = mesh.send(arm);
+    let disarm = skymesh_ipc_types::VehicleCommand::new(
+        VEHICLE,
+        skymesh_ipc_types::CommandSource::Safety,
+        0,
+        &Command::Disarm { force: true },
+    )
+    .unwrap();
+    let disarm_id = mesh.send(disarm);
+    let a = mesh.answer_to(arm_id).await;
+    assert_eq!(a.reason(), Some(RefusalReason::Cancelled));
+    let d = mesh.answer_to(disarm_id).await;
+    assert_eq!(d.result(), Some(AckResult::Accepted));
+    drop(fake);
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn setpoints_are_accepted_when_written() {
+    let mut fake = Fake::start(VEHICLE, Box::new(|_| Vec::new()));
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    mesh.wait_link_up().await;
+    let a = mesh
+        .command(Command::VelocityNed {
+            vel_ned_mps: [1.0, -0.5, 0.0],
+            yaw_rate_dps: Some(30.0),
+        })
+        .await;
+    common::assert_accepted(&a, "velocity");
+    assert_eq!(a.mav_result, 255);
+    let (h, m) = fake
+        .expect("the velocity setpoint", |_, m| {
+            matches!(m, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_))
+        })
+        .await;
+    assert_eq!(h.component_id, 191);
+    let MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp) = m else {
+        unreachable!()
+    };
+    assert_eq!((sp.vx, sp.vy, sp.vz), (1.0, -0.5, 0.0));
+    assert!((sp.yaw_rate - 30f32.to_radians()).abs() < 1e-6);
+    assert_eq!((sp.target_system, sp.target_component), (VEHICLE, 1));
+    // In GUIDED, Brake is a zero-velocity setpoint too.
+    common::assert_accepted(&mesh.command(Command::Brake).await, "brake");
+    let (_, m) = fake
+        .expect(
+            "the brake setpoint",
+            |_, m| matches!(m, MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp) if sp.vx == 0.0),
+        )
+        .await;
+    let MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp) = m else {
+        unreachable!()
+    };
+    assert_eq!((sp.vx, sp.vy, sp.vz), (0.0, 0.0, 0.0));
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_autopilot_with_another_system_id_is_ignored() {
+    let fake = Fake::start(7, Box::new(|_| Vec::new()));
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    // Connected, heartbeats flowing, but not ours: the link stays down.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let s = mesh.status.latest().unwrap().expect("status at 1 Hz");
+    assert!(!s.is_link_up());
+    assert!(
+        mesh.state.latest().unwrap().is_none(),
+        "no state from system 7"
+    );
+    let a = mesh.command(Command::Land).await;
+    assert_eq!(a.reason(), Some(RefusalReason::LinkDown));
+    drop(fake);
+    mesh.stop().await;
+}
