@@ -1,0 +1,439 @@
+//! Configuration: the raw TOML shape (`RawConfig`) and the validated `Settings`
+//! the rest of the crate sees.
+//!
+//! Every field has a default so an empty file is a valid configuration; the
+//! shipped, commented defaults live in `deploy/vehicle-sim.toml` and are embedded
+//! as [`DEFAULT_CONFIG_TOML`].
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use crate::model::{GeoPoint, VehicleParams};
+
+/// The shipped default configuration, with every option commented.
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../deploy/vehicle-sim.toml");
+
+/// MAVLink component id of the simulated autopilot (MAV_COMP_ID_AUTOPILOT1).
+pub const COMPONENT_ID: u8 = 1;
+
+/// The physics tick: the model is always stepped with this fixed dt, and
+/// telemetry streams are evaluated once per tick, so no stream can run faster.
+pub const PHYSICS_HZ: u32 = 100;
+
+/// The configuration file as written. Unknown keys are an error so typos don't
+/// silently fall back to defaults.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RawConfig {
+    /// `tcp:IP:PORT` (any number of clients) or `udp:IP:PORT` (replies to every peer).
+    pub endpoint: String,
+    /// MAVLink system id of the vehicle (1..=255).
+    pub system_id: u32,
+    /// Home / EKF origin latitude, degrees.
+    pub home_lat: f64,
+    /// Home / EKF origin longitude, degrees.
+    pub home_lon: f64,
+    /// Home / ground altitude above mean sea level, metres.
+    pub home_alt_msl: f64,
+    /// Initial heading, degrees clockwise from north.
+    pub home_heading_deg: f64,
+    /// Seconds after start until the EKF reports a good position (arming is refused before).
+    pub ekf_ready_after_s: f64,
+    /// Battery capacity, mAh.
+    pub battery_capacity_mah: f64,
+    /// Number of LiPo cells in series.
+    pub battery_cells: u32,
+    /// State of charge at start, percent.
+    pub battery_initial_percent: f64,
+    /// Arming is refused below this state of charge, percent.
+    pub battery_arm_min_percent: f64,
+    /// Battery current while hovering, amperes.
+    pub hover_current_a: f64,
+    /// Horizontal speed limit (ArduCopter WPNAV_SPEED), m/s.
+    pub max_speed_mps: f64,
+    /// Climb rate limit (WPNAV_SPEED_UP), m/s.
+    pub max_climb_mps: f64,
+    /// Descent rate limit (WPNAV_SPEED_DN), m/s.
+    pub max_descent_mps: f64,
+    /// Acceleration limit, horizontal and vertical, m/s².
+    pub max_accel_mps2: f64,
+    /// Yaw rate limit, degrees/s.
+    pub max_yaw_rate_dps: f64,
+    /// Final descent speed in LAND (LAND_SPEED), m/s.
+    pub land_speed_mps: f64,
+    /// RTL climbs to at least this altitude above home (RTL_ALT), metres.
+    pub rtl_alt_m: f64,
+    /// Landed and armed for this long disarms the motors (DISARM_DELAY), seconds.
+    pub disarm_delay_s: f64,
+    /// Guided velocity/yaw-rate setpoints expire after this long, seconds.
+    pub velocity_timeout_s: f64,
+    /// Default ATTITUDE rate per link, Hz (0 = off).
+    pub default_attitude_hz: f64,
+    /// Default rate of the other periodic telemetry per link, Hz (0 = off).
+    pub default_stream_hz: f64,
+    /// Maximum simultaneous TCP clients (further connections are refused) or
+    /// remembered UDP peers (the oldest is forgotten).
+    pub max_clients: u32,
+}
+
+impl Default for RawConfig {
+    fn default() -> Self {
+        Self {
+            endpoint: "tcp:127.0.0.1:5760".to_owned(),
+            system_id: 1,
+            home_lat: -35.363_261,
+            home_lon: 149.165_230,
+            home_alt_msl: 584.0,
+            home_heading_deg: 353.0,
+            ekf_ready_after_s: 0.0,
+            battery_capacity_mah: 5200.0,
+            battery_cells: 4,
+            battery_initial_percent: 100.0,
+            battery_arm_min_percent: 20.0,
+            hover_current_a: 15.0,
+            max_speed_mps: 5.0,
+            max_climb_mps: 2.5,
+            max_descent_mps: 1.5,
+            max_accel_mps2: 2.5,
+            max_yaw_rate_dps: 90.0,
+            land_speed_mps: 0.5,
+            rtl_alt_m: 15.0,
+            disarm_delay_s: 10.0,
+            velocity_timeout_s: 3.0,
+            default_attitude_hz: 10.0,
+            default_stream_hz: 1.0,
+            max_clients: 16,
+        }
+    }
+}
+
+/// Where the simulator listens.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Endpoint {
+    /// Serve MAVLink over TCP; every accepted client is its own link.
+    Tcp(SocketAddr),
+    /// Serve MAVLink over UDP; every peer that has sent a packet gets the telemetry.
+    Udp(SocketAddr),
+}
+
+impl Endpoint {
+    /// The socket address to bind.
+    pub fn addr(&self) -> SocketAddr {
+        match self {
+            Endpoint::Tcp(a) | Endpoint::Udp(a) => *a,
+        }
+    }
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Endpoint::Tcp(a) => write!(f, "tcp:{a}"),
+            Endpoint::Udp(a) => write!(f, "udp:{a}"),
+        }
+    }
+}
+
+/// Default per-link stream intervals (`None` = not sent until asked).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamDefaults {
+    /// ATTITUDE.
+    pub attitude: Option<Duration>,
+    /// SYS_STATUS, GPS_RAW_INT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, VFR_HUD,
+    /// BATTERY_STATUS, EKF_STATUS_REPORT.
+    pub telemetry: Option<Duration>,
+}
+
+/// Validated settings: parsed addresses, durations and ranges.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Where to listen.
+    pub endpoint: Endpoint,
+    /// MAVLink system id.
+    pub system_id: u8,
+    /// Vehicle model parameters (home, limits, battery).
+    pub vehicle: VehicleParams,
+    /// Default stream rates for a new link.
+    pub streams: StreamDefaults,
+    /// Maximum simultaneous TCP clients / remembered UDP peers.
+    pub max_clients: usize,
+}
+
+/// Why a configuration was rejected.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ConfigError {
+    /// The TOML did not parse or had unknown keys.
+    #[error("config is not valid TOML for vehicle-sim: {0}")]
+    Toml(String),
+    /// `endpoint` is malformed.
+    #[error(
+        "endpoint {value:?} is invalid: {reason} (expected \"tcp:IP:PORT\" or \"udp:IP:PORT\")"
+    )]
+    Endpoint {
+        /// The configured value.
+        value: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// `system_id` outside 1..=255.
+    #[error("system_id {0} is out of range: MAVLink system ids are 1..=255 (0 is broadcast)")]
+    SystemId(u32),
+    /// A number outside its allowed range (or not finite).
+    #[error("{field} = {value} is out of range: must be within {min}..={max}")]
+    OutOfRange {
+        /// The key.
+        field: &'static str,
+        /// The configured value.
+        value: f64,
+        /// Inclusive lower bound.
+        min: f64,
+        /// Inclusive upper bound.
+        max: f64,
+    },
+    /// A cross-field constraint failed.
+    #[error("{0}")]
+    Inconsistent(String),
+}
+
+impl RawConfig {
+    /// Parse a TOML document (unknown keys are rejected).
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        toml::from_str(text).map_err(|e| ConfigError::Toml(e.to_string()))
+    }
+
+    /// Check every field and convert to [`Settings`].
+    pub fn validate(self) -> Result<Settings, ConfigError> {
+        let endpoint = parse_endpoint(&self.endpoint)?;
+        let system_id = match u8::try_from(self.system_id) {
+            Ok(id) if id != 0 => id,
+            _ => return Err(ConfigError::SystemId(self.system_id)),
+        };
+        range("home_lat", self.home_lat, -90.0, 90.0)?;
+        range("home_lon", self.home_lon, -180.0, 180.0)?;
+        range("home_alt_msl", self.home_alt_msl, -500.0, 10_000.0)?;
+        range("home_heading_deg", self.home_heading_deg, 0.0, 360.0)?;
+        range("ekf_ready_after_s", self.ekf_ready_after_s, 0.0, 3600.0)?;
+        range(
+            "battery_capacity_mah",
+            self.battery_capacity_mah,
+            100.0,
+            1.0e6,
+        )?;
+        range("battery_cells", f64::from(self.battery_cells), 1.0, 14.0)?;
+        range(
+            "battery_initial_percent",
+            self.battery_initial_percent,
+            0.0,
+            100.0,
+        )?;
+        range(
+            "battery_arm_min_percent",
+            self.battery_arm_min_percent,
+            0.0,
+            100.0,
+        )?;
+        range("hover_current_a", self.hover_current_a, 0.0, 1000.0)?;
+        range("max_speed_mps", self.max_speed_mps, 0.1, 50.0)?;
+        range("max_climb_mps", self.max_climb_mps, 0.1, 20.0)?;
+        range("max_descent_mps", self.max_descent_mps, 0.1, 20.0)?;
+        range("max_accel_mps2", self.max_accel_mps2, 0.1, 20.0)?;
+        range("max_yaw_rate_dps", self.max_yaw_rate_dps, 1.0, 720.0)?;
+        range("land_speed_mps", self.land_speed_mps, 0.1, 5.0)?;
+        range("rtl_alt_m", self.rtl_alt_m, 0.0, 1000.0)?;
+        range("disarm_delay_s", self.disarm_delay_s, 0.0, 600.0)?;
+        range("velocity_timeout_s", self.velocity_timeout_s, 0.1, 60.0)?;
+        let max_hz = f64::from(PHYSICS_HZ);
+        range("default_attitude_hz", self.default_attitude_hz, 0.0, max_hz)?;
+        range("default_stream_hz", self.default_stream_hz, 0.0, max_hz)?;
+        range("max_clients", f64::from(self.max_clients), 1.0, 1024.0)?;
+        if self.land_speed_mps > self.max_descent_mps {
+            return Err(ConfigError::Inconsistent(format!(
+                "land_speed_mps ({}) must not exceed max_descent_mps ({})",
+                self.land_speed_mps, self.max_descent_mps
+            )));
+        }
+
+        let vehicle = VehicleParams {
+            home: GeoPoint {
+                lat_deg: self.home_lat,
+                lon_deg: self.home_lon,
+                alt_msl_m: self.home_alt_msl,
+            },
+            initial_heading_rad: self.home_heading_deg.to_radians(),
+            ekf_ready_after_s: self.ekf_ready_after_s,
+            battery_capacity_mah: self.battery_capacity_mah,
+            battery_cells: self.battery_cells,
+            battery_initial_fraction: self.battery_initial_percent / 100.0,
+            battery_arm_min_fraction: self.battery_arm_min_percent / 100.0,
+            hover_current_a: self.hover_current_a,
+            max_speed_xy: self.max_speed_mps,
+            max_speed_up: self.max_climb_mps,
+            max_speed_down: self.max_descent_mps,
+            max_accel: self.max_accel_mps2,
+            max_yaw_rate: self.max_yaw_rate_dps.to_radians(),
+            land_speed: self.land_speed_mps,
+            rtl_alt_m: self.rtl_alt_m,
+            disarm_delay_s: self.disarm_delay_s,
+            velocity_timeout_s: self.velocity_timeout_s,
+        };
+        Ok(Settings {
+            endpoint,
+            system_id,
+            vehicle,
+            streams: StreamDefaults {
+                attitude: hz_to_interval(self.default_attitude_hz),
+                telemetry: hz_to_interval(self.default_stream_hz),
+            },
+            max_clients: self.max_clients as usize,
+        })
+    }
+}
+
+fn range(field: &'static str, value: f64, min: f64, max: f64) -> Result<(), ConfigError> {
+    // `contains` is false for NaN, so non-finite values are rejected here too.
+    if (min..=max).contains(&value) {
+        Ok(())
+    } else {
+        Err(ConfigError::OutOfRange {
+            field,
+            value,
+            min,
+            max,
+        })
+    }
+}
+
+fn hz_to_interval(hz: f64) -> Option<Duration> {
+    (hz > 0.0).then(|| Duration::from_secs_f64(1.0 / hz))
+}
+
+/// Parse `tcp:IP:PORT` / `udp:IP:PORT` (`tcpin:`/`udpin:` accepted as synonyms,
+/// as the mavlink crate spells listening endpoints).
+pub fn parse_endpoint(value: &str) -> Result<Endpoint, ConfigError> {
+    let err = |reason: &str| ConfigError::Endpoint {
+        value: value.to_owned(),
+        reason: reason.to_owned(),
+    };
+    let (scheme, rest) = value.split_once(':').ok_or_else(|| err("missing scheme"))?;
+    let addr: SocketAddr = rest
+        .parse()
+        .map_err(|_| err("address must be a literal IP:PORT"))?;
+    match scheme {
+        "tcp" | "tcpin" => Ok(Endpoint::Tcp(addr)),
+        "udp" | "udpin" => Ok(Endpoint::Udp(addr)),
+        "tcpout" | "udpout" => Err(err("the simulator listens; use tcp: or udp:")),
+        _ => Err(err("unknown scheme")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate() {
+        let s = RawConfig::default().validate().expect("defaults are valid");
+        assert_eq!(
+            s.endpoint,
+            Endpoint::Tcp(SocketAddr::from(([127, 0, 0, 1], 5760)))
+        );
+        assert_eq!(s.system_id, 1);
+        assert_eq!(s.streams.attitude, Some(Duration::from_millis(100)));
+    }
+
+    #[test]
+    fn shipped_file_parses_and_matches_defaults() {
+        let raw = RawConfig::from_toml(DEFAULT_CONFIG_TOML).expect("shipped config parses");
+        let s = raw.validate().expect("shipped config validates");
+        let d = RawConfig::default().validate().expect("defaults are valid");
+        assert_eq!(s.endpoint, d.endpoint);
+        assert_eq!(s.system_id, d.system_id);
+        assert_eq!(s.vehicle, d.vehicle);
+        assert_eq!(s.streams, d.streams);
+        assert_eq!(s.max_clients, d.max_clients);
+    }
+
+    #[test]
+    fn raw_defaults_match_model_defaults() {
+        let s = RawConfig::default().validate().expect("defaults are valid");
+        let m = VehicleParams::default();
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        assert!(close(s.vehicle.max_yaw_rate, m.max_yaw_rate));
+        assert!(close(s.vehicle.initial_heading_rad, m.initial_heading_rad));
+        let (mut a, mut b) = (s.vehicle, m);
+        (a.max_yaw_rate, a.initial_heading_rad) = (0.0, 0.0);
+        (b.max_yaw_rate, b.initial_heading_rad) = (0.0, 0.0);
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn empty_file_is_defaults() {
+        let s = RawConfig::from_toml("").and_then(RawConfig::validate);
+        assert!(s.is_ok());
+    }
+
+    #[test]
+    fn unknown_key_is_rejected() {
+        let e = RawConfig::from_toml("sysid = 3").unwrap_err();
+        assert!(matches!(e, ConfigError::Toml(m) if m.contains("sysid")));
+    }
+
+    #[test]
+    fn endpoints() {
+        assert_eq!(
+            parse_endpoint("udp:127.0.0.1:14560"),
+            Ok(Endpoint::Udp(SocketAddr::from(([127, 0, 0, 1], 14560))))
+        );
+        assert!(matches!(
+            parse_endpoint("tcpin:[::1]:5760"),
+            Ok(Endpoint::Tcp(_))
+        ));
+        for bad in [
+            "127.0.0.1:5760",
+            "tcp:localhost:5760",
+            "udpout:1.2.3.4:5",
+            "serial:/dev/tty",
+            "tcp:127.0.0.1",
+        ] {
+            assert!(parse_endpoint(bad).is_err(), "{bad} should be rejected");
+        }
+    }
+
+    #[test]
+    fn bad_values_are_reported_with_field_names() {
+        let e = RawConfig {
+            system_id: 0,
+            ..RawConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert_eq!(e, ConfigError::SystemId(0));
+        assert!(e.to_string().contains("1..=255"));
+
+        let e = RawConfig {
+            home_lat: 91.0,
+            ..RawConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.to_string().contains("home_lat"), "{e}");
+
+        let e = RawConfig {
+            max_speed_mps: f64::NAN,
+            ..RawConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.to_string().contains("max_speed_mps"), "{e}");
+
+        let e = RawConfig {
+            land_speed_mps: 2.0,
+            ..RawConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(matches!(e, ConfigError::Inconsistent(_)));
+    }
+}

@@ -1,0 +1,301 @@
+//! Per-link telemetry scheduling: which message ids are due at a given sim
+//! time. Rates change with MAV_CMD_SET_MESSAGE_INTERVAL (per message) and
+//! REQUEST_DATA_STREAM (per ArduCopter stream group). Pure: time is passed in.
+
+// REQUEST_DATA_STREAM / MAV_DATA_STREAM are deprecated in MAVLink but ArduPilot
+// still honours them and many ground stations still send them.
+#![allow(deprecated)]
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use mavlink::dialects::ardupilotmega::{
+    MavDataStream, ATTITUDE_DATA, BATTERY_STATUS_DATA, EKF_STATUS_REPORT_DATA,
+    GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
+    SYS_STATUS_DATA, VFR_HUD_DATA,
+};
+use mavlink::MessageData;
+
+use crate::config::{StreamDefaults, PHYSICS_HZ};
+
+/// Shortest interval: streams are evaluated once per physics tick.
+pub const MIN_INTERVAL: Duration = Duration::from_micros(1_000_000 / PHYSICS_HZ as u64);
+
+/// A SET_MESSAGE_INTERVAL request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IntervalRequest {
+    /// -1: stop sending.
+    Disable,
+    /// 0: back to the default rate.
+    Default,
+    /// Send every so often (clamped to [`MIN_INTERVAL`]).
+    Every(Duration),
+}
+
+impl IntervalRequest {
+    /// From SET_MESSAGE_INTERVAL param2 (µs); `None` if invalid.
+    pub fn from_param(interval_us: f32) -> Option<Self> {
+        if interval_us == -1.0 {
+            Some(IntervalRequest::Disable)
+        } else if interval_us == 0.0 {
+            Some(IntervalRequest::Default)
+        } else if interval_us > 0.0 && interval_us.is_finite() {
+            Some(IntervalRequest::Every(Duration::from_secs_f64(
+                f64::from(interval_us) / 1e6,
+            )))
+        } else {
+            None
+        }
+    }
+}
+
+/// ArduCopter's REQUEST_DATA_STREAM groups, restricted to the messages the
+/// simulator produces (GCS_MAVLINK_Copter `STREAM_*_msgs`).
+pub fn stream_group(stream: MavDataStream) -> &'static [u32] {
+    match stream {
+        MavDataStream::MAV_DATA_STREAM_EXTENDED_STATUS => {
+            &[SYS_STATUS_DATA::ID, GPS_RAW_INT_DATA::ID]
+        }
+        MavDataStream::MAV_DATA_STREAM_POSITION => {
+            &[GLOBAL_POSITION_INT_DATA::ID, LOCAL_POSITION_NED_DATA::ID]
+        }
+        MavDataStream::MAV_DATA_STREAM_EXTRA1 => &[ATTITUDE_DATA::ID],
+        MavDataStream::MAV_DATA_STREAM_EXTRA2 => &[VFR_HUD_DATA::ID],
+        MavDataStream::MAV_DATA_STREAM_EXTRA3 => {
+            &[BATTERY_STATUS_DATA::ID, EKF_STATUS_REPORT_DATA::ID]
+        }
+        MavDataStream::MAV_DATA_STREAM_ALL => &[
+            SYS_STATUS_DATA::ID,
+            GPS_RAW_INT_DATA::ID,
+            GLOBAL_POSITION_INT_DATA::ID,
+            LOCAL_POSITION_NED_DATA::ID,
+            ATTITUDE_DATA::ID,
+            VFR_HUD_DATA::ID,
+            BATTERY_STATUS_DATA::ID,
+            EKF_STATUS_REPORT_DATA::ID,
+        ],
+        // RAW_SENSORS, RC_CHANNELS, RAW_CONTROLLER: nothing the sim produces.
+        _ => &[],
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Stream {
+    interval: Option<Duration>,
+    next_due: Duration,
+}
+
+/// The schedule of one link.
+#[derive(Debug, Clone)]
+pub struct StreamScheduler {
+    defaults: BTreeMap<u32, Option<Duration>>,
+    streams: BTreeMap<u32, Stream>,
+}
+
+impl StreamScheduler {
+    /// Default rates: HEARTBEAT 1 Hz, ATTITUDE and the rest from `defaults`;
+    /// everything due at `now` so a new link hears a heartbeat at once.
+    pub fn new(defaults: &StreamDefaults, now: Duration) -> Self {
+        let mut d = BTreeMap::new();
+        d.insert(HEARTBEAT_DATA::ID, Some(Duration::from_secs(1)));
+        d.insert(ATTITUDE_DATA::ID, defaults.attitude);
+        for id in stream_group(MavDataStream::MAV_DATA_STREAM_ALL) {
+            if *id != ATTITUDE_DATA::ID {
+                d.insert(*id, defaults.telemetry);
+            }
+        }
+        let streams = d
+            .iter()
+            .map(|(id, interval)| {
+                (
+                    *id,
+                    Stream {
+                        interval: *interval,
+                        next_due: now,
+                    },
+                )
+            })
+            .collect();
+        Self {
+            defaults: d,
+            streams,
+        }
+    }
+
+    /// Apply a SET_MESSAGE_INTERVAL for message `id` (the caller checked the
+    /// simulator can produce it).
+    pub fn set_interval(&mut self, id: u32, req: IntervalRequest, now: Duration) {
+        let interval = match req {
+            IntervalRequest::Disable => None,
+            IntervalRequest::Default => self.defaults.get(&id).copied().flatten(),
+            IntervalRequest::Every(d) => Some(d.max(MIN_INTERVAL)),
+        };
+        self.streams.insert(
+            id,
+            Stream {
+                interval,
+                next_due: now,
+            },
+        );
+    }
+
+    /// Apply a REQUEST_DATA_STREAM (rate 0 or `start == false` stops the group).
+    pub fn request_data_stream(
+        &mut self,
+        stream: MavDataStream,
+        rate_hz: u16,
+        start: bool,
+        now: Duration,
+    ) {
+        let req = if start && rate_hz > 0 {
+            IntervalRequest::Every(Duration::from_secs_f64(1.0 / f64::from(rate_hz)))
+        } else {
+            IntervalRequest::Disable
+        };
+        for id in stream_group(stream) {
+            self.set_interval(*id, req, now);
+        }
+    }
+
+    /// Current interval of message `id` (`None` = not streamed).
+    pub fn interval(&self, id: u32) -> Option<Duration> {
+        self.streams.get(&id).and_then(|s| s.interval)
+    }
+
+    /// Message ids due at `now`, in id order (HEARTBEAT first).
+    pub fn due(&mut self, now: Duration) -> Vec<u32> {
+        let mut out = Vec::new();
+        for (id, s) in &mut self.streams {
+            let Some(interval) = s.interval else { continue };
+            if now >= s.next_due {
+                out.push(*id);
+                // Keep the long-run rate exact despite tick jitter, but never
+                // burst to catch up after a stall.
+                s.next_due += interval;
+                if s.next_due <= now {
+                    s.next_due = now + interval;
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn defaults() -> StreamDefaults {
+        StreamDefaults {
+            attitude: Some(Duration::from_millis(100)),
+            telemetry: Some(Duration::from_secs(1)),
+        }
+    }
+
+    /// Count emissions of `id` over `secs` of 10 ms ticks.
+    fn count(s: &mut StreamScheduler, id: u32, from: Duration, secs: u64) -> usize {
+        let mut n = 0;
+        for tick in 0..secs * 100 {
+            let now = from + Duration::from_millis(10 * tick);
+            n += s.due(now).iter().filter(|x| **x == id).count();
+        }
+        n
+    }
+
+    #[test]
+    fn defaults_heartbeat_first_and_rates() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        assert_eq!(s.due(Duration::ZERO)[0], HEARTBEAT_DATA::ID);
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        assert_eq!(
+            count(&mut s.clone(), HEARTBEAT_DATA::ID, Duration::ZERO, 10),
+            10
+        );
+        assert_eq!(count(&mut s, ATTITUDE_DATA::ID, Duration::ZERO, 10), 100);
+    }
+
+    #[test]
+    fn set_interval_100hz_disable_and_default() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        let id = ATTITUDE_DATA::ID;
+        s.set_interval(
+            id,
+            IntervalRequest::Every(Duration::from_micros(10_000)),
+            Duration::ZERO,
+        );
+        assert_eq!(count(&mut s, id, Duration::ZERO, 1), 100);
+        // Faster than the physics tick is clamped to it.
+        s.set_interval(
+            id,
+            IntervalRequest::Every(Duration::from_micros(100)),
+            Duration::ZERO,
+        );
+        assert_eq!(s.interval(id), Some(MIN_INTERVAL));
+        s.set_interval(id, IntervalRequest::Disable, Duration::ZERO);
+        assert_eq!(count(&mut s, id, Duration::ZERO, 1), 0);
+        s.set_interval(id, IntervalRequest::Default, Duration::ZERO);
+        assert_eq!(s.interval(id), Some(Duration::from_millis(100)));
+    }
+
+    #[test]
+    fn odd_rates_average_out() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        let id = VFR_HUD_DATA::ID;
+        s.set_interval(
+            id,
+            IntervalRequest::Every(Duration::from_secs_f64(1.0 / 30.0)),
+            Duration::ZERO,
+        );
+        let n = count(&mut s, id, Duration::ZERO, 10);
+        assert!((298..=301).contains(&n), "{n}");
+    }
+
+    #[test]
+    fn data_stream_groups() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        s.request_data_stream(
+            MavDataStream::MAV_DATA_STREAM_POSITION,
+            4,
+            true,
+            Duration::ZERO,
+        );
+        assert_eq!(
+            s.interval(GLOBAL_POSITION_INT_DATA::ID),
+            Some(Duration::from_millis(250))
+        );
+        s.request_data_stream(
+            MavDataStream::MAV_DATA_STREAM_ALL,
+            10,
+            false,
+            Duration::ZERO,
+        );
+        assert_eq!(s.interval(ATTITUDE_DATA::ID), None);
+        assert_eq!(s.interval(HEARTBEAT_DATA::ID), Some(Duration::from_secs(1)));
+    }
+
+    #[test]
+    fn interval_params() {
+        assert_eq!(
+            IntervalRequest::from_param(-1.0),
+            Some(IntervalRequest::Disable)
+        );
+        assert_eq!(
+            IntervalRequest::from_param(0.0),
+            Some(IntervalRequest::Default)
+        );
+        assert_eq!(IntervalRequest::from_param(-5.0), None);
+        assert_eq!(IntervalRequest::from_param(f32::NAN), None);
+        assert_eq!(
+            IntervalRequest::from_param(10_000.0),
+            Some(IntervalRequest::Every(Duration::from_millis(10)))
+        );
+    }
+
+    #[test]
+    fn a_stall_does_not_burst() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        s.due(Duration::ZERO);
+        let due = s.due(Duration::from_secs(5));
+        assert_eq!(due.iter().filter(|x| **x == ATTITUDE_DATA::ID).count(), 1);
+    }
+}
