@@ -28,27 +28,40 @@ static COUNTER: AtomicU32 = AtomicU32::new(0);
 
 /// The repository root (this package lives in `<root>/tests`).
 pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
 }
 
 /// The directory holding the workspace binaries (`target/<profile>`).
 pub fn bin_dir() -> PathBuf {
     // current_exe = target/<profile>/deps/<test>-<hash>
     let exe = std::env::current_exe().unwrap_or_default();
-    exe.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default()
+    exe.parent()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
 }
 
 /// Path of a workspace binary; fails with a clear message if it was not built.
 pub fn binary(name: &str) -> PathBuf {
     let p = bin_dir().join(name);
-    assert!(p.exists(), "{} not built: run `cargo build --workspace` (or `cargo test --workspace`)", p.display());
+    assert!(
+        p.exists(),
+        "{} not built: run `cargo build --workspace` (or `cargo test --workspace`)",
+        p.display()
+    );
     p
 }
 
 /// A TCP port free on 127.0.0.1 right now (for protocols that cannot take port 0
 /// through a config file, the supervisor's children are told a concrete port).
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).unwrap_or(0)
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .unwrap_or(0)
 }
 
 /// How a test wants its mesh.
@@ -164,10 +177,20 @@ critical = true
             .stderr(stderr)
             .spawn()
             .context("spawning skymesh up")?;
-        let mut mesh = Mesh { dir, domain, mavlink_port, supervisor: Some(child), metrics_addr: None, _serial: serial };
+        let mut mesh = Mesh {
+            dir,
+            domain,
+            mavlink_port,
+            supervisor: Some(child),
+            metrics_addr: None,
+            _serial: serial,
+        };
         let addr = mesh.wait_for(Duration::from_secs(20), "supervisor status file", |m| {
             let text = std::fs::read_to_string(&status_file).ok()?;
-            text.trim().parse::<SocketAddr>().ok().filter(|_| m.http_get("/status").is_ok())
+            text.trim()
+                .parse::<SocketAddr>()
+                .ok()
+                .filter(|_| m.http_get("/status").is_ok())
         })?;
         mesh.metrics_addr = Some(addr);
         Ok(mesh)
@@ -175,7 +198,8 @@ critical = true
 
     /// The supervisor's HTTP address.
     pub fn metrics_addr(&self) -> SocketAddr {
-        self.metrics_addr.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)))
+        self.metrics_addr
+            .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)))
     }
 
     /// The supervisor's pid.
@@ -185,26 +209,39 @@ critical = true
 
     /// This mesh's iceoryx2 domain, with the shared deploy config.
     pub fn ipc_domain(&self) -> Result<Domain> {
-        Ok(Domain::load(&self.domain, Some(&repo_root().join("deploy/iceoryx2.toml")))?)
+        Ok(Domain::load(
+            &self.domain,
+            Some(&repo_root().join("deploy/iceoryx2.toml")),
+        )?)
     }
 
     /// A bus node for the test itself, in the mesh's domain. Call inside a tokio runtime.
     pub fn bus(&self, name: &str) -> Result<Bus> {
-        Ok(Bus::open(&self.ipc_domain()?, name, ServiceId::Tool, 0, Stats::new())?)
+        Ok(Bus::open(
+            &self.ipc_domain()?,
+            name,
+            ServiceId::Tool,
+            0,
+            Stats::new(),
+        )?)
     }
 
     /// Plain HTTP/1.0 GET against the supervisor (test-side client).
     pub fn http_get(&self, path: &str) -> Result<String> {
         let addr = match self.metrics_addr {
             Some(a) => a,
-            None => std::fs::read_to_string(self.dir.path().join("metrics.addr"))?.trim().parse()?,
+            None => std::fs::read_to_string(self.dir.path().join("metrics.addr"))?
+                .trim()
+                .parse()?,
         };
         let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2))?;
         s.set_read_timeout(Some(Duration::from_secs(5)))?;
         write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n")?;
         let mut resp = String::new();
         s.read_to_string(&mut resp)?;
-        let (head, body) = resp.split_once("\r\n\r\n").ok_or_else(|| anyhow!("no HTTP header end"))?;
+        let (head, body) = resp
+            .split_once("\r\n\r\n")
+            .ok_or_else(|| anyhow!("no HTTP header end"))?;
         if !head.starts_with("HTTP/1.1 200") && !head.starts_with("HTTP/1.0 200") {
             bail!("GET {path}: {}", head.lines().next().unwrap_or(""));
         }
@@ -214,7 +251,9 @@ critical = true
     /// `/status` as JSON.
     pub fn status(&self) -> Result<Vec<serde_json::Value>> {
         let v: serde_json::Value = serde_json::from_str(&self.http_get("/status")?)?;
-        v.as_array().cloned().ok_or_else(|| anyhow!("/status is not an array: {v}"))
+        v.as_array()
+            .cloned()
+            .ok_or_else(|| anyhow!("/status is not an array: {v}"))
     }
 
     /// The `/status` entry of one service.
@@ -232,7 +271,12 @@ critical = true
     }
 
     /// Polls `f` every 50 ms until it returns `Some` or `timeout` passes.
-    pub fn wait_for<T>(&mut self, timeout: Duration, what: &str, mut f: impl FnMut(&mut Self) -> Option<T>) -> Result<T> {
+    pub fn wait_for<T>(
+        &mut self,
+        timeout: Duration,
+        what: &str,
+        mut f: impl FnMut(&mut Self) -> Option<T>,
+    ) -> Result<T> {
         let start = Instant::now();
         loop {
             if let Some(v) = f(self) {
@@ -254,13 +298,19 @@ critical = true
     pub fn wait_running(&mut self, name: &str, timeout: Duration) -> Result<u32> {
         self.wait_for(timeout, &format!("{name} running"), |m| {
             let s = m.service(name).ok()?;
-            (s["state"] == "running").then(|| s["pid"].as_u64()).flatten().map(|p| p as u32)
+            (s["state"] == "running")
+                .then(|| s["pid"].as_u64())
+                .flatten()
+                .map(|p| p as u32)
         })
     }
 
     /// Sends SIGTERM to the supervisor and waits for it to exit.
     pub fn stop(&mut self, timeout: Duration) -> Result<std::process::ExitStatus> {
-        let mut child = self.supervisor.take().ok_or_else(|| anyhow!("already stopped"))?;
+        let mut child = self
+            .supervisor
+            .take()
+            .ok_or_else(|| anyhow!("already stopped"))?;
         signal(child.id(), Signal::SIGTERM)?;
         let start = Instant::now();
         loop {
@@ -325,17 +375,25 @@ pub fn processes_with_env(key: &str, value: &str) -> Vec<u32> {
     let needle = format!("{key}={value}");
     let me = std::process::id();
     let mut out = Vec::new();
-    let Ok(rd) = std::fs::read_dir("/proc") else { return out };
+    let Ok(rd) = std::fs::read_dir("/proc") else {
+        return out;
+    };
     for e in rd.flatten() {
-        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
         if pid == me {
             continue;
         }
-        let Ok(env) = std::fs::read(e.path().join("environ")) else { continue };
+        let Ok(env) = std::fs::read(e.path().join("environ")) else {
+            continue;
+        };
         if env.split(|b| *b == 0).any(|kv| kv == needle.as_bytes()) {
             let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
             // Field 3 (after the parenthesised comm) is the state; Z = zombie.
-            let state = stat.rsplit_once(')').map(|(_, rest)| rest.trim_start().chars().next()).flatten();
+            let state = stat
+                .rsplit_once(')')
+                .and_then(|(_, rest)| rest.trim_start().chars().next());
             if state != Some('Z') {
                 out.push(pid);
             }
@@ -348,19 +406,27 @@ pub fn processes_with_env(key: &str, value: &str) -> Vec<u32> {
 /// Labels are compared as a set, so their order in the exposition does not matter.
 pub fn find_metric(text: &str, series: &str) -> Option<f64> {
     let (want_name, want_labels) = split_series(series);
-    text.lines().filter(|l| !l.starts_with('#')).find_map(|line| {
-        let (s, value) = line.rsplit_once(' ')?;
-        let (name, labels) = split_series(s);
-        (name == want_name && labels == want_labels).then(|| value.parse().ok()).flatten()
-    })
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .find_map(|line| {
+            let (s, value) = line.rsplit_once(' ')?;
+            let (name, labels) = split_series(s);
+            (name == want_name && labels == want_labels)
+                .then(|| value.parse().ok())
+                .flatten()
+        })
 }
 
 fn split_series(s: &str) -> (&str, Vec<String>) {
     match s.split_once('{') {
         None => (s.trim(), Vec::new()),
         Some((name, rest)) => {
-            let mut labels: Vec<String> =
-                rest.trim_end_matches('}').split(',').filter(|l| !l.is_empty()).map(str::to_string).collect();
+            let mut labels: Vec<String> = rest
+                .trim_end_matches('}')
+                .split(',')
+                .filter(|l| !l.is_empty())
+                .map(str::to_string)
+                .collect();
             labels.sort();
             (name.trim(), labels)
         }

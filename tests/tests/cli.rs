@@ -32,13 +32,27 @@ fn every_service_has_help_and_a_default_config_that_checks() {
         let path = dir.path().join(format!("{bin}.toml"));
         std::fs::write(&path, &default.stdout).unwrap();
         let check = run(bin, &["--config", path.to_str().unwrap(), "--check-config"]);
-        assert_eq!(check.status.code(), Some(0), "{bin}: {}", String::from_utf8_lossy(&check.stderr));
+        assert_eq!(
+            check.status.code(),
+            Some(0),
+            "{bin}: {}",
+            String::from_utf8_lossy(&check.stderr)
+        );
 
         // The shipped file under deploy/ is the same default and also checks.
         let name = bin.trim_start_matches("skymesh-");
         let shipped = repo_root().join(format!("deploy/{name}.toml"));
-        let check = run(bin, &["--config", shipped.to_str().unwrap(), "--check-config"]);
-        assert_eq!(check.status.code(), Some(0), "{}: {}", shipped.display(), String::from_utf8_lossy(&check.stderr));
+        let check = run(
+            bin,
+            &["--config", shipped.to_str().unwrap(), "--check-config"],
+        );
+        assert_eq!(
+            check.status.code(),
+            Some(0),
+            "{}: {}",
+            shipped.display(),
+            String::from_utf8_lossy(&check.stderr)
+        );
     }
 }
 
@@ -56,26 +70,65 @@ fn bad_configuration_exits_64_with_a_clear_message() {
             let out = run(bin, &["--config", path.to_str().unwrap(), "--check-config"]);
             assert_eq!(out.status.code(), Some(64), "{bin} with {what}");
             let err = String::from_utf8_lossy(&out.stderr);
-            assert!(err.contains("bad configuration"), "{bin} with {what}: {err}");
+            assert!(
+                err.contains("bad configuration"),
+                "{bin} with {what}: {err}"
+            );
         }
-        let missing = run(bin, &["--config", "/nonexistent/skymesh.toml", "--check-config"]);
+        let missing = run(
+            bin,
+            &["--config", "/nonexistent/skymesh.toml", "--check-config"],
+        );
         assert_eq!(missing.status.code(), Some(64), "{bin} with a missing file");
         // An invalid domain is a configuration error too.
-        let out = Command::new(binary(bin)).arg("--check-config").env("SKYMESH_DOMAIN", "bad/domain").output().unwrap();
-        assert_eq!(out.status.code(), Some(64), "{bin} with a bad SKYMESH_DOMAIN");
+        let out = Command::new(binary(bin))
+            .arg("--check-config")
+            .env("SKYMESH_DOMAIN", "bad/domain")
+            .output()
+            .unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(64),
+            "{bin} with a bad SKYMESH_DOMAIN"
+        );
     }
 }
 
 #[test]
 fn supervisor_checks_its_config() {
     let shipped = repo_root().join("deploy/skymesh.toml");
-    let out = run("skymesh", &["up", "--config", shipped.to_str().unwrap(), "--check-config"]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = run(
+        "skymesh",
+        &[
+            "up",
+            "--config",
+            shipped.to_str().unwrap(),
+            "--check-config",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("skymesh.toml");
-    std::fs::write(&bad, "[[service]]\nname = \"a\"\nbinary = \"x\"\nafter = [\"nobody\"]\n").unwrap();
-    let out = run("skymesh", &["up", "--config", bad.to_str().unwrap(), "--check-config"]);
-    assert_eq!(out.status.code(), Some(64), "{}", String::from_utf8_lossy(&out.stderr));
+    std::fs::write(
+        &bad,
+        "[[service]]\nname = \"a\"\nbinary = \"x\"\nafter = [\"nobody\"]\n",
+    )
+    .unwrap();
+    let out = run(
+        "skymesh",
+        &["up", "--config", bad.to_str().unwrap(), "--check-config"],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(64),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let help = run("skymesh", &["--help"]);
     assert!(help.status.success());
 }

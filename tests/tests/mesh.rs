@@ -13,7 +13,11 @@ use skymesh_runtime::Subscriber;
 const STARTUP: Duration = Duration::from_secs(30);
 
 fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap()
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
 }
 
 /// The next VehicleState, failing the test if none arrives in time.
@@ -32,7 +36,9 @@ fn mesh_comes_up_and_vehicle_state_flows() {
     let rt = runtime();
     rt.block_on(async {
         let bus = mesh.bus("e2e-observer").unwrap();
-        let mut sub = bus.subscriber::<VehicleState>(&topics::vehicle_state(1)).unwrap();
+        let mut sub = bus
+            .subscriber::<VehicleState>(&topics::vehicle_state(1))
+            .unwrap();
         // Skip history; then count a second of fresh samples.
         let first = next_state(&mut sub, STARTUP).await;
         assert_eq!(first.vehicle_id, 1);
@@ -55,7 +61,11 @@ fn mesh_comes_up_and_vehicle_state_flows() {
         "skymesh_service_up{service=\"vehicle-sim\"}",
         "skymesh_service_up{service=\"autopilot-link\"}",
     ] {
-        assert_eq!(skymesh_e2e::find_metric(&metrics, series), Some(1.0), "{series} in\n{metrics}");
+        assert_eq!(
+            skymesh_e2e::find_metric(&metrics, series),
+            Some(1.0),
+            "{series} in\n{metrics}"
+        );
     }
     let published = skymesh_e2e::find_metric(
         &metrics,
@@ -71,17 +81,32 @@ fn guided_arm_takeoff_climbs_to_10_metres() {
     let rt = runtime();
     rt.block_on(async {
         let bus = mesh.bus("e2e-pilot").unwrap();
-        let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1)).unwrap();
-        let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1)).unwrap();
-        let mut cmds = bus.publisher::<VehicleCommand>(&topics::vehicle_command(1)).unwrap();
+        let mut state = bus
+            .subscriber::<VehicleState>(&topics::vehicle_state(1))
+            .unwrap();
+        let mut acks = bus
+            .subscriber::<CommandAck>(&topics::vehicle_command_ack(1))
+            .unwrap();
+        let mut cmds = bus
+            .publisher::<VehicleCommand>(&topics::vehicle_command(1))
+            .unwrap();
         next_state(&mut state, STARTUP).await; // the link is up
 
-        let sequence = [Command::SetMode(FlightMode::Guided), Command::Arm { force: false }, Command::Takeoff { alt_rel_m: 10.0 }];
+        let sequence = [
+            Command::SetMode(FlightMode::Guided),
+            Command::Arm { force: false },
+            Command::Takeoff { alt_rel_m: 10.0 },
+        ];
         for (id, cmd) in sequence.iter().enumerate() {
             let id = 100 + id as u32;
-            cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd).unwrap()).unwrap();
+            cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd).unwrap())
+                .unwrap();
             let ack = loop {
-                let a = acks.recv_timeout(Duration::from_secs(10)).await.unwrap().expect("no CommandAck within 10 s");
+                let a = acks
+                    .recv_timeout(Duration::from_secs(10))
+                    .await
+                    .unwrap()
+                    .expect("no CommandAck within 10 s");
                 if a.command_id == id {
                     break a;
                 }
@@ -92,14 +117,23 @@ fn guided_arm_takeoff_climbs_to_10_metres() {
         let mut alt = 0.0;
         let mut stable = 0;
         while std::time::Instant::now() < deadline {
-            alt = next_state(&mut state, Duration::from_secs(2)).await.alt_rel_m;
+            alt = next_state(&mut state, Duration::from_secs(2))
+                .await
+                .alt_rel_m;
             // Count consecutive samples inside 10 ± 1 m: it must get there and stay.
-            stable = if (alt - 10.0).abs() <= 1.0 { stable + 1 } else { 0 };
+            stable = if (alt - 10.0).abs() <= 1.0 {
+                stable + 1
+            } else {
+                0
+            };
             if stable >= 50 {
                 break;
             }
         }
-        assert!(stable >= 50, "vehicle did not hold 10 ± 1 m; last altitude {alt:.2} m");
+        assert!(
+            stable >= 50,
+            "vehicle did not hold 10 ± 1 m; last altitude {alt:.2} m"
+        );
     });
 }
 
@@ -110,7 +144,9 @@ fn sigkilled_autopilot_link_is_restarted_and_state_flows_again() {
     let rt = runtime();
     rt.block_on(async {
         let bus = mesh.bus("e2e-kill").unwrap();
-        let mut sub = bus.subscriber::<VehicleState>(&topics::vehicle_state(1)).unwrap();
+        let mut sub = bus
+            .subscriber::<VehicleState>(&topics::vehicle_state(1))
+            .unwrap();
         next_state(&mut sub, STARTUP).await;
         signal(old_pid, Signal::SIGKILL).unwrap();
         let new_pid = mesh
@@ -130,16 +166,29 @@ fn sigkilled_autopilot_link_is_restarted_and_state_flows_again() {
             if s.header.stamp_ns > restarted_at {
                 break;
             }
-            assert!(std::time::Instant::now() < deadline, "no VehicleState from the restarted autopilot-link");
+            assert!(
+                std::time::Instant::now() < deadline,
+                "no VehicleState from the restarted autopilot-link"
+            );
         }
     });
-    let restarts = mesh.metric("skymesh_service_restarts_total{service=\"autopilot-link\"}").unwrap();
-    assert_eq!(restarts, Some(1.0), "{}", mesh.http_get("/metrics").unwrap_or_default());
+    let restarts = mesh
+        .metric("skymesh_service_restarts_total{service=\"autopilot-link\"}")
+        .unwrap();
+    assert_eq!(
+        restarts,
+        Some(1.0),
+        "{}",
+        mesh.http_get("/metrics").unwrap_or_default()
+    );
 }
 
 #[test]
 fn a_service_with_bad_config_exits_64_and_is_not_restarted() {
-    let opts = MeshOptions { autopilot_link_extra: "no_such_option = true".into(), ..Default::default() };
+    let opts = MeshOptions {
+        autopilot_link_extra: "no_such_option = true".into(),
+        ..Default::default()
+    };
     let mut mesh = Mesh::start(opts).unwrap();
     mesh.wait_for(STARTUP, "autopilot-link config-error", |m| {
         let s = m.service("autopilot-link").ok()?;
@@ -152,14 +201,22 @@ fn a_service_with_bad_config_exits_64_and_is_not_restarted() {
     assert_eq!(s["state"], "config-error", "{s}");
     assert_eq!(s["restarts"], 0, "{s}");
     assert_eq!(s["last_exit_code"], 64, "{s}");
-    assert_eq!(mesh.metric("skymesh_service_last_exit_code{service=\"autopilot-link\"}").unwrap(), Some(64.0));
+    assert_eq!(
+        mesh.metric("skymesh_service_last_exit_code{service=\"autopilot-link\"}")
+            .unwrap(),
+        Some(64.0)
+    );
     // The healthy service is unaffected.
     mesh.wait_running("vehicle-sim", STARTUP).unwrap();
 }
 
 #[test]
 fn a_hung_service_is_detected_and_restarted() {
-    let opts = MeshOptions { heartbeat_ms: 200, missed_heartbeats: 5, ..Default::default() };
+    let opts = MeshOptions {
+        heartbeat_ms: 200,
+        missed_heartbeats: 5,
+        ..Default::default()
+    };
     let mut mesh = Mesh::start(opts).unwrap();
     let old_pid = mesh.wait_running("autopilot-link", STARTUP).unwrap();
     signal(old_pid, Signal::SIGSTOP).unwrap();
@@ -172,7 +229,10 @@ fn a_hung_service_is_detected_and_restarted() {
         .unwrap();
     assert_ne!(new_pid, old_pid);
     // The stopped process was killed and reaped, not left behind.
-    assert!(!mesh.processes().contains(&old_pid), "old pid {old_pid} still alive");
+    assert!(
+        !mesh.processes().contains(&old_pid),
+        "old pid {old_pid} still alive"
+    );
     assert_eq!(mesh.service("autopilot-link").unwrap()["restarts"], 1);
 }
 
@@ -182,13 +242,27 @@ fn sigterm_leaves_no_process_and_no_shared_memory() {
     mesh.wait_running("vehicle-sim", STARTUP).unwrap();
     mesh.wait_running("autopilot-link", STARTUP).unwrap();
     let domain = mesh.ipc_domain().unwrap();
-    assert!(!domain.leftover_files().is_empty(), "a running mesh has shared memory");
-    assert!(mesh.processes().len() >= 3, "supervisor + 2 services: {:?}", mesh.processes());
+    assert!(
+        !domain.leftover_files().is_empty(),
+        "a running mesh has shared memory"
+    );
+    assert!(
+        mesh.processes().len() >= 3,
+        "supervisor + 2 services: {:?}",
+        mesh.processes()
+    );
 
     let status = mesh.stop(Duration::from_secs(20)).unwrap();
-    assert!(status.success(), "supervisor exit {status}\n{}", mesh.output());
+    assert!(
+        status.success(),
+        "supervisor exit {status}\n{}",
+        mesh.output()
+    );
     let left = mesh.processes();
     assert!(left.is_empty(), "processes left: {left:?}");
     let files = domain.leftover_files();
-    assert!(files.is_empty(), "files left in /dev/shm or the iceoryx2 root: {files:?}");
+    assert!(
+        files.is_empty(),
+        "files left in /dev/shm or the iceoryx2 root: {files:?}"
+    );
 }

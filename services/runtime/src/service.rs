@@ -72,8 +72,19 @@ pub struct Context {
 
 impl Context {
     /// A context around an existing bus, for in-process tests and embedding.
-    pub fn new(bus: Bus, shutdown: CancellationToken, stats: Stats, name: impl Into<String>) -> Self {
-        Context { bus, shutdown, stats, name: name.into(), health: HealthState::default() }
+    pub fn new(
+        bus: Bus,
+        shutdown: CancellationToken,
+        stats: Stats,
+        name: impl Into<String>,
+    ) -> Self {
+        Context {
+            bus,
+            shutdown,
+            stats,
+            name: name.into(),
+            health: HealthState::default(),
+        }
     }
 
     /// Marks the service running (heartbeat state) and tells systemd `READY=1`.

@@ -16,7 +16,10 @@ use skymesh_runtime::clock::monotonic_ns;
 
 fn arg(name: &str, default: u64) -> u64 {
     let args: Vec<String> = std::env::args().collect();
-    args.windows(2).find(|w| w[0] == name).and_then(|w| w[1].parse().ok()).unwrap_or(default)
+    args.windows(2)
+        .find(|w| w[0] == name)
+        .and_then(|w| w[1].parse().ok())
+        .unwrap_or(default)
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
@@ -54,7 +57,10 @@ fn main() -> anyhow::Result<()> {
     let mut mesh = Mesh::start(opts)?;
     mesh.wait_running("vehicle-sim", Duration::from_secs(30))?;
     mesh.wait_running("autopilot-link", Duration::from_secs(30))?;
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
 
     // Idle CPU and memory of the whole mesh (supervisor + services), vehicle on the ground.
     std::thread::sleep(Duration::from_secs(2));
@@ -66,10 +72,19 @@ fn main() -> anyhow::Result<()> {
     std::thread::sleep(Duration::from_secs(idle_secs));
     let after: Vec<_> = pids.iter().filter_map(|p| proc_usage(*p)).collect();
     let wall = t0.elapsed().as_secs_f64();
-    let cpu_ticks: u64 = after.iter().zip(&before).map(|(a, b)| a.0.saturating_sub(b.0)).sum();
+    let cpu_ticks: u64 = after
+        .iter()
+        .zip(&before)
+        .map(|(a, b)| a.0.saturating_sub(b.0))
+        .sum();
     let rss: f64 = after.iter().map(|a| a.1 as f64 * page).sum();
-    println!("idle mesh: {} processes, CPU {:.2}% of one core over {:.0} s, RSS {:.1} MiB total",
-        pids.len(), 100.0 * cpu_ticks as f64 / tick_hz / wall, wall, rss / (1024.0 * 1024.0));
+    println!(
+        "idle mesh: {} processes, CPU {:.2}% of one core over {:.0} s, RSS {:.1} MiB total",
+        pids.len(),
+        100.0 * cpu_ticks as f64 / tick_hz / wall,
+        wall,
+        rss / (1024.0 * 1024.0)
+    );
 
     // Restart latency.
     let mut latencies = Vec::with_capacity(kills);
@@ -95,7 +110,10 @@ fn main() -> anyhow::Result<()> {
             }
             let ms = t.elapsed().as_secs_f64() * 1e3;
             latencies.push(ms);
-            eprintln!("kill {:2}: VehicleState flowing again after {ms:.0} ms", i + 1);
+            eprintln!(
+                "kill {:2}: VehicleState flowing again after {ms:.0} ms",
+                i + 1
+            );
         }
         anyhow::Ok(())
     })?;
