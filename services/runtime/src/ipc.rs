@@ -6,9 +6,10 @@
 //! one kernel wake-up per burst, no polling while idle.
 
 use std::collections::HashMap;
+use std::ops::ControlFlow;
 use std::os::fd::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use iceoryx2::config::Config;
@@ -19,6 +20,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::ipc_threadsafe;
 use skymesh_ipc_types::{Sample, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
+use tokio_util::sync::CancellationToken;
 
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
@@ -383,7 +385,8 @@ impl Bus {
         })
     }
 
-    /// A subscriber on `topic` that can be awaited. Must be called inside a tokio runtime.
+    /// A subscriber on `topic`: awaited with `recv` (inside a tokio runtime) or
+    /// blocked on with [`wait_loop`].
     pub fn subscriber<T: Sample>(&self, topic: &Topic) -> Result<Subscriber<T>, IpcError> {
         let pubsub = self.open_pubsub::<T>(topic)?;
         let event = self.open_event(topic)?;
@@ -395,14 +398,10 @@ impl Bus {
             .listener_builder()
             .create()
             .map_err(|e| ipc_err("create listener", &topic.name, e))?;
-        let afd = register_listener(&listener).map_err(|source| IpcError::Wait {
-            topic: topic.name.clone(),
-            source,
-        })?;
         let labels = [("topic", topic.name.as_str())];
         let stats = &self.inner.stats;
         Ok(Subscriber {
-            afd,
+            afd: None,
             listener,
             port,
             received: stats.counter("skymesh_topic_samples_received_total", &labels),
@@ -412,7 +411,7 @@ impl Bus {
                 &labels,
                 &LATENCY_BOUNDS_S,
             ),
-            last_seq: HashMap::new(),
+            last_seq: Mutex::new(HashMap::new()),
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -496,15 +495,18 @@ impl<T: Sample> Publisher<T> {
 
 /// Receives samples of one type from one topic.
 pub struct Subscriber<T: Sample> {
-    // Declared first: must drop before `listener` (see `ListenerFd`).
-    afd: AsyncFd<ListenerFd>,
+    // Declared first: must drop before `listener` (see `ListenerFd`). Registered
+    // with tokio on the first `recv`, so blocking users need no runtime.
+    afd: Option<AsyncFd<ListenerFd>>,
     listener: Listener<Svc>,
     port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
     received: Counter,
     lost: Counter,
     age: Histogram,
     /// Last sequence seen per publisher `(service, instance)`, for gap counting.
-    last_seq: HashMap<(u16, u16), u64>,
+    /// Behind a mutex so reads work through `&self` (the blocking wait loop holds
+    /// shared references while the callback receives); never contended in practice.
+    last_seq: Mutex<HashMap<(u16, u16), u64>>,
     topic: String,
     _bus: Bus,
 }
@@ -519,7 +521,7 @@ impl<T: Sample> core::fmt::Debug for Subscriber<T> {
 
 impl<T: Sample> Subscriber<T> {
     /// Takes one pending sample without waiting.
-    pub fn try_recv(&mut self) -> Result<Option<T>, IpcError> {
+    pub fn try_recv(&self) -> Result<Option<T>, IpcError> {
         let Some(sample) = self
             .port
             .receive()
@@ -533,12 +535,17 @@ impl<T: Sample> Subscriber<T> {
         Ok(Some(value))
     }
 
-    fn account(&mut self, value: &T) {
+    fn account(&self, value: &T) {
         let h = value.header();
         self.received.inc();
         self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
         let key = (h.service, h.instance);
-        if let Some(prev) = self.last_seq.insert(key, h.seq) {
+        let prev = self
+            .last_seq
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(key, h.seq);
+        if let Some(prev) = prev {
             // A lower sequence means the publisher restarted; not a loss.
             if h.seq > prev + 1 {
                 self.lost.add(h.seq - prev - 1);
@@ -552,10 +559,18 @@ impl<T: Sample> Subscriber<T> {
             if let Some(v) = self.try_recv()? {
                 return Ok(v);
             }
-            let mut guard = self.afd.readable().await.map_err(|source| IpcError::Wait {
-                topic: self.topic.clone(),
+            let topic = &self.topic;
+            let wait_err = |source| IpcError::Wait {
+                topic: topic.clone(),
                 source,
-            })?;
+            };
+            let afd = match &mut self.afd {
+                Some(afd) => afd,
+                None => self
+                    .afd
+                    .insert(register_listener(&self.listener).map_err(wait_err)?),
+            };
+            let mut guard = afd.readable().await.map_err(wait_err)?;
             let woken = self
                 .listener
                 .try_wait(|_| {})
@@ -569,7 +584,7 @@ impl<T: Sample> Subscriber<T> {
     }
 
     /// Drains everything pending and returns the newest sample, if any.
-    pub fn latest(&mut self) -> Result<Option<T>, IpcError> {
+    pub fn latest(&self) -> Result<Option<T>, IpcError> {
         let mut newest = None;
         while let Some(v) = self.try_recv()? {
             newest = Some(v);
@@ -588,4 +603,87 @@ impl<T: Sample> Subscriber<T> {
     pub fn topic(&self) -> &str {
         &self.topic
     }
+}
+
+/// What woke a [`wait_loop`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// Samples may be pending on `sources[i]`: drain it with `try_recv` until `None`.
+    Topic(usize),
+    /// The loop's interval elapsed.
+    Tick,
+}
+
+/// Something a [`wait_loop`] can block on. Implemented by every [`Subscriber`].
+pub trait WaitSource {
+    #[doc(hidden)]
+    fn listener(&self) -> &Listener<Svc>;
+}
+
+impl<T: Sample> WaitSource for Subscriber<T> {
+    fn listener(&self) -> &Listener<Svc> {
+        &self.listener
+    }
+}
+
+/// How often a [`wait_loop`] without an interval looks at its stop token.
+const STOP_CHECK: Duration = Duration::from_millis(100);
+
+/// Blocks the calling thread on an iceoryx2 WaitSet over `sources` (plus an optional
+/// `interval`) and calls `on_wake` for each wake-up, until `stop` is cancelled or the
+/// callback breaks. For consumers that own a thread and want no async runtime in
+/// their hot path (a frame loop, a control loop): one kernel wake-up per burst, no
+/// spinning while idle.
+pub fn wait_loop(
+    sources: &[&dyn WaitSource],
+    interval: Option<Duration>,
+    stop: &CancellationToken,
+    mut on_wake: impl FnMut(Wake) -> ControlFlow<()>,
+) -> Result<(), IpcError> {
+    let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+        .map_err(|e| ipc_err("create waitset", "wait_loop", e))?;
+    let guards = sources
+        .iter()
+        .map(|s| waitset.attach_notification(s.listener()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| ipc_err("attach", "wait_loop", e))?;
+    let tick = interval
+        .map(|i| waitset.attach_interval(i))
+        .transpose()
+        .map_err(|e| ipc_err("attach interval", "wait_loop", e))?;
+    let timeout = interval.map_or(STOP_CHECK, |i| i.min(STOP_CHECK));
+    while !stop.is_cancelled() {
+        let mut flow = ControlFlow::Continue(());
+        waitset
+            .wait_and_process_once_with_timeout(
+                |id| {
+                    for (i, guard) in guards.iter().enumerate() {
+                        if id.has_event_from(guard) {
+                            // Consume the wake-up before the callback drains samples, so
+                            // a sample published meanwhile wakes us again.
+                            let _ = sources[i].listener().try_wait(|_| {});
+                            flow = on_wake(Wake::Topic(i));
+                        }
+                    }
+                    if let Some(t) = &tick {
+                        if flow.is_continue() && id.has_event_from(t) {
+                            flow = on_wake(Wake::Tick);
+                        }
+                    }
+                    if flow.is_break() {
+                        CallbackProgression::Stop
+                    } else {
+                        CallbackProgression::Continue
+                    }
+                },
+                timeout,
+            )
+            .map_err(|e| ipc_err("wait", "wait_loop", e))?;
+        if flow.is_break() {
+            break;
+        }
+    }
+    Ok(())
 }

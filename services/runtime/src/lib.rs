@@ -9,7 +9,8 @@
 //! - structured logs (`tracing`, text or JSON),
 //! - the iceoryx2 node, created from one explicitly loaded config file with the
 //!   domain from `SKYMESH_DOMAIN` (all iceoryx2 calls live in [`ipc`]),
-//! - typed publishers and subscribers that wake through events (no spinning),
+//! - typed publishers and subscribers that wake through events (no spinning):
+//!   awaited in tokio, or blocked on a WaitSet with [`wait_loop`],
 //! - heartbeat and stats publishing for the supervisor, systemd notify/watchdog,
 //! - SIGTERM/SIGINT → one [`CancellationToken`] → graceful shutdown.
 #![deny(unsafe_code)]
@@ -25,7 +26,7 @@ pub mod stats;
 pub mod systemd;
 
 pub use config::{ConfigError, ServiceConfig};
-pub use ipc::{Bus, Domain, IpcError, Publisher, Subscriber};
+pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};
 pub use stats::{Counter, Gauge, Histogram, Stats};
 pub use tokio_util::sync::CancellationToken;

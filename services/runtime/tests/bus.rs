@@ -44,7 +44,7 @@ async fn a_published_sample_wakes_an_awaiting_subscriber() {
         ..Default::default()
     })
     .unwrap();
-    let (first, second, mut sub) = tokio::time::timeout(Duration::from_secs(5), waiter)
+    let (first, second, sub) = tokio::time::timeout(Duration::from_secs(5), waiter)
         .await
         .unwrap()
         .unwrap();
@@ -106,4 +106,73 @@ async fn domains_are_isolated_and_leave_no_files_behind() {
     d1.remove_leftover_files();
     d2.remove_leftover_files();
     assert!(d1.leftover_files().is_empty());
+}
+
+#[test]
+fn the_blocking_wait_loop_wakes_on_samples_and_ticks_and_stops() {
+    use skymesh_ipc_types::VehicleStatus;
+    use skymesh_runtime::{wait_loop, CancellationToken, Wake};
+    use std::ops::ControlFlow;
+
+    // No tokio runtime here: the blocking loop needs none.
+    let d = domain("w");
+    let bus = Bus::open(&d, "waiter", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let state_sub = bus
+        .subscriber::<VehicleState>(&topics::vehicle_state(2))
+        .unwrap();
+    let status_sub = bus
+        .subscriber::<VehicleStatus>(&topics::vehicle_status(2))
+        .unwrap();
+    let mut state_pub = bus
+        .publisher::<VehicleState>(&topics::vehicle_state(2))
+        .unwrap();
+    let mut status_pub = bus
+        .publisher::<VehicleStatus>(&topics::vehicle_status(2))
+        .unwrap();
+
+    let stop = CancellationToken::new();
+    let stopper = stop.clone();
+    let publisher = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(50));
+        state_pub
+            .publish(VehicleState {
+                lat_deg: 9.0,
+                ..Default::default()
+            })
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+        status_pub
+            .publish(VehicleStatus {
+                armed: 1,
+                ..Default::default()
+            })
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        stopper.cancel();
+    });
+    let (mut states, mut statuses, mut ticks) = (Vec::new(), Vec::new(), 0);
+    wait_loop(
+        &[&state_sub, &status_sub],
+        Some(Duration::from_millis(20)),
+        &stop,
+        |wake| {
+            match wake {
+                Wake::Topic(0) => {
+                    states.extend(std::iter::from_fn(|| state_sub.try_recv().unwrap()))
+                }
+                Wake::Topic(_) => {
+                    statuses.extend(std::iter::from_fn(|| status_sub.try_recv().unwrap()))
+                }
+                Wake::Tick => ticks += 1,
+            }
+            ControlFlow::Continue(())
+        },
+    )
+    .unwrap();
+    publisher.join().unwrap();
+    assert_eq!(states.len(), 1);
+    assert_eq!(states[0].lat_deg, 9.0);
+    assert_eq!(statuses.len(), 1);
+    assert!(statuses[0].is_armed());
+    assert!(ticks >= 5, "interval ticks: {ticks}");
 }
