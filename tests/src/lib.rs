@@ -34,14 +34,16 @@ pub fn repo_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// The directory holding the workspace binaries (`target/<profile>`).
+/// The directory holding the workspace binaries (`target/<profile>`): the parent of
+/// this executable, or of its `deps/` folder for a test executable.
 pub fn bin_dir() -> PathBuf {
-    // current_exe = target/<profile>/deps/<test>-<hash>
     let exe = std::env::current_exe().unwrap_or_default();
-    exe.parent()
-        .and_then(Path::parent)
-        .map(Path::to_path_buf)
-        .unwrap_or_default()
+    let dir = exe.parent().map(Path::to_path_buf).unwrap_or_default();
+    if dir.file_name().is_some_and(|n| n == "deps") {
+        dir.parent().map(Path::to_path_buf).unwrap_or_default()
+    } else {
+        dir
+    }
 }
 
 /// Path of a workspace binary; fails with a clear message if it was not built.

@@ -72,6 +72,15 @@ fn main() -> anyhow::Result<()> {
     std::thread::sleep(Duration::from_secs(idle_secs));
     let after: Vec<_> = pids.iter().filter_map(|p| proc_usage(*p)).collect();
     let wall = t0.elapsed().as_secs_f64();
+    for (pid, (a, b)) in pids.iter().zip(after.iter().zip(&before)) {
+        let comm = std::fs::read_to_string(format!("/proc/{pid}/comm")).unwrap_or_default();
+        println!(
+            "  {:<24} CPU {:5.2}%  RSS {:5.1} MiB",
+            comm.trim(),
+            100.0 * a.0.saturating_sub(b.0) as f64 / tick_hz / wall,
+            a.1 as f64 * page / (1024.0 * 1024.0)
+        );
+    }
     let cpu_ticks: u64 = after
         .iter()
         .zip(&before)
