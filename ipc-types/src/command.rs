@@ -53,6 +53,11 @@ wire_enum! {
         Servo = 16 => "servo",
         Brake = 17 => "brake",
         EmergencyStop = 18 => "emergency_stop",
+        GrabFlightAuthority = 19 => "grab_flight_authority",
+        ReleaseFlightAuthority = 20 => "release_flight_authority",
+        GrabPayloadAuthority = 21 => "grab_payload_authority",
+        ReleasePayloadAuthority = 22 => "release_payload_authority",
+        MotorKill = 23 => "motor_kill",
     }
 }
 
@@ -63,6 +68,8 @@ wire_enum! {
         Refused = 1 => "refused",
         /// Accepted by the autopilot and still running (long commands).
         InProgress = 2 => "in_progress",
+        /// Accepted after the arbiter reduced it (e.g. a velocity limited by the geofence).
+        Limited = 3 => "limited",
     }
 }
 
@@ -96,6 +103,75 @@ wire_enum! {
         WrongState = 12 => "wrong_state",
         /// Superseded by a newer command before the autopilot answered.
         Cancelled = 13 => "cancelled",
+        /// An emergency stop holds the vehicle; only the safety source may command it.
+        Emergency = 14 => "emergency",
+        /// Motor kill while the vehicle is in the air, not flagged as an emergency kill.
+        InAir = 15 => "in_air",
+        /// The source lost authority to a higher-priority source.
+        Preempted = 16 => "preempted",
+    }
+}
+
+impl CommandSource {
+    /// Flight-authority priority, higher wins. Safety > manual RC > local operator >
+    /// DJI DRC > shot engine > swarm queue > IMC > vision. The operator (the
+    /// `skymesh` CLI and ground tools on the companion computer) ranks just below a
+    /// pilot on the sticks, above every automated source.
+    pub const fn priority(self) -> u8 {
+        match self {
+            CommandSource::Safety => 100,
+            CommandSource::ManualRc => 90,
+            CommandSource::Operator => 80,
+            CommandSource::DjiDrc => 70,
+            CommandSource::ShotEngine => 60,
+            CommandSource::SwarmQueue => 50,
+            CommandSource::Imc => 40,
+            CommandSource::Vision => 30,
+        }
+    }
+}
+
+/// Which authority a command needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AuthorityDomain {
+    /// Anything that moves the aircraft or changes its flight state.
+    Flight,
+    /// Camera, gimbal and payload outputs (DJI separates these from flight).
+    Payload,
+}
+
+impl CommandKind {
+    /// The authority a command of this kind needs; `None` for the authority
+    /// requests themselves and for the emergency stop (always allowed, it only brakes).
+    pub const fn authority(self) -> Option<AuthorityDomain> {
+        match self {
+            CommandKind::Gimbal
+            | CommandKind::CameraCapture
+            | CommandKind::RecordStart
+            | CommandKind::RecordStop
+            | CommandKind::Servo
+            | CommandKind::GrabPayloadAuthority
+            | CommandKind::ReleasePayloadAuthority => Some(AuthorityDomain::Payload),
+            CommandKind::EmergencyStop => None,
+            _ => Some(AuthorityDomain::Flight),
+        }
+    }
+
+    /// Setpoints are a stream: each carries a maximum age and the arbiter brakes when
+    /// the stream stops.
+    pub const fn is_setpoint(self) -> bool {
+        matches!(self, CommandKind::VelocityNed)
+    }
+
+    /// Grab/release requests.
+    pub const fn is_authority_request(self) -> bool {
+        matches!(
+            self,
+            CommandKind::GrabFlightAuthority
+                | CommandKind::ReleaseFlightAuthority
+                | CommandKind::GrabPayloadAuthority
+                | CommandKind::ReleasePayloadAuthority
+        )
     }
 }
 
@@ -111,6 +187,8 @@ pub mod flags {
     pub const RELATIVE: u8 = 0x08;
     /// `VelocityNed`: `f[3]` holds a yaw rate.
     pub const HAS_YAW_RATE: u8 = 0x10;
+    /// `MotorKill`: an emergency kill, executed even in the air.
+    pub const EMERGENCY: u8 = 0x20;
 }
 
 /// Sanity limits applied at conversion; the arbiter's envelope is stricter.
@@ -179,8 +257,22 @@ pub enum Command {
     },
     /// Stop and hold position now.
     Brake,
-    /// Cut the motors. Kills a flying vehicle: safety source only (enforced by the arbiter).
+    /// Brake and hover now; the safety source takes flight authority and keeps it
+    /// until it releases it explicitly. Does not stop the motors.
     EmergencyStop,
+    /// Take flight authority (granted if no higher-priority source holds it).
+    GrabFlightAuthority,
+    /// Give flight authority back.
+    ReleaseFlightAuthority,
+    /// Take payload (camera, gimbal, servo) authority.
+    GrabPayloadAuthority,
+    /// Give payload authority back.
+    ReleasePayloadAuthority,
+    /// Stop the motors. Refused while in the air unless `emergency` (a falling
+    /// aircraft is better than a fly-away, but only when someone says so).
+    MotorKill {
+        emergency: bool,
+    },
 }
 
 /// Why a command could not be converted.
@@ -257,6 +349,11 @@ impl Command {
             Command::Servo { .. } => CommandKind::Servo,
             Command::Brake => CommandKind::Brake,
             Command::EmergencyStop => CommandKind::EmergencyStop,
+            Command::GrabFlightAuthority => CommandKind::GrabFlightAuthority,
+            Command::ReleaseFlightAuthority => CommandKind::ReleaseFlightAuthority,
+            Command::GrabPayloadAuthority => CommandKind::GrabPayloadAuthority,
+            Command::ReleasePayloadAuthority => CommandKind::ReleasePayloadAuthority,
+            Command::MotorKill { .. } => CommandKind::MotorKill,
         }
     }
 
@@ -351,7 +448,12 @@ impl Command {
             | Command::RecordStart
             | Command::RecordStop
             | Command::Brake
-            | Command::EmergencyStop => {}
+            | Command::EmergencyStop
+            | Command::GrabFlightAuthority
+            | Command::ReleaseFlightAuthority
+            | Command::GrabPayloadAuthority
+            | Command::ReleasePayloadAuthority
+            | Command::MotorKill { .. } => {}
         }
         Ok(())
     }
@@ -364,7 +466,7 @@ impl Command {
 /// `SetYaw`: `f[0]` yaw, `f[1]` rate; `Gimbal`: `f[0]` pitch, `f[1]` yaw; `SetMode`:
 /// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.VehicleCommand.v1")]
+#[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
 pub struct VehicleCommand {
     pub header: SampleHeader,
@@ -476,7 +578,16 @@ impl VehicleCommand {
             | Command::RecordStart
             | Command::RecordStop
             | Command::Brake
-            | Command::EmergencyStop => {}
+            | Command::EmergencyStop
+            | Command::GrabFlightAuthority
+            | Command::ReleaseFlightAuthority
+            | Command::GrabPayloadAuthority
+            | Command::ReleasePayloadAuthority => {}
+            Command::MotorKill { emergency } => {
+                if emergency {
+                    c.flags |= flags::EMERGENCY;
+                }
+            }
         }
         Ok(c)
     }
@@ -555,6 +666,13 @@ impl VehicleCommand {
             },
             CommandKind::Brake => Command::Brake,
             CommandKind::EmergencyStop => Command::EmergencyStop,
+            CommandKind::GrabFlightAuthority => Command::GrabFlightAuthority,
+            CommandKind::ReleaseFlightAuthority => Command::ReleaseFlightAuthority,
+            CommandKind::GrabPayloadAuthority => Command::GrabPayloadAuthority,
+            CommandKind::ReleasePayloadAuthority => Command::ReleasePayloadAuthority,
+            CommandKind::MotorKill => Command::MotorKill {
+                emergency: has(flags::EMERGENCY),
+            },
         };
         cmd.validate()?;
         Ok(cmd)
@@ -566,7 +684,7 @@ impl VehicleCommand {
 /// Topic: [`crate::topics::vehicle_command_ack`]. Matched to its command by
 /// `(source, command_id)`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.CommandAck.v1")]
+#[type_name("skymesh.CommandAck.v2")]
 #[repr(C)]
 pub struct CommandAck {
     pub header: SampleHeader,
@@ -603,8 +721,9 @@ impl CommandAck {
         RefusalReason::try_from(self.reason).ok()
     }
 
+    /// Accepted as sent, or accepted after the arbiter limited it.
     pub fn is_accepted(&self) -> bool {
-        self.result == AckResult::Accepted.to_wire()
+        self.result == AckResult::Accepted.to_wire() || self.result == AckResult::Limited.to_wire()
     }
 }
 
@@ -657,6 +776,11 @@ mod tests {
             },
             Command::Brake,
             Command::EmergencyStop,
+            Command::GrabFlightAuthority,
+            Command::ReleaseFlightAuthority,
+            Command::GrabPayloadAuthority,
+            Command::ReleasePayloadAuthority,
+            Command::MotorKill { emergency: true },
         ]
     }
 

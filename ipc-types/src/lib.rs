@@ -10,6 +10,7 @@
 //! supervisor and by the tests.
 #![deny(unsafe_code)]
 
+pub mod arbiter;
 pub mod command;
 pub mod fixed;
 pub mod header;
@@ -17,9 +18,13 @@ pub mod service;
 pub mod topics;
 pub mod vehicle;
 
+pub use arbiter::{
+    ArbiterEvent, ArbiterEventKind, AuthorityChange, AuthorityState, FenceError, FenceKind,
+    FencePolygon, GeofenceSet, NO_HOLDER,
+};
 pub use command::{
-    AckResult, Command, CommandAck, CommandError, CommandKind, CommandSource, RefusalReason,
-    VehicleCommand,
+    AckResult, AuthorityDomain, Command, CommandAck, CommandError, CommandKind, CommandSource,
+    RefusalReason, VehicleCommand,
 };
 pub use fixed::FixedStr;
 pub use header::{Sample, SampleHeader, ServiceId};

@@ -41,6 +41,14 @@ impl TopicQos {
         history: 0,
         buffer: 64,
     };
+    /// A latest-value topic that several sources may write (the geofence).
+    pub const SHARED_STATE: TopicQos = TopicQos {
+        max_publishers: 16,
+        max_subscribers: 16,
+        max_nodes: 32,
+        history: 1,
+        buffer: 4,
+    };
     /// Per-service health and stats: one writer (two while a restart overlaps), the supervisor and tools read.
     pub const SERVICE: TopicQos = TopicQos {
         max_publishers: 2,
@@ -101,6 +109,27 @@ pub fn vehicle_command_ack(id: u8) -> Topic {
     Topic::new(
         format!("skymesh/vehicle/{id}/command_ack"),
         TopicQos::EVENTS,
+    )
+}
+
+/// [`crate::AuthorityState`] of vehicle `id`: who holds flight and payload authority.
+pub fn vehicle_authority(id: u8) -> Topic {
+    Topic::new(format!("skymesh/vehicle/{id}/authority"), TopicQos::STATE)
+}
+
+/// [`crate::ArbiterEvent`]s of vehicle `id`'s arbiter.
+pub fn vehicle_arbiter_events(id: u8) -> Topic {
+    Topic::new(
+        format!("skymesh/vehicle/{id}/arbiter_events"),
+        TopicQos::EVENTS,
+    )
+}
+
+/// [`crate::GeofenceSet`] for vehicle `id`, from whichever source sets the fence.
+pub fn vehicle_geofence(id: u8) -> Topic {
+    Topic::new(
+        format!("skymesh/vehicle/{id}/geofence"),
+        TopicQos::SHARED_STATE,
     )
 }
 

@@ -22,7 +22,10 @@
 //! | `Servo` | COMMAND_LONG `DO_SET_SERVO` p1 = channel, p2 = PWM µs | COMMAND_ACK |
 //! | `Brake` in GUIDED | SET_POSITION_TARGET_LOCAL_NED zero velocity (stays GUIDED, so setpoints resume at once) | accepted when written |
 //! | `Brake` otherwise | COMMAND_LONG `DO_SET_MODE` BRAKE (17) | COMMAND_ACK |
-//! | `EmergencyStop` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196: motors stop even in flight | COMMAND_ACK |
+//! | `EmergencyStop` | as `Brake`: brake and hover (motors keep running) | as `Brake` |
+//! | `MotorKill { emergency: false }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0: ArduPilot refuses it in the air | COMMAND_ACK |
+//! | `MotorKill { emergency: true }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196: motors stop even in flight | COMMAND_ACK |
+//! | authority grab/release | no MAVLink: decided by the arbiter | — |
 //!
 //! `Gimbal` has no `DO_MOUNT_CONTROL` fallback: a gimbal without gimbal protocol v2
 //! answers UNSUPPORTED, which is reported as a refusal.
@@ -187,11 +190,17 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
             [0.0, force(f), 0.0, 0.0, 0.0, 0.0, 0.0],
         )),
-        Command::EmergencyStop => only(long(
+        Command::MotorKill { emergency } => only(long(
             t,
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [0.0, FORCE_MAGIC, 0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, force(emergency), 0.0, 0.0, 0.0, 0.0, 0.0],
         )),
+        Command::GrabFlightAuthority
+        | Command::ReleaseFlightAuthority
+        | Command::GrabPayloadAuthority
+        | Command::ReleasePayloadAuthority => {
+            return Err("authority requests have no MAVLink form; the arbiter decides them")
+        }
         Command::SetMode(mode) => {
             let custom = mode
                 .to_copter_custom_mode()
@@ -311,11 +320,11 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 0.0,
             ],
         )),
-        Command::Brake if ctx.mode == FlightMode::Guided => Plan {
+        Command::Brake | Command::EmergencyStop if ctx.mode == FlightMode::Guided => Plan {
             command: None,
             setpoint: Some(velocity_setpoint(t, [0.0; 3], None)),
         },
-        Command::Brake => {
+        Command::Brake | Command::EmergencyStop => {
             let brake = FlightMode::Brake
                 .to_copter_custom_mode()
                 .ok_or("BRAKE has no ArduCopter mode number")?;
@@ -397,7 +406,8 @@ mod tests {
             (Command::Arm { force: true }, 1.0, FORCE_MAGIC),
             (Command::Disarm { force: false }, 0.0, 0.0),
             (Command::Disarm { force: true }, 0.0, FORCE_MAGIC),
-            (Command::EmergencyStop, 0.0, FORCE_MAGIC),
+            (Command::MotorKill { emergency: true }, 0.0, FORCE_MAGIC),
+            (Command::MotorKill { emergency: false }, 0.0, 0.0),
         ] {
             let p = plan_of(cmd);
             let c = long_of(&p);
