@@ -236,9 +236,12 @@ pub enum FenceError {
     BadAltitude { ceiling: f32, floor: f32 },
 }
 
+/// One validated polygon: its kind and its vertices (lat, lon in degrees).
+pub type FenceRing<'a> = (FenceKind, &'a [[f64; 2]]);
+
 impl GeofenceSet {
     /// The valid polygons as (kind, vertices), after checking every number.
-    pub fn polygons(&self) -> Result<Vec<(FenceKind, &[[f64; 2]])>, FenceError> {
+    pub fn polygons(&self) -> Result<Vec<FenceRing<'_>>, FenceError> {
         if usize::from(self.polygon_count) > MAX_FENCE_POLYGONS {
             return Err(FenceError::TooManyPolygons(self.polygon_count));
         }
