@@ -79,6 +79,9 @@ pub struct MeshOptions {
     pub attitude_hz: f64,
     /// Extra TOML placed after the `[supervisor]` table (e.g. a `[restart]` policy).
     pub supervisor_extra: String,
+    /// Number of vehicles: one vehicle-sim + autopilot-link pair per id 1..=N. With
+    /// more than one, services are named `vehicle-sim-<id>` / `autopilot-link-<id>`.
+    pub vehicles: u8,
 }
 
 impl Default for MeshOptions {
@@ -89,6 +92,7 @@ impl Default for MeshOptions {
             autopilot_link_extra: String::new(),
             attitude_hz: 50.0,
             supervisor_extra: String::new(),
+            vehicles: 1,
         }
     }
 }
@@ -98,6 +102,7 @@ impl Default for MeshOptions {
 pub struct Mesh {
     pub dir: tempfile::TempDir,
     pub domain: String,
+    /// MAVLink port of vehicle 1's simulator.
     pub mavlink_port: u16,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
@@ -111,22 +116,53 @@ impl Mesh {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let domain = format!("e2e{}x{n}", std::process::id());
         let dir = tempfile::Builder::new().prefix("skymesh-e2e-").tempdir()?;
-        let mavlink_port = free_port();
         let root = repo_root();
         let d = dir.path();
-
-        std::fs::write(
-            d.join("vehicle-sim.toml"),
-            format!("endpoint = \"tcp:127.0.0.1:{mavlink_port}\"\nsystem_id = 1\n"),
-        )?;
-        std::fs::write(
-            d.join("autopilot-link.toml"),
-            format!(
-                "connection = \"tcpout:127.0.0.1:{mavlink_port}\"\nvehicle_id = 1\nattitude_hz = {}\n{}\n",
-                opts.attitude_hz, opts.autopilot_link_extra
-            ),
-        )?;
         let bins = bin_dir();
+        let mut services = String::new();
+        let mut mavlink_ports = Vec::new();
+        for id in 1..=opts.vehicles.max(1) {
+            let port = free_port();
+            mavlink_ports.push(port);
+            // One vehicle keeps the default names; a fleet gets `-<id>` suffixes.
+            let suffix = if opts.vehicles > 1 {
+                format!("-{id}")
+            } else {
+                String::new()
+            };
+            // Vehicles stand 10 m apart (east) so a fleet does not share one spot.
+            let home_lon = 149.165230
+                + f64::from(id - 1) * 10.0 / (111_320.0 * (35.363261f64).to_radians().cos());
+            std::fs::write(
+                d.join(format!("vehicle-sim{suffix}.toml")),
+                format!("endpoint = \"tcp:127.0.0.1:{port}\"\nsystem_id = {id}\nhome_lon = {home_lon}\n"),
+            )?;
+            std::fs::write(
+                d.join(format!("autopilot-link{suffix}.toml")),
+                format!(
+                    "connection = \"tcpout:127.0.0.1:{port}\"\nvehicle_id = {id}\nattitude_hz = {}\n{}\n",
+                    opts.attitude_hz, opts.autopilot_link_extra
+                ),
+            )?;
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "vehicle-sim{suffix}"
+binary = "{bins}/skymesh-vehicle-sim"
+config = "vehicle-sim{suffix}.toml"
+critical = true
+
+[[service]]
+name = "autopilot-link{suffix}"
+binary = "{bins}/skymesh-autopilot-link"
+config = "autopilot-link{suffix}.toml"
+after = ["vehicle-sim{suffix}"]
+critical = true
+"#,
+                bins = bins.display(),
+            );
+        }
         std::fs::write(
             d.join("skymesh.toml"),
             format!(
@@ -138,27 +174,14 @@ missed_heartbeats = {missed}
 grace_period_ms = 3000
 
 {extra}
-
-[[service]]
-name = "vehicle-sim"
-binary = "{bins}/skymesh-vehicle-sim"
-config = "vehicle-sim.toml"
-critical = true
-
-[[service]]
-name = "autopilot-link"
-binary = "{bins}/skymesh-autopilot-link"
-config = "autopilot-link.toml"
-after = ["vehicle-sim"]
-critical = true
-"#,
+{services}"#,
                 ipc = root.join("deploy/iceoryx2.toml").display(),
                 hb = opts.heartbeat_ms,
                 missed = opts.missed_heartbeats,
-                bins = bins.display(),
                 extra = opts.supervisor_extra,
             ),
         )?;
+        let mavlink_port = mavlink_ports[0];
 
         let stdout = std::fs::File::create(d.join("supervisor.stdout"))?;
         let stderr = std::fs::File::create(d.join("supervisor.stderr"))?;
