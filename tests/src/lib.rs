@@ -140,7 +140,8 @@ impl Mesh {
             std::fs::write(
                 d.join(format!("autopilot-link{suffix}.toml")),
                 format!(
-                    "connection = \"tcpout:127.0.0.1:{port}\"\nvehicle_id = {id}\nattitude_hz = {}\n{}\n",
+                    // No router endpoints: tests never send to a ground station's port.
+                    "connection = \"tcpout:127.0.0.1:{port}\"\nvehicle_id = {id}\nattitude_hz = {}\nendpoints = []\n{}\n",
                     opts.attitude_hz, opts.autopilot_link_extra
                 ),
             )?;

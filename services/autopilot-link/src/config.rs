@@ -12,6 +12,8 @@ use serde::Deserialize;
 use skymesh_runtime::config::{in_range, socket_addr};
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
+use crate::arbiter::ArbiterSettings;
+
 /// Where the autopilot is, as written in `connection`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Endpoint {
@@ -136,6 +138,9 @@ pub struct StreamRates {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
     pub connection: Endpoint,
+    /// MAVLink router endpoints (ground stations, other MAVLink programs), at most
+    /// [`crate::router::MAX_ENDPOINTS`], no duplicates; see [`crate::endpoints`].
+    pub endpoints: Vec<Endpoint>,
     /// MAVLink system id of the autopilot; also the `{id}` of the vehicle topics.
     pub vehicle_id: u8,
     /// Our own MAVLink system id (component is always 191, onboard computer).
@@ -156,6 +161,8 @@ pub struct Settings {
     pub rates: StreamRates,
     /// Also send REQUEST_DATA_STREAM (for firmware without SET_MESSAGE_INTERVAL).
     pub request_data_streams: bool,
+    /// The command arbiter.
+    pub arbiter: ArbiterSettings,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -163,6 +170,8 @@ pub struct Settings {
 #[serde(deny_unknown_fields, default)]
 pub struct RawConfig {
     pub connection: String,
+    /// MAVLink router endpoints, same syntax as `connection` (no `serial:`).
+    pub endpoints: Vec<String>,
     pub vehicle_id: i64,
     /// Absent → same as `vehicle_id`.
     pub system_id: Option<i64>,
@@ -183,12 +192,15 @@ pub struct RawConfig {
     pub battery_status_hz: f64,
     pub gps_raw_hz: f64,
     pub ekf_status_hz: f64,
+    /// `[arbiter]`: authority, freshness, geofence envelope, limits.
+    pub arbiter: RawArbiter,
 }
 
 impl Default for RawConfig {
     fn default() -> Self {
         RawConfig {
             connection: "tcpout:127.0.0.1:5760".to_string(),
+            endpoints: vec!["udpout:127.0.0.1:14550".to_string()],
             vehicle_id: 1,
             system_id: None,
             link_timeout_s: 2.0,
@@ -206,6 +218,7 @@ impl Default for RawConfig {
             battery_status_hz: 2.0,
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.0,
+            arbiter: RawArbiter::default(),
         }
     }
 }
@@ -223,6 +236,44 @@ fn rate(field: &str, value: f64) -> Result<f32, ConfigError> {
         return Err(ConfigError::invalid(field, "must be a finite number"));
     }
     Ok(in_range(field, value, 0.1, 400.0)? as f32)
+}
+
+/// The `endpoints` list: valid strings, no serial ports, no duplicates, not the
+/// autopilot's own connection, at most [`crate::router::MAX_ENDPOINTS`].
+fn router_endpoints(list: &[String], connection: &str) -> Result<Vec<Endpoint>, ConfigError> {
+    const FIELD: &str = "endpoints";
+    let max = crate::router::MAX_ENDPOINTS;
+    if list.len() > max {
+        return Err(ConfigError::invalid(
+            FIELD,
+            format!("{} endpoints; at most {max}", list.len()),
+        ));
+    }
+    let connection = Endpoint::parse("connection", connection).ok();
+    let mut out: Vec<Endpoint> = Vec::new();
+    for s in list {
+        let e = Endpoint::parse(FIELD, s)?;
+        if matches!(e, Endpoint::Serial { .. }) {
+            return Err(ConfigError::invalid(
+                FIELD,
+                format!("`{s}`: serial router endpoints are not supported; use udpin/udpout/tcpin/tcpout"),
+            ));
+        }
+        if out.contains(&e) {
+            return Err(ConfigError::invalid(
+                FIELD,
+                format!("`{s}` is listed twice"),
+            ));
+        }
+        if connection.as_ref() == Some(&e) {
+            return Err(ConfigError::invalid(
+                FIELD,
+                format!("`{s}` is the autopilot connection itself"),
+            ));
+        }
+        out.push(e);
+    }
+    Ok(out)
 }
 
 fn mav_id(field: &str, value: i64) -> Result<u8, ConfigError> {
@@ -255,6 +306,7 @@ impl ServiceConfig for RawConfig {
         };
         Ok(Settings {
             connection: Endpoint::parse("connection", &self.connection)?,
+            endpoints: router_endpoints(&self.endpoints, &self.connection)?,
             vehicle_id,
             system_id,
             link_timeout: seconds("link_timeout_s", self.link_timeout_s, 0.5, 60.0)?,
@@ -279,17 +331,140 @@ impl ServiceConfig for RawConfig {
                 ekf_status_hz: rate("ekf_status_hz", self.ekf_status_hz)?,
             },
             request_data_streams: self.request_data_streams,
+            arbiter: self.arbiter.validate()?,
+        })
+    }
+}
+
+/// The `[arbiter]` table as written (see `deploy/autopilot-link.toml`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RawArbiter {
+    pub authority_timeout_s: f64,
+    pub setpoint_max_age_ms: i64,
+    pub setpoint_max_age_cap_ms: i64,
+    /// Source name (`vision`, `shot_engine`, ...) → default maximum age, ms.
+    pub setpoint_max_age_by_source: std::collections::BTreeMap<String, i64>,
+    pub max_horizontal_speed_mps: f64,
+    pub max_climb_mps: f64,
+    pub max_descent_mps: f64,
+    pub max_yaw_rate_dps: f64,
+    pub fence_deceleration_mps2: f64,
+    pub fence_margin_m: f64,
+    pub fence_vertical_margin_m: f64,
+    pub fence_response_s: f64,
+    pub in_air_alt_m: f64,
+    pub in_air_speed_mps: f64,
+}
+
+impl Default for RawArbiter {
+    fn default() -> Self {
+        RawArbiter {
+            authority_timeout_s: 5.0,
+            setpoint_max_age_ms: 500,
+            setpoint_max_age_cap_ms: 2000,
+            setpoint_max_age_by_source: std::collections::BTreeMap::new(),
+            max_horizontal_speed_mps: 12.0,
+            max_climb_mps: 5.0,
+            max_descent_mps: 3.0,
+            max_yaw_rate_dps: 180.0,
+            fence_deceleration_mps2: 1.5,
+            fence_margin_m: 2.0,
+            fence_vertical_margin_m: 1.0,
+            fence_response_s: 0.3,
+            in_air_alt_m: 0.5,
+            in_air_speed_mps: 0.5,
+        }
+    }
+}
+
+/// A finite number within `min..=max`, as f32.
+fn number(field: &str, value: f64, min: f64, max: f64) -> Result<f32, ConfigError> {
+    if !value.is_finite() {
+        return Err(ConfigError::invalid(field, "must be a finite number"));
+    }
+    Ok(in_range(field, value, min, max)? as f32)
+}
+
+impl RawArbiter {
+    fn validate(self) -> Result<ArbiterSettings, ConfigError> {
+        let ms = |field: &str, v: i64, max: i64| -> Result<Duration, ConfigError> {
+            Ok(Duration::from_millis(in_range(field, v, 20, max)? as u64))
+        };
+        let cap_ms = in_range(
+            "arbiter.setpoint_max_age_cap_ms",
+            self.setpoint_max_age_cap_ms,
+            20,
+            10_000,
+        )?;
+        let mut by_source = Vec::new();
+        for (name, age) in &self.setpoint_max_age_by_source {
+            let field = format!("arbiter.setpoint_max_age_by_source.{name}");
+            let source = skymesh_ipc_types::CommandSource::ALL
+                .iter()
+                .copied()
+                .find(|s| s.as_str() == name)
+                .ok_or_else(|| ConfigError::invalid(&field, "not a command source name"))?;
+            by_source.push((source, ms(&field, *age, cap_ms)?));
+        }
+        Ok(ArbiterSettings {
+            authority_timeout: seconds(
+                "arbiter.authority_timeout_s",
+                self.authority_timeout_s,
+                0.5,
+                300.0,
+            )?,
+            setpoint_max_age: ms(
+                "arbiter.setpoint_max_age_ms",
+                self.setpoint_max_age_ms,
+                cap_ms,
+            )?,
+            setpoint_max_age_cap: Duration::from_millis(cap_ms as u64),
+            setpoint_max_age_by_source: by_source,
+            max_horizontal_speed_mps: number(
+                "arbiter.max_horizontal_speed_mps",
+                self.max_horizontal_speed_mps,
+                0.5,
+                50.0,
+            )?,
+            max_climb_mps: number("arbiter.max_climb_mps", self.max_climb_mps, 0.1, 50.0)?,
+            max_descent_mps: number("arbiter.max_descent_mps", self.max_descent_mps, 0.1, 50.0)?,
+            max_yaw_rate_dps: number(
+                "arbiter.max_yaw_rate_dps",
+                self.max_yaw_rate_dps,
+                1.0,
+                720.0,
+            )?,
+            fence_deceleration_mps2: number(
+                "arbiter.fence_deceleration_mps2",
+                self.fence_deceleration_mps2,
+                0.2,
+                20.0,
+            )?,
+            fence_margin_m: number("arbiter.fence_margin_m", self.fence_margin_m, 0.0, 100.0)?,
+            fence_vertical_margin_m: number(
+                "arbiter.fence_vertical_margin_m",
+                self.fence_vertical_margin_m,
+                0.0,
+                100.0,
+            )?,
+            fence_response_s: number("arbiter.fence_response_s", self.fence_response_s, 0.0, 5.0)?,
+            in_air_alt_m: number("arbiter.in_air_alt_m", self.in_air_alt_m, 0.1, 10.0)?,
+            in_air_speed_mps: number("arbiter.in_air_speed_mps", self.in_air_speed_mps, 0.1, 10.0)?,
         })
     }
 }
 
 impl Settings {
-    /// The defaults with `connection` replaced: what in-process tests start from.
+    /// The defaults with `connection` replaced and no router endpoints (a test must
+    /// not send to a ground station on the developer's machine): what in-process
+    /// tests start from.
     pub fn with_connection(connection: Endpoint) -> Settings {
         let mut s = RawConfig::default()
             .validate()
             .expect("the built-in defaults are valid");
         s.connection = connection;
+        s.endpoints.clear();
         s
     }
 }
@@ -326,6 +501,42 @@ mod tests {
             parse_str("").unwrap(),
             RawConfig::default().validate().unwrap()
         );
+    }
+
+    #[test]
+    fn router_endpoints_default_to_a_local_ground_station_and_are_checked() {
+        let s = parse_str("").unwrap();
+        assert_eq!(
+            s.endpoints,
+            vec![Endpoint::UdpOut {
+                host: "127.0.0.1".into(),
+                port: 14550
+            }]
+        );
+        let s = parse_str(
+            r#"endpoints = ["udpout:127.0.0.1:14550", "udpin:127.0.0.1:14560", "tcpin:127.0.0.1:5790", "tcpout:gcs.local:5760"]"#,
+        )
+        .unwrap();
+        assert_eq!(s.endpoints.len(), 4);
+        assert_eq!(
+            s.endpoints[2],
+            Endpoint::TcpIn("127.0.0.1:5790".parse().unwrap())
+        );
+        assert!(parse_str("endpoints = []").unwrap().endpoints.is_empty());
+        assert!(Settings::with_connection(s.connection.clone())
+            .endpoints
+            .is_empty());
+        for bad in [
+            r#"endpoints = ["udp:127.0.0.1:14550"]"#,
+            r#"endpoints = ["udpout:127.0.0.1:0"]"#,
+            r#"endpoints = ["serial:/dev/ttyUSB0:57600"]"#,
+            r#"endpoints = ["udpin:127.0.0.1:14560", "udpin:127.0.0.1:14560"]"#,
+            r#"endpoints = ["tcpout:127.0.0.1:5760"]"#,
+            r#"endpoints = ["udpin:127.0.0.1:1", "udpin:127.0.0.1:2", "udpin:127.0.0.1:3", "udpin:127.0.0.1:4", "udpin:127.0.0.1:5", "udpin:127.0.0.1:6", "udpin:127.0.0.1:7", "udpin:127.0.0.1:8", "udpin:127.0.0.1:9"]"#,
+        ] {
+            let e = parse_str(bad).unwrap_err();
+            assert!(e.to_string().contains("endpoints"), "{bad}: {e}");
+        }
     }
 
     #[test]
@@ -401,6 +612,22 @@ mod tests {
             ("attitude_hz = 500.0", "attitude_hz"),
             ("ekf_status_hz = 0.01", "ekf_status_hz"),
             ("gps_raw_hz = inf", "gps_raw_hz"),
+            (
+                "[arbiter]\nsetpoint_max_age_ms = 5",
+                "arbiter.setpoint_max_age_ms",
+            ),
+            (
+                "[arbiter]\nsetpoint_max_age_ms = 3000",
+                "arbiter.setpoint_max_age_ms",
+            ),
+            (
+                "[arbiter]\nfence_deceleration_mps2 = nan",
+                "arbiter.fence_deceleration_mps2",
+            ),
+            (
+                "[arbiter.setpoint_max_age_by_source]\ndrone = 100",
+                "arbiter.setpoint_max_age_by_source.drone",
+            ),
         ] {
             let e = parse_str(text).unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");
@@ -414,5 +641,14 @@ mod tests {
         assert_eq!(s.system_id, 42);
         assert_eq!(s.rates.attitude_hz, 20.0);
         assert_eq!(s.silence_reconnect, None);
+        let s = parse_str("[arbiter]\nauthority_timeout_s = 2\n[arbiter.setpoint_max_age_by_source]\nvision = 200").unwrap();
+        assert_eq!(s.arbiter.authority_timeout, Duration::from_secs(2));
+        assert_eq!(
+            s.arbiter.setpoint_max_age_by_source,
+            vec![(
+                skymesh_ipc_types::CommandSource::Vision,
+                Duration::from_millis(200)
+            )]
+        );
     }
 }

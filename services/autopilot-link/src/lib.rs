@@ -13,26 +13,38 @@
 //! |---|---|
 //! | [`config`] | TOML → [`Settings`] |
 //! | [`link`] | transports, reader/writer threads, reconnect |
+//! | [`frame`] | raw MAVLink frames: split, check, target (pure) |
+//! | [`router`] | MAVLink routing table and COMMAND_ACK attribution (pure) |
+//! | [`endpoints`] | router endpoints (ground stations): sockets and their tasks |
+//! | [`hub`] | moves frames between autopilot and endpoints; router metrics |
 //! | [`telemetry`] | MAVLink → samples (pure) |
 //! | [`commands`] | intake checks, `Command` → MAVLink (pure) |
 //! | [`acks`] | COMMAND_ACK matching, retransmission, timeouts (pure) |
+//! | [`arbiter`] | authority, freshness, geofence envelope, audit: decides every command (pure) |
 //! | [`requests`] | our heartbeat, stream-rate and home requests (pure) |
 //! | [`metrics`] | the exported series |
 //! | `service` | the event loop tying them together |
 #![forbid(unsafe_code)]
 
 pub mod acks;
+pub mod arbiter;
 pub mod commands;
 pub mod config;
+pub mod endpoints;
+pub mod frame;
+pub mod hub;
 pub mod link;
 pub mod metrics;
 pub mod requests;
+pub mod router;
 mod service;
 pub mod telemetry;
+mod transport;
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, CommandAck, ServiceState, VehicleCommand, VehicleState, VehicleStatus,
+    topics, ArbiterEvent, AuthorityState, CommandAck, GeofenceSet, ServiceState, VehicleCommand,
+    VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
 
@@ -78,11 +90,25 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 
 /// Runs autopilot-link on `bus` until `shutdown` is cancelled.
 ///
-/// Opens `skymesh/vehicle/{vehicle_id}/{state,status,command_ack}` as publisher and
-/// `.../command` as subscriber, starts the link and returns once both have stopped
+/// Opens `skymesh/vehicle/{vehicle_id}/{state,status,command_ack,authority,arbiter_events}`
+/// as publisher and `.../{command,geofence}` as subscriber, starts the link and returns once both have stopped
 /// (well within the runtime's 5 s grace period).
 pub async fn run_with(
     settings: Settings,
+    bus: Bus,
+    stats: Stats,
+    shutdown: CancellationToken,
+    lifecycle: impl Lifecycle,
+) -> anyhow::Result<()> {
+    let endpoints = endpoints::Bound::bind(&settings.endpoints).await?;
+    run_with_endpoints(settings, endpoints, bus, stats, shutdown, lifecycle).await
+}
+
+/// [`run_with`] with the router endpoints already bound (tests bind port 0 and read
+/// the ports from [`endpoints::Bound::local_addrs`]).
+pub async fn run_with_endpoints(
+    settings: Settings,
+    endpoints: endpoints::Bound,
     bus: Bus,
     stats: Stats,
     shutdown: CancellationToken,
@@ -102,13 +128,30 @@ pub async fn run_with(
         commands: bus
             .subscriber::<VehicleCommand>(&topics::vehicle_command(id))
             .context("opening the vehicle command topic")?,
+        authority: bus
+            .publisher::<AuthorityState>(&topics::vehicle_authority(id))
+            .context("opening the authority topic")?,
+        events: bus
+            .publisher::<ArbiterEvent>(&topics::vehicle_arbiter_events(id))
+            .context("opening the arbiter events topic")?,
+        geofence: bus
+            .subscriber::<GeofenceSet>(&topics::vehicle_geofence(id))
+            .context("opening the geofence topic")?,
     };
     let metrics = metrics::Metrics::new(&stats);
+    let audit = arbiter::audit::Audit::new(&stats, id);
     tracing::info!(
         connection = %settings.connection,
         vehicle_id = id,
         system_id = settings.system_id,
         "autopilot-link starting"
+    );
+    let router_stop = shutdown.child_token();
+    let (hub, router_task) = endpoints::start(
+        endpoints,
+        (settings.system_id, requests::OWN_COMPONENT),
+        &stats,
+        router_stop.clone(),
     );
     let link_stop = shutdown.child_token();
     let (mut events, link_task) = link::spawn(
@@ -121,16 +164,21 @@ pub async fn run_with(
             silence_reconnect: settings.silence_reconnect,
         },
         metrics.clone(),
+        hub,
         link_stop.clone(),
     );
     lifecycle.ready();
-    let mut svc = service::Service::new(settings, lifecycle, metrics, ports);
+    let mut svc = service::Service::new(settings, lifecycle, metrics, audit, ports);
     let result = svc.run(&mut events, &shutdown).await;
     link_stop.cancel();
     // The reader thread may be waiting for room in the event channel: close it.
     drop(events);
     if let Err(e) = link_task.await {
         tracing::warn!(error = %e, "link task failed");
+    }
+    router_stop.cancel();
+    if let Err(e) = router_task.await {
+        tracing::warn!(error = %e, "router task failed");
     }
     result
 }

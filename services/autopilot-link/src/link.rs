@@ -1,50 +1,57 @@
 //! The MAVLink connection: open, read, write, reconnect.
 //!
-//! The `mavlink` crate's connections are blocking, so each open connection gets two
-//! blocking threads (tokio's blocking pool): a reader that forwards every message
-//! into the service's [`LinkEvent`] channel, and a writer that drains the bounded
-//! queue behind [`LinkWriter`]. Both poll a stop flag at least every
-//! [`POLL`] (every transport is opened with a read timeout), so a shutdown or a
-//! reconnect never waits on a blocked read.
+//! Each open connection gets two blocking threads (tokio's blocking pool) over the
+//! raw byte transport of `transport`: a reader that splits the bytes into
+//! frames ([`crate::frame`]), hands every frame to the router [`Hub`] (byte for
+//! byte, to the endpoints) and decodes the ones the dialect knows into the
+//! service's [`LinkEvent`] channel; and a writer that drains the [`Outbox`]:
+//! our own messages (queued through [`LinkWriter`], serialised with our header and
+//! sequence) before frames the router forwards from endpoints, each kind bounded
+//! on its own so ground-station traffic can never crowd out our commands. Both poll
+//! a stop flag at least every [`POLL`], so a shutdown or a reconnect never waits
+//! on a blocked read.
+//!
+//! COMMAND_ACKs that answer an endpoint's command (decided by the
+//! [`AckLedger`], fed by the writer) are forwarded but not given to the service.
 //!
 //! [`spawn`] runs the supervising task: connect (with backoff after failures,
 //! forever, so the autopilot may start after us; logged at a sane rate), report
 //! [`LinkEvent::Connected`], wait for the reader or writer to fail, report
 //! [`LinkEvent::Disconnected`], and start over. The service keeps its state across
-//! reconnects; only this module knows about sockets and serial ports.
+//! reconnects; only this module knows about connections.
 
+use std::collections::VecDeque;
 use std::io;
-use std::net::{TcpListener, TcpStream, ToSocketAddrs};
+use std::net::TcpListener;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self as std_mpsc, RecvTimeoutError, SyncSender, TrySendError};
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::MavMessage;
-use mavlink::error::MessageReadError;
-use mavlink::{
-    Connectable, Connection, MavConnection, MavHeader, Message, SerialConfig, TcpConfig, UdpConfig,
-    UdpMode,
-};
+use mavlink::{MavHeader, Message};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
 use crate::config::Endpoint;
+use crate::frame::{message_info, FrameParser, RawFrame, COMMAND_ACK_ID};
+use crate::hub::Hub;
 use crate::metrics::Metrics;
+use crate::router::{AckLedger, AckOwner};
+use crate::transport::{self, Received};
 
-/// How often blocking reads, writes and accepts look at the stop flag.
-pub const POLL: Duration = Duration::from_millis(100);
-/// Outgoing messages queued for the writer thread; beyond this a write is refused.
+pub use crate::transport::POLL;
+
+/// Our own outgoing messages queued for the writer thread; beyond this a write is refused.
 pub const WRITE_QUEUE: usize = 128;
+/// Frames from router endpoints queued for the autopilot; beyond this they are dropped.
+pub const FORWARD_QUEUE: usize = 256;
 /// Incoming messages queued for the service; the reader waits when it is full.
 pub const EVENT_QUEUE: usize = 512;
-/// How long a TCP connect may take (a host that drops SYNs would block for minutes).
-const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
-/// A write blocked this long (peer stopped reading) fails the connection.
-const WRITE_TIMEOUT: Duration = Duration::from_secs(2);
 /// Repeated connection failures are logged at warn level at most this often.
 const WARN_EVERY: Duration = Duration::from_secs(30);
+/// Read buffer: one UDP datagram of any size.
+const READ_BUFFER: usize = 65536;
 
 /// What the link tells the service.
 // Nearly every event is a `Message`: boxing it would allocate per message for
@@ -71,20 +78,100 @@ pub enum WriteError {
 
 /// Queues messages for the writer thread of one connection.
 ///
-/// Held by the service from `Connected` until `Disconnected`; the writer thread holds
-/// the receiving end and writes with our header (system id, component 191).
+/// Held by the service from `Connected` until `Disconnected`; the writer thread
+/// drains the [`Outbox`] behind it and writes with our header (system id,
+/// component 191).
 #[derive(Debug, Clone)]
 pub struct LinkWriter {
-    tx: SyncSender<MavMessage>,
+    outbox: Arc<Outbox>,
 }
 
 impl LinkWriter {
     /// Queues `msg` without waiting.
     pub fn send(&self, msg: MavMessage) -> Result<(), WriteError> {
-        self.tx.try_send(msg).map_err(|e| match e {
-            TrySendError::Full(_) => WriteError::Congested,
-            TrySendError::Disconnected(_) => WriteError::Closed,
-        })
+        self.outbox.send(msg)
+    }
+}
+
+/// What the writer thread writes next.
+#[allow(clippy::large_enum_variant)] // moved once per write, never stored in bulk
+#[derive(Debug)]
+enum Outgoing {
+    Own(MavMessage),
+    Forwarded(RawFrame),
+}
+
+#[derive(Debug, Default)]
+struct OutboxState {
+    own: VecDeque<MavMessage>,
+    forwarded: VecDeque<RawFrame>,
+    closed: bool,
+}
+
+/// The writer thread's two bounded queues: our own messages ([`WRITE_QUEUE`],
+/// written first) and frames forwarded from router endpoints ([`FORWARD_QUEUE`]).
+/// Filled by the service (through [`LinkWriter`]) and the router [`Hub`]; drained
+/// by the connection's writer thread; closed when that thread ends.
+#[derive(Debug, Default)]
+pub struct Outbox {
+    state: Mutex<OutboxState>,
+    ready: Condvar,
+}
+
+impl Outbox {
+    fn lock(&self) -> MutexGuard<'_, OutboxState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn send(&self, msg: MavMessage) -> Result<(), WriteError> {
+        let mut s = self.lock();
+        if s.closed {
+            return Err(WriteError::Closed);
+        }
+        if s.own.len() >= WRITE_QUEUE {
+            return Err(WriteError::Congested);
+        }
+        s.own.push_back(msg);
+        self.ready.notify_one();
+        Ok(())
+    }
+
+    /// Queues a frame from a router endpoint without waiting.
+    pub fn forward(&self, frame: &RawFrame) -> Result<(), WriteError> {
+        let mut s = self.lock();
+        if s.closed {
+            return Err(WriteError::Closed);
+        }
+        if s.forwarded.len() >= FORWARD_QUEUE {
+            return Err(WriteError::Congested);
+        }
+        s.forwarded.push_back(*frame);
+        self.ready.notify_one();
+        Ok(())
+    }
+
+    /// The next thing to write, waiting at most `timeout`.
+    fn next(&self, timeout: Duration) -> Option<Outgoing> {
+        let mut s = self.lock();
+        if s.own.is_empty() && s.forwarded.is_empty() && !s.closed {
+            s = self
+                .ready
+                .wait_timeout(s, timeout)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        if let Some(m) = s.own.pop_front() {
+            return Some(Outgoing::Own(m));
+        }
+        s.forwarded.pop_front().map(Outgoing::Forwarded)
+    }
+
+    fn close(&self) {
+        let mut s = self.lock();
+        s.closed = true;
+        s.own.clear();
+        s.forwarded.clear();
+        self.ready.notify_all();
     }
 }
 
@@ -102,18 +189,19 @@ pub struct LinkConfig {
 }
 
 /// Starts the link. Events arrive on the returned receiver until `shutdown` fires
-/// (then the task ends within about [`POLL`]) or the receiver is dropped.
+/// (then the task ends within about [`POLL`]) or the receiver is dropped. Every
+/// frame read goes to `hub` as well; `hub` forwards endpoint frames into the open
+/// connection.
 pub fn spawn(
     config: LinkConfig,
     metrics: Metrics,
+    hub: Arc<Hub>,
     shutdown: CancellationToken,
 ) -> (mpsc::Receiver<LinkEvent>, JoinHandle<()>) {
     let (tx, rx) = mpsc::channel(EVENT_QUEUE);
-    let task = tokio::spawn(supervise(config, tx, metrics, shutdown));
+    let task = tokio::spawn(supervise(config, tx, metrics, hub, shutdown));
     (rx, task)
 }
-
-type Conn = Connection<MavMessage>;
 
 /// Connection failures, logged at warn level once and then every [`WARN_EVERY`].
 #[derive(Debug, Default)]
@@ -144,6 +232,7 @@ async fn supervise(
     config: LinkConfig,
     events: mpsc::Sender<LinkEvent>,
     metrics: Metrics,
+    hub: Arc<Hub>,
     shutdown: CancellationToken,
 ) {
     let mut delay = config.reconnect_min;
@@ -155,7 +244,7 @@ async fn supervise(
         let opening = {
             let (endpoint, stop, listener) =
                 (config.endpoint.clone(), stop.clone(), listener.clone());
-            tokio::task::spawn_blocking(move || open(&endpoint, listener, &stop))
+            tokio::task::spawn_blocking(move || transport::open(&endpoint, listener, &stop))
         };
         let (kept_listener, opened) = tokio::select! {
             r = opening => match r {
@@ -169,7 +258,7 @@ async fn supervise(
         };
         listener = kept_listener;
         match opened {
-            Ok(conn) => {
+            Ok(halves) => {
                 connections += 1;
                 if connections > 1 {
                     metrics.reconnects.inc();
@@ -177,7 +266,8 @@ async fn supervise(
                 let attempts = failures.connected();
                 tracing::info!(endpoint = %config.endpoint, failed_attempts = attempts, "MAVLink connection open");
                 delay = config.reconnect_min;
-                let reason = serve(&config, conn, &events, &metrics, &stop, &shutdown).await;
+                let reason =
+                    serve(&config, halves, &events, &metrics, &hub, &stop, &shutdown).await;
                 if shutdown.is_cancelled() {
                     return;
                 }
@@ -205,35 +295,78 @@ async fn supervise(
 /// Runs one open connection until it fails; returns why it ended.
 async fn serve(
     config: &LinkConfig,
-    conn: Conn,
+    (reader, writer): (transport::Reader, transport::Writer),
     events: &mpsc::Sender<LinkEvent>,
     metrics: &Metrics,
+    hub: &Arc<Hub>,
     stop: &Arc<AtomicBool>,
     shutdown: &CancellationToken,
 ) -> String {
-    let conn = Arc::new(conn);
-    let (wtx, wrx) = std_mpsc::sync_channel(WRITE_QUEUE);
+    let outbox = Arc::new(Outbox::default());
     if events
-        .send(LinkEvent::Connected(LinkWriter { tx: wtx }))
+        .send(LinkEvent::Connected(LinkWriter {
+            outbox: outbox.clone(),
+        }))
         .await
         .is_err()
     {
         return "service stopped".to_string();
     }
-    let header = MavHeader {
-        system_id: u32::from(config.system_id),
-        component_id: config.component_id,
-        sequence: 0,
+    hub.attach(outbox.clone());
+    // Stops both threads however this future ends (also when it is dropped, e.g. by
+    // a runtime shutting down, which would otherwise wait for them forever).
+    let guard = StopGuard {
+        stop: stop.clone(),
+        outbox: outbox.clone(),
+        hub: hub.clone(),
     };
+    let me = (config.system_id, config.component_id);
+    let ledger = Arc::new(Mutex::new(AckLedger::new(me)));
     let mut reader = {
-        let (conn, events, metrics, stop) =
-            (conn.clone(), events.clone(), metrics.clone(), stop.clone());
-        let read_mode = ReadMode::of(&config.endpoint, config.silence_reconnect);
-        tokio::task::spawn_blocking(move || read_loop(&conn, read_mode, &events, &metrics, &stop))
+        let (events, metrics, hub, ledger, stop) = (
+            events.clone(),
+            metrics.clone(),
+            hub.clone(),
+            ledger.clone(),
+            stop.clone(),
+        );
+        let silence = config
+            .silence_reconnect
+            .filter(|_| config.endpoint.is_stream());
+        let mut reader_half = reader;
+        tokio::task::spawn_blocking(move || {
+            read_loop(
+                &mut reader_half,
+                silence,
+                &events,
+                &metrics,
+                &hub,
+                &ledger,
+                &stop,
+            )
+        })
     };
     let mut writer = {
-        let (metrics, stop) = (metrics.clone(), stop.clone());
-        tokio::task::spawn_blocking(move || write_loop(&conn, header, &wrx, &metrics, &stop))
+        let (metrics, hub, stop, outbox) =
+            (metrics.clone(), hub.clone(), stop.clone(), outbox.clone());
+        let header = MavHeader {
+            system_id: u32::from(config.system_id),
+            component_id: config.component_id,
+            sequence: 0,
+        };
+        let mut writer_half = writer;
+        tokio::task::spawn_blocking(move || {
+            let ctx = WriteContext {
+                header,
+                outbox: &outbox,
+                hub: &hub,
+                ledger: &ledger,
+                metrics: &metrics,
+            };
+            let reason = write_loop(&mut writer_half, &ctx, &stop);
+            outbox.close();
+            reason
+        })
     };
     let joined = |r: Result<String, tokio::task::JoinError>| {
         r.unwrap_or_else(|e| format!("link thread failed: {e}"))
@@ -243,7 +376,7 @@ async fn serve(
         r = &mut writer => (joined(r), false, true),
         _ = shutdown.cancelled() => ("shutdown".to_string(), false, false),
     };
-    stop.store(true, Ordering::Relaxed);
+    drop(guard);
     // Both threads see the flag within POLL. The reader may be waiting for room in
     // the event channel; the service keeps draining it until it drops the receiver.
     if !reader_done {
@@ -255,188 +388,157 @@ async fn serve(
     reason
 }
 
-/// How the reader thread waits for data.
-#[derive(Debug, Clone, Copy)]
-struct ReadMode {
-    /// Serial `recv` retries timeouts internally and would never see the stop flag;
-    /// `try_recv` returns after the port's read timeout instead.
-    use_try_recv: bool,
-    silence: Option<Duration>,
+/// Ends a connection's threads when dropped: stop flag, closed outbox, router detached.
+struct StopGuard {
+    stop: Arc<AtomicBool>,
+    outbox: Arc<Outbox>,
+    hub: Arc<Hub>,
 }
 
-impl ReadMode {
-    fn of(endpoint: &Endpoint, silence: Option<Duration>) -> Self {
-        ReadMode {
-            use_try_recv: matches!(endpoint, Endpoint::Serial { .. }),
-            silence: silence.filter(|_| endpoint.is_stream()),
-        }
+impl Drop for StopGuard {
+    fn drop(&mut self) {
+        self.hub.detach();
+        self.stop.store(true, Ordering::Relaxed);
+        self.outbox.close();
     }
 }
 
-fn is_idle(e: &io::Error) -> bool {
-    matches!(
-        e.kind(),
-        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
-    )
+fn lock_ledger(ledger: &Mutex<AckLedger>) -> MutexGuard<'_, AckLedger> {
+    ledger.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// Reads until the transport fails, the stop flag is set or the service is gone.
 fn read_loop(
-    conn: &Conn,
-    mode: ReadMode,
+    reader: &mut transport::Reader,
+    silence: Option<Duration>,
     events: &mpsc::Sender<LinkEvent>,
     metrics: &Metrics,
+    hub: &Hub,
+    ledger: &Mutex<AckLedger>,
     stop: &AtomicBool,
 ) -> String {
+    let mut buf = vec![0u8; READ_BUFFER];
+    let mut parser = FrameParser::new();
     let mut last_message = Instant::now();
     while !stop.load(Ordering::Relaxed) {
-        let received = if mode.use_try_recv {
-            conn.try_recv()
-        } else {
-            conn.recv()
-        };
-        match received {
-            Ok((header, msg)) => {
-                last_message = Instant::now();
-                metrics.received(msg.message_name());
-                if events
-                    .blocking_send(LinkEvent::Message(header, msg))
-                    .is_err()
-                {
-                    return "service stopped".to_string();
-                }
-            }
-            Err(MessageReadError::Io(e)) if is_idle(&e) => {
-                if let Some(silence) = mode.silence {
+        let (n, datagram) = match reader.read(&mut buf) {
+            Ok(Received::Stream(n)) => (n, false),
+            Ok(Received::Datagram(n)) => (n, true),
+            Ok(Received::Idle) => {
+                if let Some(silence) = silence {
                     if last_message.elapsed() >= silence {
                         return format!("no MAVLink received for {silence:?}");
                     }
                 }
+                continue;
             }
-            Err(MessageReadError::Io(e)) if e.kind() == io::ErrorKind::UnexpectedEof => {
-                return "closed by the other end".to_string();
+            Ok(Received::Closed) => return "closed by the other end".to_string(),
+            Err(e) => return format!("read failed: {e}"),
+        };
+        parser.push(&buf[..n]);
+        while let Some(frame) = parser.next_frame() {
+            last_message = Instant::now();
+            hub.from_autopilot(&frame);
+            if !deliver(&frame, events, metrics, ledger) {
+                return "service stopped".to_string();
             }
-            Err(MessageReadError::Io(e)) => return format!("read failed: {e}"),
-            Err(MessageReadError::Parse(e)) => {
-                metrics.parse_errors.inc();
-                tracing::debug!(error = %e, "unparsable MAVLink frame");
-            }
+        }
+        if datagram {
+            parser.end_datagram();
+        }
+        let bad = parser.take_malformed();
+        if bad > 0 {
+            hub.autopilot_malformed(bad);
         }
     }
     "stopped".to_string()
 }
 
-fn write_loop(
-    conn: &Conn,
-    header: MavHeader,
-    queue: &std_mpsc::Receiver<MavMessage>,
+/// Decodes a frame from the autopilot for the service. False once the service is gone.
+fn deliver(
+    frame: &RawFrame,
+    events: &mpsc::Sender<LinkEvent>,
     metrics: &Metrics,
-    stop: &AtomicBool,
-) -> String {
-    loop {
-        match queue.recv_timeout(POLL) {
-            Ok(msg) => match conn.send(&header, &msg) {
-                Ok(_) => metrics.sent(msg.message_name()),
-                Err(e) => return format!("write failed: {e}"),
-            },
-            Err(RecvTimeoutError::Timeout) => {
-                if stop.load(Ordering::Relaxed) {
-                    return "stopped".to_string();
+    ledger: &Mutex<AckLedger>,
+) -> bool {
+    let id = frame.message_id();
+    if message_info(id).is_none() {
+        // Not in our dialect: forwarded to the endpoints, nothing for us.
+        return true;
+    }
+    let msg = match frame.decode() {
+        Ok(msg) => msg,
+        Err(e) => {
+            metrics.parse_errors.inc();
+            tracing::debug!(error = %e, message_id = id, "unparsable MAVLink frame");
+            return true;
+        }
+    };
+    metrics.received(msg.message_name());
+    if id == COMMAND_ACK_ID {
+        let command = u16::from_le_bytes([frame.payload_byte(0), frame.payload_byte(1)]);
+        let target = (frame.payload_byte(8), frame.payload_byte(9));
+        let owner =
+            lock_ledger(ledger).on_ack(command, frame.payload_byte(2), target, Instant::now());
+        if owner == AckOwner::Endpoint {
+            tracing::debug!(
+                command,
+                ?target,
+                "COMMAND_ACK for a router endpoint; not ours"
+            );
+            return true;
+        }
+    }
+    events
+        .blocking_send(LinkEvent::Message(frame.header(), msg))
+        .is_ok()
+}
+
+/// What the writer thread needs besides the transport.
+struct WriteContext<'a> {
+    header: MavHeader,
+    outbox: &'a Outbox,
+    hub: &'a Hub,
+    ledger: &'a Mutex<AckLedger>,
+    metrics: &'a Metrics,
+}
+
+fn write_loop(writer: &mut transport::Writer, ctx: &WriteContext<'_>, stop: &AtomicBool) -> String {
+    let mut sequence: u8 = 0;
+    while !stop.load(Ordering::Relaxed) {
+        match ctx.outbox.next(POLL) {
+            Some(Outgoing::Own(msg)) => {
+                let header = MavHeader {
+                    sequence,
+                    ..ctx.header
+                };
+                sequence = sequence.wrapping_add(1);
+                let frame = RawFrame::encode(header, &msg);
+                // Recorded before writing: the answer may come back at once.
+                if let Some(command) = frame.command() {
+                    lock_ledger(ctx.ledger).sent(command, true, Instant::now());
+                }
+                if let Err(e) = writer.write_frame(frame.as_bytes()) {
+                    return format!("write failed: {e}");
+                }
+                ctx.metrics.sent(msg.message_name());
+                if let MavMessage::HEARTBEAT(_) = msg {
+                    ctx.hub.from_local(&frame);
                 }
             }
-            Err(RecvTimeoutError::Disconnected) => return "writer closed".to_string(),
-        }
-    }
-}
-
-/// Opens the transport (blocking). For `tcpin` the listener is kept across
-/// connections and handed back.
-fn open(
-    endpoint: &Endpoint,
-    listener: Option<Arc<TcpListener>>,
-    stop: &AtomicBool,
-) -> (Option<Arc<TcpListener>>, io::Result<Conn>) {
-    match endpoint {
-        Endpoint::TcpIn(addr) => {
-            let listener = match listener {
-                Some(l) => l,
-                None => match TcpListener::bind(addr).and_then(|l| {
-                    l.set_nonblocking(true)?;
-                    Ok(l)
-                }) {
-                    Ok(l) => {
-                        tracing::info!(%addr, "waiting for the autopilot to connect over TCP");
-                        Arc::new(l)
-                    }
-                    Err(e) => return (None, Err(e)),
-                },
-            };
-            let conn = accept(&listener, stop).and_then(stream_connection);
-            (Some(listener), conn)
-        }
-        Endpoint::TcpOut { host, port } => {
-            let conn = (host.as_str(), *port)
-                .to_socket_addrs()
-                .and_then(|mut addrs| {
-                    addrs.next().ok_or_else(|| {
-                        io::Error::new(io::ErrorKind::NotFound, format!("{host} has no address"))
-                    })
-                })
-                .and_then(|addr| TcpStream::connect_timeout(&addr, CONNECT_TIMEOUT))
-                .and_then(stream_connection);
-            (None, conn)
-        }
-        Endpoint::UdpIn(addr) => (None, udp(&addr.to_string(), UdpMode::Udpin)),
-        Endpoint::UdpOut { host, port } => (None, udp(&format!("{host}:{port}"), UdpMode::Udpout)),
-        Endpoint::Serial { device, baud } => {
-            let conn = SerialConfig::new(device.clone(), *baud)
-                .timeout(POLL)
-                .connect::<MavMessage>();
-            (None, conn.map(prepare))
-        }
-    }
-}
-
-fn accept(listener: &TcpListener, stop: &AtomicBool) -> io::Result<TcpStream> {
-    loop {
-        match listener.accept() {
-            Ok((stream, peer)) => {
-                tracing::info!(%peer, "autopilot connected over TCP");
-                stream.set_nonblocking(false)?;
-                return Ok(stream);
-            }
-            Err(e) if is_idle(&e) => {
-                if stop.load(Ordering::Relaxed) {
-                    return Err(io::Error::new(io::ErrorKind::Interrupted, "stopped"));
+            Some(Outgoing::Forwarded(frame)) => {
+                if let Some(command) = frame.command() {
+                    lock_ledger(ctx.ledger).sent(command, false, Instant::now());
                 }
-                std::thread::sleep(POLL);
+                if let Err(e) = writer.write_frame(frame.as_bytes()) {
+                    return format!("write failed: {e}");
+                }
+                ctx.hub.forwarded_to_autopilot();
             }
-            Err(e) => return Err(e),
+            None => {}
         }
     }
-}
-
-fn stream_connection(stream: TcpStream) -> io::Result<Conn> {
-    stream.set_read_timeout(Some(POLL))?;
-    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
-    stream.set_nodelay(true)?;
-    Ok(prepare(
-        TcpConfig::from_stream(stream)?.connect::<MavMessage>()?,
-    ))
-}
-
-fn udp(address: &str, mode: UdpMode) -> io::Result<Conn> {
-    Ok(prepare(
-        UdpConfig::new(address.to_string(), mode)
-            .read_timeout(POLL)
-            .connect::<MavMessage>()?,
-    ))
-}
-
-/// MAVLink 2 out; MAVLink 1 or 2 in (old radios and firmware speak 1 until they hear 2).
-fn prepare(mut conn: Conn) -> Conn {
-    conn.set_protocol_version(mavlink::MavlinkVersion::V2);
-    conn.set_allow_recv_any_version(true);
-    conn
+    "stopped".to_string()
 }
 
 #[cfg(test)]
@@ -445,7 +547,13 @@ mod tests {
     use mavlink::dialects::ardupilotmega::{
         MavAutopilot, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
     };
+    use mavlink::{Connectable, MavConnection, TcpConfig};
     use skymesh_runtime::Stats;
+    use std::net::TcpStream;
+
+    fn hub() -> Arc<Hub> {
+        Hub::detached((1, 191))
+    }
 
     fn heartbeat() -> MavMessage {
         MavMessage::HEARTBEAT(HEARTBEAT_DATA {
@@ -489,7 +597,7 @@ mod tests {
             host: "127.0.0.1".into(),
             port,
         };
-        let (mut rx, task) = spawn(config(endpoint), metrics.clone(), shutdown.clone());
+        let (mut rx, task) = spawn(config(endpoint), metrics.clone(), hub(), shutdown.clone());
 
         for round in 0..2 {
             let peer = tokio::task::spawn_blocking({
@@ -553,6 +661,7 @@ mod tests {
                 port,
             }),
             Metrics::new(&Stats::new()),
+            hub(),
             shutdown.clone(),
         );
         tokio::time::sleep(Duration::from_millis(300)).await;
@@ -576,6 +685,7 @@ mod tests {
         let (mut rx, task) = spawn(
             config(Endpoint::TcpIn(addr)),
             Metrics::new(&Stats::new()),
+            hub(),
             shutdown.clone(),
         );
         for _ in 0..2 {

@@ -1,20 +1,26 @@
 //! The event loop: link events, command samples and timers in one task that owns
 //! every piece of state (no locks).
 //!
-//! Command path: intake ([`commands::admit`]) → *(issue 3: the arbiter)* →
-//! dispatch ([`commands::plan`] → link writer → [`AckTracker`]) → `CommandAck`.
+//! Command path: intake ([`commands::admit`]) → [`Arbiter::decide`] (authority,
+//! freshness, geofence envelope; wiring of its effects in [`safety`]) → dispatch
+//! ([`commands::plan`] → link writer → [`AckTracker`]) → `CommandAck`.
 
+mod safety;
+
+use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{
-    AckResult, Command, CommandAck, CommandKind, CommandSource, FixedStr, RefusalReason,
-    VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, ArbiterEvent, AuthorityState, Command, CommandAck, CommandKind, CommandSource,
+    FixedStr, GeofenceSet, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{clock::monotonic_ns, IpcError, Publisher, Subscriber};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
 use crate::acks::{AckPolicy, AckTracker, Action, Answer, Origin};
+use crate::arbiter::audit::Audit;
+use crate::arbiter::{Arbiter, Outcome};
 use crate::commands::{self, PlanContext, Target};
 use crate::config::Settings;
 use crate::link::{LinkEvent, LinkWriter};
@@ -39,6 +45,8 @@ const EXPLANATION_WAIT: Duration = Duration::from_millis(300);
 /// What woke the event loop.
 enum Wake {
     Command(Result<VehicleCommand, IpcError>),
+    /// Boxed: a fence is 4 KiB and arrives rarely.
+    Geofence(Result<Box<GeofenceSet>, IpcError>),
     Link(Option<LinkEvent>),
     Timer,
 }
@@ -49,12 +57,25 @@ pub(crate) struct Ports {
     pub status: Publisher<VehicleStatus>,
     pub acks: Publisher<CommandAck>,
     pub commands: Subscriber<VehicleCommand>,
+    /// Who holds authority: on every change and with each tick.
+    pub authority: Publisher<AuthorityState>,
+    /// What the arbiter did on its own.
+    pub events: Publisher<ArbiterEvent>,
+    /// The geofence, from whichever source sets it (history 1).
+    pub geofence: Subscriber<GeofenceSet>,
 }
 
 pub(crate) struct Service<L> {
     settings: Settings,
     lifecycle: L,
     metrics: Metrics,
+    arbiter: Arbiter,
+    audit: Audit,
+    /// Commands the arbiter limited that wait for the autopilot's answer, by
+    /// (source, command_id): their `Accepted` is published as `Limited` with this detail.
+    limited: HashMap<(u8, u32), String>,
+    /// The last VehicleState published (the arbiter's view of the vehicle).
+    last_state: Option<VehicleState>,
     ports: Ports,
     telemetry: Telemetry,
     link: LinkMonitor,
@@ -78,7 +99,13 @@ pub(crate) struct Service<L> {
 }
 
 impl<L: Lifecycle> Service<L> {
-    pub fn new(settings: Settings, lifecycle: L, metrics: Metrics, ports: Ports) -> Self {
+    pub fn new(
+        settings: Settings,
+        lifecycle: L,
+        metrics: Metrics,
+        audit: Audit,
+        ports: Ports,
+    ) -> Self {
         let now = Instant::now();
         Service {
             telemetry: Telemetry::new(settings.vehicle_id),
@@ -88,6 +115,10 @@ impl<L: Lifecycle> Service<L> {
                 retries: settings.command_retries,
                 in_progress_timeout: settings.command_in_progress_timeout,
             }),
+            arbiter: Arbiter::new(settings.arbiter.clone()),
+            audit,
+            limited: HashMap::new(),
+            last_state: None,
             settings,
             lifecycle,
             metrics,
@@ -135,12 +166,15 @@ impl<L: Lifecycle> Service<L> {
                 biased;
                 _ = shutdown.cancelled() => break Ok(()),
                 sample = self.ports.commands.recv() => Wake::Command(sample),
+                fence = self.ports.geofence.recv() => Wake::Geofence(fence.map(Box::new)),
                 event = events.recv() => Wake::Link(event),
                 _ = &mut sleep => Wake::Timer,
             };
             let step = match wake {
                 Wake::Command(Ok(sample)) => self.on_command(sample),
                 Wake::Command(Err(e)) => Err(e.into()),
+                Wake::Geofence(Ok(fence)) => self.on_geofence(&fence),
+                Wake::Geofence(Err(e)) => Err(e.into()),
                 Wake::Link(Some(event)) => self.on_link_event(event),
                 Wake::Link(None) => Err(anyhow::anyhow!("the link task ended")),
                 Wake::Timer => Ok(()),
@@ -165,6 +199,7 @@ impl<L: Lifecycle> Service<L> {
             self.link.deadline(),
             self.tracker.next_deadline(),
             unexplained,
+            self.arbiter_deadline(),
         ]
         .into_iter()
         .flatten()
@@ -172,6 +207,8 @@ impl<L: Lifecycle> Service<L> {
     }
 
     fn on_timers(&mut self, now: Instant) -> anyhow::Result<()> {
+        let effects = self.arbiter.poll(monotonic_ns());
+        self.apply(effects)?;
         if let Some(change) = self.link.poll(now) {
             self.link_changed(change, now, "no heartbeat within the link timeout")?;
         }
@@ -199,6 +236,7 @@ impl<L: Lifecycle> Service<L> {
             self.next_tick = if next <= now { now + TICK } else { next };
             self.write(requests::heartbeat());
             self.publish_status(now)?;
+            self.publish_authority()?;
             let age = self
                 .link
                 .heartbeat_age(now)
@@ -303,6 +341,7 @@ impl<L: Lifecycle> Service<L> {
                     self.last_attitude = Some(now);
                     self.stream_retries = 0;
                     self.ports.state.publish(state)?;
+                    self.last_state = Some(state);
                 }
                 self.publish_status_if_changed(now)?;
             }
@@ -327,8 +366,20 @@ impl<L: Lifecycle> Service<L> {
                 );
                 self.metrics.link_up.set(0.0);
                 self.lifecycle.link_changed(false);
+                // Nothing sent before the loss may go out after it: a command still
+                // waiting for its COMMAND_ACK would otherwise be retransmitted.
+                for answer in self.tracker.fail_all(
+                    RefusalReason::LinkDown,
+                    "link lost before the autopilot answered",
+                ) {
+                    self.answer(answer)?;
+                }
             }
         }
+        let effects = self
+            .arbiter
+            .link_changed(change == LinkChange::Up, monotonic_ns());
+        self.apply(effects)?;
         Ok(self.publish_status(now)?)
     }
 
@@ -385,14 +436,40 @@ impl<L: Lifecycle> Service<L> {
 
     fn on_command(&mut self, sample: VehicleCommand) -> anyhow::Result<()> {
         let now = Instant::now();
+        let now_ns = monotonic_ns();
         let origin = Origin::of(&sample);
-        let command = match commands::admit(&sample, self.settings.vehicle_id, self.link.is_up()) {
-            Ok(c) => c,
-            Err(r) => return self.answer(Answer::refused(origin, r.reason, r.detail)),
-        };
-        // Issue 3: the command arbiter (authority, freshness, geofence envelope)
-        // decides here, between intake and dispatch.
-        self.dispatch(origin, &command, now)
+        if let Err(r) = commands::admit(&sample, self.settings.vehicle_id, self.link.is_up()) {
+            return self.refuse(origin, r.reason, r.detail);
+        }
+        let view = self.vehicle_view(now_ns);
+        let decision = self.arbiter.decide(now_ns, &sample, &view);
+        self.audit.decision(crate::arbiter::audit::Record {
+            source: origin.source,
+            kind: origin.kind,
+            command_id: origin.command_id,
+            result: decision.result(),
+            reason: decision.reason(),
+            detail: decision.detail(),
+        });
+        // Authority changes are published before the answer, so a source that
+        // reads its ack finds AuthorityState already saying so.
+        self.apply(decision.effects)?;
+        match decision.outcome {
+            Outcome::Execute { command, limited } => {
+                if let Some(detail) = limited {
+                    self.limited
+                        .insert((origin.source, origin.command_id), detail);
+                }
+                self.dispatch(origin, &command, now)
+            }
+            Outcome::Done { detail } => self.publish_answer(Answer {
+                detail,
+                ..Answer::accepted(origin)
+            }),
+            Outcome::Refused { reason, detail } => {
+                self.publish_answer(Answer::refused(origin, reason, detail))
+            }
+        }
     }
 
     fn dispatch(&mut self, origin: Origin, command: &Command, now: Instant) -> anyhow::Result<()> {
@@ -442,23 +519,15 @@ impl<L: Lifecycle> Service<L> {
     }
 
     /// Publishes, counts and logs the answer to one command.
-    fn answer(&mut self, a: Answer) -> anyhow::Result<()> {
+    fn answer(&mut self, mut a: Answer) -> anyhow::Result<()> {
         let o = a.origin;
-        let ack = CommandAck {
-            vehicle_id: o.vehicle_id,
-            source: o.source,
-            kind: o.kind,
-            result: a.result.to_wire(),
-            command_id: o.command_id,
-            reason: a.reason.to_wire(),
-            mav_result: a.mav_result,
-            command_seq: o.command_seq,
-            detail: FixedStr::new(&a.detail),
-            ..CommandAck::default()
-        };
-        self.metrics.command(o.kind, a.result);
-        if let Some(latency) = a.latency {
-            self.metrics.observe_latency(latency);
+        if !self.limited.is_empty() && a.result != AckResult::InProgress {
+            if let Some(detail) = self.limited.remove(&(o.source, o.command_id)) {
+                if a.result == AckResult::Accepted {
+                    a.result = AckResult::Limited;
+                    a.detail = detail;
+                }
+            }
         }
         let kind = kind_name(o.kind);
         let source = CommandSource::try_from(o.source).map_or("unknown", CommandSource::as_str);
@@ -475,6 +544,28 @@ impl<L: Lifecycle> Service<L> {
                 kind, source, command_id = o.command_id, result = %a.result,
                 mav_result = a.mav_result, "command answered"
             ),
+        }
+        self.publish_answer(a)
+    }
+
+    /// Publishes and counts the answer to one command (the caller has logged it).
+    fn publish_answer(&mut self, a: Answer) -> anyhow::Result<()> {
+        let o = a.origin;
+        let ack = CommandAck {
+            vehicle_id: o.vehicle_id,
+            source: o.source,
+            kind: o.kind,
+            result: a.result.to_wire(),
+            command_id: o.command_id,
+            reason: a.reason.to_wire(),
+            mav_result: a.mav_result,
+            command_seq: o.command_seq,
+            detail: FixedStr::new(&a.detail),
+            ..CommandAck::default()
+        };
+        self.metrics.command(o.kind, a.result);
+        if let Some(latency) = a.latency {
+            self.metrics.observe_latency(latency);
         }
         self.ports.acks.publish(ack)?;
         Ok(())

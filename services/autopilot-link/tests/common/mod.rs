@@ -2,6 +2,9 @@
 //! own iceoryx2 domain plus a "tool" node that sends commands and reads samples.
 #![allow(dead_code)] // each test crate uses its own subset
 
+pub mod arbiter;
+pub mod sim;
+
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
@@ -52,6 +55,15 @@ impl Mesh {
     }
 
     pub async fn start_with(settings: Settings) -> Mesh {
+        Mesh::start_routed(settings, None).await
+    }
+
+    /// Like [`Mesh::start_with`], with router endpoints already bound (port 0 →
+    /// read the ports from `Bound::local_addrs` before handing them over).
+    pub async fn start_routed(
+        settings: Settings,
+        endpoints: Option<skymesh_autopilot_link::endpoints::Bound>,
+    ) -> Mesh {
         let domain = unique_domain();
         let stats = Stats::new();
         let bus = Bus::open(
@@ -78,13 +90,23 @@ impl Mesh {
             .publisher::<VehicleCommand>(&topics::vehicle_command(VEHICLE))
             .expect("command publisher");
         let shutdown = CancellationToken::new();
-        let link = tokio::spawn(run_with(
-            settings,
-            bus,
-            stats.clone(),
-            shutdown.clone(),
-            Detached,
-        ));
+        let link = match endpoints {
+            None => tokio::spawn(run_with(
+                settings,
+                bus,
+                stats.clone(),
+                shutdown.clone(),
+                Detached,
+            )),
+            Some(endpoints) => tokio::spawn(skymesh_autopilot_link::run_with_endpoints(
+                settings,
+                endpoints,
+                bus,
+                stats.clone(),
+                shutdown.clone(),
+                Detached,
+            )),
+        };
         Mesh {
             domain,
             stats,

@@ -1,0 +1,239 @@
+//! Audit: every decision is counted and logged as one structured line (the
+//! `CommandAck` is published by the service), plus the arbiter's other series.
+//!
+//! Series (all registered on first use: the stats sample holds 64 entries for the
+//! whole service, so no label combination is spent before it happens):
+//! - `skymesh_arbiter_decisions_total{source,decision,reason}` — decision is
+//!   `accepted`, `limited` or `refused`; reason is a `RefusalReason` name (`none`
+//!   when accepted or limited).
+//! - `skymesh_arbiter_authority_holder{vehicle,source}` — 1 for the flight-authority
+//!   holder, 0 for every source that held it before.
+//! - `skymesh_arbiter_stale_brakes_total{source}` — brakes because the source's
+//!   setpoint stream stopped.
+//!
+//! Log levels: refusals `warn`, other decisions `info`; a setpoint stream (tens of
+//! Hz) logs at `info`/`warn` only when its outcome changes and at `debug` otherwise.
+
+use std::collections::HashMap;
+
+use skymesh_ipc_types::{AckResult, CommandKind, CommandSource, RefusalReason};
+use skymesh_runtime::{Counter, Gauge, Stats};
+
+/// One decision as the audit sees it (raw wire values: refusals of undecodable
+/// samples are audited too).
+#[derive(Debug, Clone, Copy)]
+pub struct Record<'a> {
+    pub source: u8,
+    pub kind: u8,
+    pub command_id: u32,
+    pub result: AckResult,
+    pub reason: RefusalReason,
+    pub detail: &'a str,
+}
+
+/// The arbiter's metrics and log lines.
+#[derive(Debug)]
+pub struct Audit {
+    stats: Stats,
+    vehicle: String,
+    decisions: HashMap<(&'static str, AckResult, RefusalReason), Counter>,
+    holders: Vec<(CommandSource, Gauge)>,
+    stale_brakes: HashMap<CommandSource, Counter>,
+    /// Outcome of the last setpoint per source (wire value as index).
+    last_setpoint: [Option<(AckResult, RefusalReason)>; CommandSource::ALL.len()],
+}
+
+fn source_name(raw: u8) -> &'static str {
+    CommandSource::try_from(raw).map_or("unknown", CommandSource::as_str)
+}
+
+impl Audit {
+    pub fn new(stats: &Stats, vehicle_id: u8) -> Self {
+        Audit {
+            stats: stats.clone(),
+            vehicle: vehicle_id.to_string(),
+            decisions: HashMap::new(),
+            holders: Vec::new(),
+            stale_brakes: HashMap::new(),
+            last_setpoint: [None; CommandSource::ALL.len()],
+        }
+    }
+
+    /// Counts and logs one decision.
+    pub fn decision(&mut self, r: Record<'_>) {
+        let source = source_name(r.source);
+        let stats = &self.stats;
+        self.decisions
+            .entry((source, r.result, r.reason))
+            .or_insert_with(|| {
+                stats.counter(
+                    "skymesh_arbiter_decisions_total",
+                    &[
+                        ("source", source),
+                        ("decision", r.result.as_str()),
+                        ("reason", r.reason.as_str()),
+                    ],
+                )
+            })
+            .inc();
+        let kind_known = CommandKind::try_from(r.kind).ok();
+        let kind = kind_known.map_or("unknown", CommandKind::as_str);
+        let repeat = match kind_known {
+            Some(k) if k.is_setpoint() => self
+                .last_setpoint
+                .get_mut(usize::from(r.source))
+                .is_some_and(|last| {
+                    last.replace((r.result, r.reason)) == Some((r.result, r.reason))
+                }),
+            _ => false,
+        };
+        let (decision, reason, command_id, detail) =
+            (r.result.as_str(), r.reason.as_str(), r.command_id, r.detail);
+        if repeat {
+            tracing::debug!(
+                source,
+                kind,
+                decision,
+                reason,
+                command_id,
+                detail,
+                "arbiter decision"
+            );
+        } else if r.result == AckResult::Refused {
+            tracing::warn!(
+                source,
+                kind,
+                decision,
+                reason,
+                command_id,
+                detail,
+                "arbiter decision"
+            );
+        } else {
+            tracing::info!(
+                source,
+                kind,
+                decision,
+                reason,
+                command_id,
+                detail,
+                "arbiter decision"
+            );
+        }
+    }
+
+    /// Flight authority now belongs to `holder` (or nobody).
+    pub fn flight_holder(&mut self, holder: Option<CommandSource>) {
+        if let Some(h) = holder {
+            if !self.holders.iter().any(|(s, _)| *s == h) {
+                let gauge = self.stats.gauge(
+                    "skymesh_arbiter_authority_holder",
+                    &[("vehicle", &self.vehicle), ("source", h.as_str())],
+                );
+                self.holders.push((h, gauge));
+            }
+        }
+        for (s, gauge) in &self.holders {
+            gauge.set(if Some(*s) == holder { 1.0 } else { 0.0 });
+        }
+    }
+
+    /// The arbiter braked because `source`'s setpoint stream stopped.
+    pub fn stale_brake(&mut self, source: CommandSource) {
+        let stats = &self.stats;
+        self.stale_brakes
+            .entry(source)
+            .or_insert_with(|| {
+                stats.counter(
+                    "skymesh_arbiter_stale_brakes_total",
+                    &[("source", source.as_str())],
+                )
+            })
+            .inc();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skymesh_ipc_types::ServiceStats;
+
+    fn value(stats: &Stats, name: &str, labels: &str) -> Option<f64> {
+        let mut out = Box::<ServiceStats>::default();
+        stats.snapshot_into(&mut out);
+        out.entries()
+            .iter()
+            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
+            .map(|e| e.value)
+    }
+
+    #[test]
+    fn series_are_registered_on_use_with_bounded_labels() {
+        let stats = Stats::new();
+        let mut a = Audit::new(&stats, 3);
+        let rec = |source: u8, result, reason| Record {
+            source,
+            kind: CommandKind::VelocityNed.to_wire(),
+            command_id: 1,
+            result,
+            reason,
+            detail: "",
+        };
+        a.decision(rec(
+            CommandSource::Vision.to_wire(),
+            AckResult::Refused,
+            RefusalReason::Stale,
+        ));
+        a.decision(rec(
+            CommandSource::Vision.to_wire(),
+            AckResult::Refused,
+            RefusalReason::Stale,
+        ));
+        a.decision(rec(
+            200,
+            AckResult::Refused,
+            RefusalReason::InvalidParameter,
+        ));
+        a.decision(rec(
+            CommandSource::Operator.to_wire(),
+            AckResult::Limited,
+            RefusalReason::None,
+        ));
+        let d = "skymesh_arbiter_decisions_total";
+        assert_eq!(
+            value(&stats, d, "source=vision,decision=refused,reason=stale"),
+            Some(2.0)
+        );
+        assert_eq!(
+            value(
+                &stats,
+                d,
+                "source=unknown,decision=refused,reason=invalid_parameter"
+            ),
+            Some(1.0)
+        );
+        assert_eq!(
+            value(&stats, d, "source=operator,decision=limited,reason=none"),
+            Some(1.0)
+        );
+        assert_eq!(
+            value(&stats, d, "source=operator,decision=accepted,reason=none"),
+            None
+        );
+
+        let h = "skymesh_arbiter_authority_holder";
+        a.flight_holder(Some(CommandSource::ShotEngine));
+        a.flight_holder(Some(CommandSource::ManualRc));
+        assert_eq!(value(&stats, h, "vehicle=3,source=shot_engine"), Some(0.0));
+        assert_eq!(value(&stats, h, "vehicle=3,source=manual_rc"), Some(1.0));
+        a.flight_holder(None);
+        assert_eq!(value(&stats, h, "vehicle=3,source=manual_rc"), Some(0.0));
+        assert_eq!(value(&stats, h, "vehicle=3,source=vision"), None);
+
+        a.stale_brake(CommandSource::Imc);
+        assert_eq!(
+            value(&stats, "skymesh_arbiter_stale_brakes_total", "source=imc"),
+            Some(1.0)
+        );
+    }
+}

@@ -1,0 +1,176 @@
+//! The event loop's side of the arbiter: the vehicle view it decides on, and what
+//! its effects become — `AuthorityState` and `ArbiterEvent` samples, metrics, log
+//! lines and the stale-stream brake.
+
+use std::time::{Duration, Instant};
+
+use skymesh_ipc_types::{
+    ArbiterEvent, ArbiterEventKind, AuthorityDomain, Command, CommandSource, FixedStr, FlightMode,
+    GeofenceSet, RefusalReason, NO_HOLDER,
+};
+use skymesh_runtime::clock::monotonic_ns;
+
+use super::Service;
+use crate::acks::{Answer, Origin};
+use crate::arbiter::audit::Record;
+use crate::arbiter::{Effect, VehicleView};
+use crate::commands::{self, PlanContext};
+use crate::Lifecycle;
+
+fn name(source: Option<CommandSource>) -> &'static str {
+    source.map_or("nobody", CommandSource::as_str)
+}
+
+impl<L: Lifecycle> Service<L> {
+    /// When the arbiter next has something to do on its own.
+    pub(super) fn arbiter_deadline(&self) -> Option<Instant> {
+        let due = self.arbiter.next_deadline_ns()?;
+        Some(Instant::now() + Duration::from_nanos(due.saturating_sub(monotonic_ns())))
+    }
+
+    pub(super) fn vehicle_view(&self, now_ns: u64) -> VehicleView {
+        VehicleView::new(
+            self.telemetry.is_armed(),
+            self.telemetry.flight_mode(),
+            self.last_state.as_ref(),
+            now_ns,
+        )
+    }
+
+    /// A refusal before the arbiter (intake): audited like the arbiter's own.
+    pub(super) fn refuse(
+        &mut self,
+        origin: Origin,
+        reason: RefusalReason,
+        detail: String,
+    ) -> anyhow::Result<()> {
+        self.audit.decision(Record {
+            source: origin.source,
+            kind: origin.kind,
+            command_id: origin.command_id,
+            result: skymesh_ipc_types::AckResult::Refused,
+            reason,
+            detail: &detail,
+        });
+        self.publish_answer(Answer::refused(origin, reason, detail))
+    }
+
+    pub(super) fn on_geofence(&mut self, set: &GeofenceSet) -> anyhow::Result<()> {
+        let effects = self.arbiter.set_geofence(set, self.settings.vehicle_id);
+        self.apply(effects)
+    }
+
+    /// Does what the arbiter decided besides answering.
+    pub(super) fn apply(&mut self, effects: Vec<Effect>) -> anyhow::Result<()> {
+        for effect in effects {
+            match effect {
+                Effect::Authority(c) => {
+                    let domain = match c.domain {
+                        AuthorityDomain::Flight => "flight",
+                        AuthorityDomain::Payload => "payload",
+                    };
+                    if c.domain == AuthorityDomain::Flight {
+                        self.audit.flight_holder(c.to);
+                    }
+                    let detail = format!(
+                        "{domain}: {} -> {} ({})",
+                        name(c.from),
+                        name(c.to),
+                        c.change
+                    );
+                    tracing::info!(
+                        vehicle_id = self.settings.vehicle_id,
+                        domain,
+                        from = name(c.from),
+                        to = name(c.to),
+                        change = %c.change,
+                        "authority changed"
+                    );
+                    self.publish_authority()?;
+                    // The source that lost authority is the one that must be told.
+                    self.publish_event(
+                        ArbiterEventKind::AuthorityChanged,
+                        c.from.or(c.to),
+                        &detail,
+                    )?;
+                }
+                Effect::Event {
+                    kind,
+                    source,
+                    detail,
+                } => {
+                    let src = name(source);
+                    match kind {
+                        ArbiterEventKind::EmergencyStop | ArbiterEventKind::GeofenceInvalid => {
+                            tracing::warn!(event = %kind, source = src, detail, "arbiter event")
+                        }
+                        // Already in the decision's audit line or the link log.
+                        ArbiterEventKind::GeofenceRefused
+                        | ArbiterEventKind::GeofenceLimited
+                        | ArbiterEventKind::LinkLost
+                        | ArbiterEventKind::LinkRestored => {
+                            tracing::debug!(event = %kind, source = src, detail, "arbiter event")
+                        }
+                        _ => tracing::info!(event = %kind, source = src, detail, "arbiter event"),
+                    }
+                    self.publish_event(kind, source, &detail)?;
+                }
+                Effect::StaleBrake { source } => self.stale_brake(source)?,
+            }
+        }
+        Ok(())
+    }
+
+    /// `source`'s setpoint stream stopped while the vehicle was moving on it: hold a
+    /// hover with a zero-velocity setpoint. Only in GUIDED, the one mode in which the
+    /// setpoints had any effect; in any other mode the autopilot (or the pilot) is
+    /// already in charge and switching it to BRAKE would override them.
+    fn stale_brake(&mut self, source: CommandSource) -> anyhow::Result<()> {
+        let mode = self.telemetry.flight_mode();
+        let detail = if mode == FlightMode::Guided {
+            self.audit.stale_brake(source);
+            let ctx = PlanContext {
+                target: self.target(),
+                mode,
+                capture_seq: self.capture_seq,
+            };
+            let sent = match (commands::plan(&Command::Brake, &ctx), &self.writer) {
+                (Ok(plan), Some(writer)) => plan
+                    .setpoint
+                    .is_some_and(|setpoint| writer.send(setpoint).is_ok()),
+                _ => false,
+            };
+            if sent {
+                "setpoint stream stopped: braked to a hover"
+            } else {
+                "setpoint stream stopped: brake not sent, link down"
+            }
+        } else {
+            "setpoint stream stopped: not GUIDED, nothing to brake"
+        };
+        tracing::warn!(source = %source, mode = %mode, detail, "stale setpoint stream");
+        self.publish_event(ArbiterEventKind::StaleBrake, Some(source), detail)
+    }
+
+    pub(super) fn publish_authority(&mut self) -> anyhow::Result<()> {
+        let state = self.arbiter.authority().state(self.settings.vehicle_id);
+        self.ports.authority.publish(state)?;
+        Ok(())
+    }
+
+    fn publish_event(
+        &mut self,
+        kind: ArbiterEventKind,
+        source: Option<CommandSource>,
+        detail: &str,
+    ) -> anyhow::Result<()> {
+        self.ports.events.publish(ArbiterEvent {
+            vehicle_id: self.settings.vehicle_id,
+            kind: kind.to_wire(),
+            source: source.map_or(NO_HOLDER, CommandSource::to_wire),
+            detail: FixedStr::new(detail),
+            ..ArbiterEvent::default()
+        })?;
+        Ok(())
+    }
+}

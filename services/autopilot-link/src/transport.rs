@@ -1,0 +1,243 @@
+//! The autopilot's byte transports (blocking): TCP, UDP and serial, each split into
+//! a reading and a writing half for the link's reader and writer threads.
+//!
+//! Raw bytes rather than the `mavlink` crate's connections, because the router
+//! forwards frames byte for byte, including message ids the crate's dialect does
+//! not know (its reader drops those). Every read returns within [`POLL`] so the
+//! threads see their stop flag.
+
+use std::io::{self, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use crate::config::Endpoint;
+
+/// How often blocking reads, writes and accepts look at the stop flag.
+pub const POLL: Duration = Duration::from_millis(100);
+/// How long a TCP connect may take (a host that drops SYNs would block for minutes).
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+/// A write blocked this long (peer stopped reading) fails the connection.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Where UDP replies go: fixed for `udpout`, the last sender for `udpin`.
+type Destination = Arc<Mutex<Option<SocketAddr>>>;
+
+fn lock(d: &Destination) -> std::sync::MutexGuard<'_, Option<SocketAddr>> {
+    d.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The reading half.
+#[derive(Debug)]
+pub enum Reader {
+    Tcp(TcpStream),
+    Udp {
+        socket: UdpSocket,
+        /// `udpin`: remember who spoke last, replies go there.
+        reply_to: Option<Destination>,
+    },
+    Serial(Box<dyn serialport::SerialPort>),
+}
+
+/// What one read produced.
+#[derive(Debug, PartialEq, Eq)]
+pub enum Received {
+    /// `n` bytes of a stream.
+    Stream(usize),
+    /// One datagram of `n` bytes (frames never span datagrams).
+    Datagram(usize),
+    /// Nothing within [`POLL`].
+    Idle,
+    /// The other end closed the stream.
+    Closed,
+}
+
+fn is_idle(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+    )
+}
+
+impl Reader {
+    pub fn read(&mut self, buf: &mut [u8]) -> io::Result<Received> {
+        let r = match self {
+            Reader::Tcp(s) => s.read(buf).map(|n| match n {
+                0 => Received::Closed,
+                n => Received::Stream(n),
+            }),
+            Reader::Udp { socket, reply_to } => socket.recv_from(buf).map(|(n, from)| {
+                if let Some(dest) = reply_to {
+                    *lock(dest) = Some(from);
+                }
+                Received::Datagram(n)
+            }),
+            Reader::Serial(p) => p.read(buf).map(|n| match n {
+                // poll() said readable and nothing came: the device went away.
+                0 => Received::Closed,
+                n => Received::Stream(n),
+            }),
+        };
+        match r {
+            Err(e) if is_idle(&e) => Ok(Received::Idle),
+            // ICMP port unreachable from a peer that is not listening (yet): not fatal.
+            Err(e) if e.kind() == io::ErrorKind::ConnectionRefused && self.is_udp() => {
+                Ok(Received::Idle)
+            }
+            r => r,
+        }
+    }
+
+    fn is_udp(&self) -> bool {
+        matches!(self, Reader::Udp { .. })
+    }
+}
+
+/// The writing half.
+#[derive(Debug)]
+pub enum Writer {
+    Tcp(TcpStream),
+    Udp {
+        socket: UdpSocket,
+        destination: Destination,
+    },
+    Serial(Box<dyn serialport::SerialPort>),
+}
+
+impl Writer {
+    /// Writes one whole frame. UDP with nobody to reply to yet (`udpin` before the
+    /// autopilot spoke) drops it, as the `mavlink` crate does.
+    pub fn write_frame(&mut self, frame: &[u8]) -> io::Result<()> {
+        match self {
+            Writer::Tcp(s) => s.write_all(frame),
+            Writer::Serial(p) => p.write_all(frame),
+            Writer::Udp {
+                socket,
+                destination,
+            } => {
+                let Some(to) = *lock(destination) else {
+                    return Ok(());
+                };
+                match socket.send_to(frame, to) {
+                    Ok(_) => Ok(()),
+                    // The autopilot's port is closed for now; UDP does not care.
+                    Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => Ok(()),
+                    Err(e) => Err(e),
+                }
+            }
+        }
+    }
+}
+
+/// Opens the transport (blocking). For `tcpin` the listener is kept across
+/// connections and handed back.
+pub fn open(
+    endpoint: &Endpoint,
+    listener: Option<Arc<TcpListener>>,
+    stop: &AtomicBool,
+) -> (Option<Arc<TcpListener>>, io::Result<(Reader, Writer)>) {
+    match endpoint {
+        Endpoint::TcpIn(addr) => {
+            let listener = match listener {
+                Some(l) => l,
+                None => match TcpListener::bind(addr).and_then(|l| {
+                    l.set_nonblocking(true)?;
+                    Ok(l)
+                }) {
+                    Ok(l) => {
+                        tracing::info!(%addr, "waiting for the autopilot to connect over TCP");
+                        Arc::new(l)
+                    }
+                    Err(e) => return (None, Err(e)),
+                },
+            };
+            let halves = accept(&listener, stop).and_then(stream);
+            (Some(listener), halves)
+        }
+        Endpoint::TcpOut { host, port } => {
+            let halves = resolve(host, *port)
+                .and_then(|addr| TcpStream::connect_timeout(&addr, CONNECT_TIMEOUT))
+                .and_then(stream);
+            (None, halves)
+        }
+        Endpoint::UdpIn(addr) => (None, udp(*addr, None)),
+        Endpoint::UdpOut { host, port } => {
+            let halves = resolve(host, *port).and_then(|to| {
+                let any: SocketAddr = if to.is_ipv4() {
+                    ([0, 0, 0, 0], 0).into()
+                } else {
+                    (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
+                };
+                udp(any, Some(to))
+            });
+            (None, halves)
+        }
+        Endpoint::Serial { device, baud } => (None, serial(device, *baud)),
+    }
+}
+
+fn resolve(host: &str, port: u16) -> io::Result<SocketAddr> {
+    (host, port)
+        .to_socket_addrs()?
+        .next()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, format!("{host} has no address")))
+}
+
+fn accept(listener: &TcpListener, stop: &AtomicBool) -> io::Result<TcpStream> {
+    loop {
+        match listener.accept() {
+            Ok((stream, peer)) => {
+                tracing::info!(%peer, "autopilot connected over TCP");
+                stream.set_nonblocking(false)?;
+                return Ok(stream);
+            }
+            Err(e) if is_idle(&e) => {
+                if stop.load(Ordering::Relaxed) {
+                    return Err(io::Error::new(io::ErrorKind::Interrupted, "stopped"));
+                }
+                std::thread::sleep(POLL);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+fn stream(stream: TcpStream) -> io::Result<(Reader, Writer)> {
+    stream.set_read_timeout(Some(POLL))?;
+    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+    stream.set_nodelay(true)?;
+    let writer = stream.try_clone()?;
+    Ok((Reader::Tcp(stream), Writer::Tcp(writer)))
+}
+
+/// `to` = None: `udpin` (reply to the last sender); Some: `udpout`.
+fn udp(bind: SocketAddr, to: Option<SocketAddr>) -> io::Result<(Reader, Writer)> {
+    let socket = UdpSocket::bind(bind)?;
+    socket.set_read_timeout(Some(POLL))?;
+    let destination: Destination = Arc::new(Mutex::new(to));
+    let reader = Reader::Udp {
+        socket: socket.try_clone()?,
+        reply_to: to.is_none().then(|| destination.clone()),
+    };
+    Ok((
+        reader,
+        Writer::Udp {
+            socket,
+            destination,
+        },
+    ))
+}
+
+fn serial(device: &str, baud: u32) -> io::Result<(Reader, Writer)> {
+    let port = serialport::new(device, baud)
+        .data_bits(serialport::DataBits::Eight)
+        .parity(serialport::Parity::None)
+        .stop_bits(serialport::StopBits::One)
+        .flow_control(serialport::FlowControl::None)
+        .timeout(POLL)
+        .open()
+        .map_err(io::Error::from)?;
+    let writer = port.try_clone().map_err(io::Error::from)?;
+    Ok((Reader::Serial(port), Writer::Serial(writer)))
+}
