@@ -157,14 +157,16 @@ async fn the_arbiter_brakes_when_a_velocity_stream_stops() {
     mesh.wait_link_up().await;
     mesh.take_off(5.0).await;
 
-    // 3 m/s north at 20 Hz; each setpoint is good for 200 ms (the default 500 ms
-    // plus vehicle-sim's 2.5 m/s² braking from 3 m/s would need about 1.6 s).
+    // 2 m/s north at 20 Hz; each setpoint is good for 200 ms. Expected stop: 0.2 s
+    // until the stream counts as stopped + 0.8 s of braking at vehicle-sim's 2.5 m/s²,
+    // leaving margin under the 1.5 s bound on a loaded machine. (With the default
+    // 500 ms max age the same holds up to about 2.5 m/s.)
     let mut last_stamp = 0;
     let start = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     while start.elapsed() < Duration::from_secs(4) {
         tick.tick().await;
-        mesh.send_as(CommandSource::Operator, velocity(3.0, 0.0, 0.0), 200);
+        mesh.send_as(CommandSource::Operator, velocity(2.0, 0.0, 0.0), 200);
         last_stamp = monotonic_ns();
     }
     let ack = mesh.acks.latest().expect("acks").expect("acks flowing");
@@ -174,7 +176,7 @@ async fn the_arbiter_brakes_when_a_velocity_stream_stops() {
         .wait_state("flying north", PATIENCE, |s| s.position_valid == 1)
         .await;
     assert!(
-        ground_speed(&moving) > 2.0,
+        ground_speed(&moving) > 1.5,
         "the stream flew the vehicle: {:?}",
         moving.vel_ned_mps
     );
