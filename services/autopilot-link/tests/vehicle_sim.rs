@@ -6,64 +6,14 @@
 
 mod common;
 
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use common::sim::Sim;
 use common::{assert_accepted, Mesh, PATIENCE, VEHICLE};
 use skymesh_ipc_types::{
     AckResult, Command, CommandAck, CommandSource, FlightMode, RefusalReason, ServiceStats,
     VehicleCommand, VehicleStatus,
 };
-use skymesh_runtime::CancellationToken;
-use skymesh_vehicle_sim::SimStats;
-use tokio::task::JoinHandle;
-
-/// A vehicle-sim serving TCP on 127.0.0.1.
-struct Sim {
-    port: u16,
-    stats: Arc<SimStats>,
-    shutdown: CancellationToken,
-    task: JoinHandle<anyhow::Result<()>>,
-}
-
-impl Sim {
-    /// `port` 0 picks a free one.
-    async fn start(port: u16) -> Sim {
-        let raw = skymesh_vehicle_sim::RawConfig {
-            endpoint: format!("tcp:127.0.0.1:{port}"),
-            system_id: u32::from(VEHICLE),
-            ..Default::default()
-        };
-        let settings = raw.validate().expect("sim settings");
-        let bound = skymesh_vehicle_sim::bind(&settings)
-            .await
-            .expect("bind sim");
-        let port = bound.local_addr().expect("sim address").port();
-        let stats = Arc::new(SimStats::default());
-        let shutdown = CancellationToken::new();
-        let task = tokio::spawn(skymesh_vehicle_sim::run(
-            settings,
-            bound,
-            stats.clone(),
-            shutdown.clone(),
-        ));
-        Sim {
-            port,
-            stats,
-            shutdown,
-            task,
-        }
-    }
-
-    async fn stop(self) {
-        self.shutdown.cancel();
-        tokio::time::timeout(PATIENCE, self.task)
-            .await
-            .expect("sim stops")
-            .expect("sim task")
-            .expect("sim result");
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn state_flows_at_about_the_requested_attitude_rate() {
