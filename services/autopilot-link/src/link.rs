@@ -639,7 +639,13 @@ mod tests {
             };
             assert!(!reason.is_empty());
         }
-        assert_eq!(metrics.reconnects.get(), 1);
+        // At least the second round's connection; the link may already have connected
+        // a third time (the kernel accepts into the listener's backlog before `accept`).
+        assert!(
+            metrics.reconnects.get() >= 1,
+            "{}",
+            metrics.reconnects.get()
+        );
         shutdown.cancel();
         tokio::time::timeout(Duration::from_secs(5), task)
             .await
