@@ -153,7 +153,11 @@ pub async fn run_with_endpoints(
         &stats,
         router_stop.clone(),
     );
-    let link_stop = shutdown.child_token();
+    // Not a child of `shutdown`: a parent token cancels its children before it marks
+    // itself cancelled, so the link task could end (closing its channel) while the
+    // service loop still sees `shutdown` as live and reports "the link task ended".
+    // The link is stopped explicitly once the service loop has returned.
+    let link_stop = CancellationToken::new();
     let (mut events, link_task) = link::spawn(
         link::LinkConfig {
             endpoint: settings.connection.clone(),
