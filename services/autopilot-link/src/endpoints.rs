@@ -246,13 +246,7 @@ async fn udp_in(
                     metrics.peers(peers.heard.len());
                 }
                 for (peer, _) in &peers.heard {
-                    match socket.send_to(frame.as_bytes(), peer).await {
-                        Ok(_) => metrics.frame_out(),
-                        Err(e) => {
-                            metrics.dropped(DropReason::SendError, 1);
-                            tracing::debug!(%peer, error = %e, "udp send failed");
-                        }
-                    }
+                    send_datagram(&socket, frame.as_bytes(), *peer, metrics).await;
                 }
             }
             r = socket.recv_from(&mut buf) => match r {
@@ -266,6 +260,22 @@ async fn udp_in(
                 // E.g. ICMP port unreachable from a vanished peer: not fatal.
                 Err(e) => tracing::debug!(endpoint = metrics.label(), error = %e, "udp receive failed"),
             },
+        }
+    }
+}
+
+/// Sends one frame as a datagram, counting it sent or dropped.
+async fn send_datagram(
+    socket: &UdpSocket,
+    bytes: &[u8],
+    to: SocketAddr,
+    metrics: &EndpointMetrics,
+) {
+    match socket.send_to(bytes, to).await {
+        Ok(_) => metrics.frame_out(),
+        Err(e) => {
+            metrics.dropped(DropReason::SendError, 1);
+            tracing::debug!(%to, error = %e, "udp send failed");
         }
     }
 }
@@ -333,13 +343,7 @@ async fn udp_out(
             _ = shutdown.cancelled() => return,
             frame = rx.recv() => {
                 let Some(frame) = frame else { return };
-                match socket.send_to(frame.as_bytes(), to).await {
-                    Ok(_) => metrics.frame_out(),
-                    Err(e) => {
-                        metrics.dropped(DropReason::SendError, 1);
-                        tracing::debug!(%to, error = %e, "udp send failed");
-                    }
-                }
+                send_datagram(&socket, frame.as_bytes(), to, metrics).await;
             }
             r = socket.recv_from(&mut buf) => match r {
                 Ok((n, _)) => deliver(&hub, index, &mut parser, &buf[..n], true),
