@@ -58,6 +58,7 @@ wire_enum! {
         GrabPayloadAuthority = 21 => "grab_payload_authority",
         ReleasePayloadAuthority = 22 => "release_payload_authority",
         MotorKill = 23 => "motor_kill",
+        GoProSet = 24 => "gopro_set",
     }
 }
 
@@ -150,6 +151,7 @@ impl CommandKind {
             | CommandKind::RecordStart
             | CommandKind::RecordStop
             | CommandKind::Servo
+            | CommandKind::GoProSet
             | CommandKind::GrabPayloadAuthority
             | CommandKind::ReleasePayloadAuthority => Some(AuthorityDomain::Payload),
             CommandKind::EmergencyStop => None,
@@ -201,6 +203,8 @@ pub mod limits {
     pub const MAX_GIMBAL_DEG: f32 = 360.0;
     pub const PWM_US: core::ops::RangeInclusive<u16> = 500..=2500;
     pub const SERVO_CHANNELS: core::ops::RangeInclusive<u8> = 1..=32;
+    /// Highest MAVLink GOPRO_COMMAND id.
+    pub const MAX_GOPRO_COMMAND: u8 = 31;
 }
 
 /// A typed command. Build a [`VehicleCommand`] from it with [`VehicleCommand::new`].
@@ -272,6 +276,12 @@ pub enum Command {
     /// aircraft is better than a fly-away, but only when someone says so).
     MotorKill {
         emergency: bool,
+    },
+    /// A GoPro setting through the gimbal's GoPro bridge (MAVLink `GOPRO_SET_REQUEST`):
+    /// `command` is a MAVLink GOPRO_COMMAND (0..=31), `value` its four value bytes.
+    GoProSet {
+        command: u8,
+        value: [u8; 4],
     },
 }
 
@@ -354,6 +364,7 @@ impl Command {
             Command::GrabPayloadAuthority => CommandKind::GrabPayloadAuthority,
             Command::ReleasePayloadAuthority => CommandKind::ReleasePayloadAuthority,
             Command::MotorKill { .. } => CommandKind::MotorKill,
+            Command::GoProSet { .. } => CommandKind::GoProSet,
         }
     }
 
@@ -439,6 +450,9 @@ impl Command {
                     (*PWM_US.end()).into(),
                 )?;
             }
+            Command::GoProSet { command, .. } => {
+                check("gopro_command", command.into(), 0.0, limits::MAX_GOPRO_COMMAND.into())?
+            }
             Command::Arm { .. }
             | Command::Disarm { .. }
             | Command::Land
@@ -464,7 +478,8 @@ impl Command {
 /// Parameter slots by kind: `GoTo`/`SetRoi`: lat/lon, `f[0]` alt_rel, `f[1]` yaw,
 /// `f[2]` speed; `VelocityNed`: `f[0..3]` vn/ve/vd, `f[3]` yaw rate; `Takeoff`: `f[0]`;
 /// `SetYaw`: `f[0]` yaw, `f[1]` rate; `Gimbal`: `f[0]` pitch, `f[1]` yaw; `SetMode`:
-/// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm.
+/// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm; `GoProSet`: `i[0]`
+/// command, `i[1]` the four value bytes little-endian.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
@@ -588,6 +603,10 @@ impl VehicleCommand {
                     c.flags |= flags::EMERGENCY;
                 }
             }
+            Command::GoProSet { command, value } => {
+                c.i[0] = command.into();
+                c.i[1] = i32::from_le_bytes(value);
+            }
         }
         Ok(c)
     }
@@ -672,6 +691,10 @@ impl VehicleCommand {
             CommandKind::ReleasePayloadAuthority => Command::ReleasePayloadAuthority,
             CommandKind::MotorKill => Command::MotorKill {
                 emergency: has(flags::EMERGENCY),
+            },
+            CommandKind::GoProSet => Command::GoProSet {
+                command: int_param(0, "gopro_command", limits::MAX_GOPRO_COMMAND.into())? as u8,
+                value: self.i[1].to_le_bytes(),
             },
         };
         cmd.validate()?;
@@ -773,6 +796,10 @@ mod tests {
             Command::Servo {
                 channel: 9,
                 pwm_us: 1900,
+            },
+            Command::GoProSet {
+                command: 2,
+                value: [1, 0, 0, 0xff],
             },
             Command::Brake,
             Command::EmergencyStop,

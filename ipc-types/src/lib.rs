@@ -14,7 +14,9 @@ pub mod arbiter;
 pub mod command;
 pub mod fixed;
 pub mod header;
+pub mod payload;
 pub mod service;
+pub mod shot;
 pub mod topics;
 pub mod vehicle;
 
@@ -28,6 +30,11 @@ pub use command::{
 };
 pub use fixed::FixedStr;
 pub use header::{Sample, SampleHeader, ServiceId};
+pub use payload::{GoProStatus, PayloadState};
+pub use shot::{
+    AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus,
+    APP_VALUE_CAPACITY,
+};
 pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};

@@ -133,6 +133,36 @@ pub fn vehicle_geofence(id: u8) -> Topic {
     )
 }
 
+/// [`crate::PayloadState`] of vehicle `id`: gimbal attitude and GoPro status.
+pub fn vehicle_payload(id: u8) -> Topic {
+    Topic::new(format!("skymesh/vehicle/{id}/payload"), TopicQos::STATE)
+}
+
+/// [`crate::AppMessage`]s from the Solo app (gateway → shot engine).
+pub fn shot_from_app() -> Topic {
+    Topic::new("skymesh/shot/from_app".into(), TopicQos::EVENTS)
+}
+
+/// [`crate::AppMessage`]s to the Solo app (shot engine → gateway).
+pub fn shot_to_app() -> Topic {
+    Topic::new("skymesh/shot/to_app".into(), TopicQos::EVENTS)
+}
+
+/// [`crate::AppSession`]: whether a Solo app is connected (gateway → shot engine).
+pub fn shot_app_session() -> Topic {
+    Topic::new("skymesh/shot/app_session".into(), TopicQos::STATE)
+}
+
+/// [`crate::ShotStatus`] of the shot engine.
+pub fn shot_status() -> Topic {
+    Topic::new("skymesh/shot/status".into(), TopicQos::STATE)
+}
+
+/// [`crate::ButtonEvent`]s from controller hardware (IMC gateway) and tools.
+pub fn input_buttons() -> Topic {
+    Topic::new("skymesh/input/buttons".into(), TopicQos::COMMANDS)
+}
+
 /// [`crate::ServiceHealth`] heartbeats of the service instance `name`.
 pub fn service_health(name: &str) -> Topic {
     Topic::new(format!("skymesh/service/{name}/health"), TopicQos::SERVICE)

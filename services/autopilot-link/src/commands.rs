@@ -320,6 +320,7 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 0.0,
             ],
         )),
+        Command::GoProSet { .. } => return Err("GoPro requests are not mapped to MAVLink yet"),
         Command::Brake | Command::EmergencyStop if ctx.mode == FlightMode::Guided => Plan {
             command: None,
             setpoint: Some(velocity_setpoint(t, [0.0; 3], None)),
