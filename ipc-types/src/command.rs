@@ -203,8 +203,8 @@ pub mod limits {
     pub const MAX_GIMBAL_DEG: f32 = 360.0;
     pub const PWM_US: core::ops::RangeInclusive<u16> = 500..=2500;
     pub const SERVO_CHANNELS: core::ops::RangeInclusive<u8> = 1..=32;
-    /// Highest MAVLink GOPRO_COMMAND id.
-    pub const MAX_GOPRO_COMMAND: u8 = 31;
+    /// Highest MAVLink GOPRO_COMMAND id (GOPRO_COMMAND_CHARGING).
+    pub const MAX_GOPRO_COMMAND: u8 = 16;
 }
 
 /// A typed command. Build a [`VehicleCommand`] from it with [`VehicleCommand::new`].
@@ -278,7 +278,7 @@ pub enum Command {
         emergency: bool,
     },
     /// A GoPro setting through the gimbal's GoPro bridge (MAVLink `GOPRO_SET_REQUEST`):
-    /// `command` is a MAVLink GOPRO_COMMAND (0..=31), `value` its four value bytes.
+    /// `command` is a MAVLink GOPRO_COMMAND (0..=16), `value` its four value bytes.
     GoProSet {
         command: u8,
         value: [u8; 4],
@@ -450,9 +450,12 @@ impl Command {
                     (*PWM_US.end()).into(),
                 )?;
             }
-            Command::GoProSet { command, .. } => {
-                check("gopro_command", command.into(), 0.0, limits::MAX_GOPRO_COMMAND.into())?
-            }
+            Command::GoProSet { command, .. } => check(
+                "gopro_command",
+                command.into(),
+                0.0,
+                limits::MAX_GOPRO_COMMAND.into(),
+            )?,
             Command::Arm { .. }
             | Command::Disarm { .. }
             | Command::Land

@@ -31,11 +31,11 @@ pub use command::{
 pub use fixed::FixedStr;
 pub use header::{Sample, SampleHeader, ServiceId};
 pub use payload::{GoProStatus, PayloadState};
+pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};
 pub use shot::{
     AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus,
     APP_VALUE_CAPACITY,
 };
-pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
 

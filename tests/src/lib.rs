@@ -66,6 +66,14 @@ pub fn free_port() -> u16 {
         .unwrap_or(0)
 }
 
+/// A UDP port free on 127.0.0.1 right now.
+pub fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .unwrap_or(0)
+}
+
 /// How a test wants its mesh.
 #[derive(Debug, Clone)]
 pub struct MeshOptions {
@@ -82,6 +90,15 @@ pub struct MeshOptions {
     /// Number of vehicles: one vehicle-sim + autopilot-link pair per id 1..=N. With
     /// more than one, services are named `vehicle-sim-<id>` / `autopilot-link-<id>`.
     pub vehicles: u8,
+    /// Also run the Solo app gateway and the shot engine (for vehicle 1).
+    pub solo: bool,
+    /// Extra TOML appended to the shot engine's config.
+    pub shot_engine_extra: String,
+    /// Extra TOML appended to the Solo gateway's config.
+    pub solo_gateway_extra: String,
+    /// Vehicle 1's autopilot-link connects to this port on 127.0.0.1 instead of
+    /// straight to its vehicle-sim (a benchmark's tap sits there and forwards).
+    pub link_via: Option<u16>,
 }
 
 impl Default for MeshOptions {
@@ -93,6 +110,10 @@ impl Default for MeshOptions {
             attitude_hz: 50.0,
             supervisor_extra: String::new(),
             vehicles: 1,
+            solo: false,
+            shot_engine_extra: String::new(),
+            solo_gateway_extra: String::new(),
+            link_via: None,
         }
     }
 }
@@ -104,6 +125,10 @@ pub struct Mesh {
     pub domain: String,
     /// MAVLink port of vehicle 1's simulator.
     pub mavlink_port: u16,
+    /// Solo app TCP port (with `MeshOptions::solo`).
+    pub solo_port: u16,
+    /// Solo follow-stream UDP port (with `MeshOptions::solo`).
+    pub follow_port: u16,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
     _serial: MutexGuard<'static, ()>,
@@ -137,11 +162,15 @@ impl Mesh {
                 d.join(format!("vehicle-sim{suffix}.toml")),
                 format!("endpoint = \"tcp:127.0.0.1:{port}\"\nsystem_id = {id}\nhome_lon = {home_lon}\n"),
             )?;
+            let link_port = match opts.link_via {
+                Some(via) if id == 1 => via,
+                _ => port,
+            };
             std::fs::write(
                 d.join(format!("autopilot-link{suffix}.toml")),
                 format!(
                     // No router endpoints: tests never send to a ground station's port.
-                    "connection = \"tcpout:127.0.0.1:{port}\"\nvehicle_id = {id}\nattitude_hz = {}\nendpoints = []\n{}\n",
+                    "connection = \"tcpout:127.0.0.1:{link_port}\"\nvehicle_id = {id}\nattitude_hz = {}\nendpoints = []\n{}\n",
                     opts.attitude_hz, opts.autopilot_link_extra
                 ),
             )?;
@@ -164,6 +193,44 @@ critical = true
                 bins = bins.display(),
             );
         }
+        let mavlink_port = mavlink_ports[0];
+        let (mut solo_port, mut follow_port) = (0, 0);
+        if opts.solo {
+            solo_port = free_port();
+            follow_port = free_udp_port();
+            std::fs::write(
+                d.join("solo-gateway.toml"),
+                format!(
+                    "listen = \"127.0.0.1:{solo_port}\"\nfollow_listen = \"127.0.0.1:{follow_port}\"\n{}\n",
+                    opts.solo_gateway_extra
+                ),
+            )?;
+            std::fs::write(
+                d.join("shot-engine.toml"),
+                format!(
+                    "vehicle_id = 1\nstate_file = \"{}\"\n{}\n",
+                    d.join("shot-engine-state.json").display(),
+                    opts.shot_engine_extra
+                ),
+            )?;
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "solo-gateway"
+binary = "{bins}/skymesh-solo-gateway"
+config = "solo-gateway.toml"
+
+[[service]]
+name = "shot-engine"
+binary = "{bins}/skymesh-shot-engine"
+config = "shot-engine.toml"
+after = ["autopilot-link"]
+"#,
+                bins = bins.display(),
+            );
+        }
+
         std::fs::write(
             d.join("skymesh.toml"),
             format!(
@@ -182,8 +249,6 @@ grace_period_ms = 3000
                 extra = opts.supervisor_extra,
             ),
         )?;
-        let mavlink_port = mavlink_ports[0];
-
         let stdout = std::fs::File::create(d.join("supervisor.stdout"))?;
         let stderr = std::fs::File::create(d.join("supervisor.stderr"))?;
         let status_file = d.join("metrics.addr");
@@ -207,6 +272,8 @@ grace_period_ms = 3000
             dir,
             domain,
             mavlink_port,
+            solo_port,
+            follow_port,
             supervisor: Some(child),
             metrics_addr: None,
             _serial: serial,

@@ -1,5 +1,5 @@
-//! COMMAND_ACK bookkeeping: which command sample each answer belongs to, retransmission
-//! and timeouts. Pure: no I/O, every instant is passed in.
+//! Answer bookkeeping: which command sample each COMMAND_ACK or GOPRO_SET_RESPONSE
+//! belongs to, retransmission and timeouts. Pure: no I/O, every instant is passed in.
 //!
 //! One outstanding command per MAV_CMD id (a newer one supersedes the older, which
 //! is answered `Cancelled`). `ACCEPTED` → accepted;
@@ -7,13 +7,20 @@
 //! answer; `DENIED`/`FAILED`/`UNSUPPORTED`/`TEMPORARILY_REJECTED`/`CANCELLED` →
 //! refused with that reason. No answer within the timeout → retransmitted with
 //! `confirmation` + 1, up to the configured retries, then refused `Timeout`.
+//!
+//! GoPro requests ride the same tracker, keyed by GOPRO_COMMAND instead of MAV_CMD
+//! ([`AnswerKey`]): one outstanding per `cmd_id` (a newer one supersedes the older,
+//! `Cancelled`), GOPRO_SET_RESPONSE `SUCCESS` → accepted, `FAILED` → refused
+//! `Failed`, nothing within the timeout → refused `Timeout` without retransmitting.
+//! As with COMMAND_ACK, an answer carries no request id: a late answer to a
+//! superseded request is taken as the answer to its successor.
 
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::MavResult;
 use skymesh_ipc_types::{AckResult, RefusalReason, VehicleCommand};
 
-use crate::commands::MavCommand;
+use crate::commands::{AnswerKey, MavCommand};
 
 /// Identifies the command sample an answer belongs to (everything a `CommandAck` echoes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -142,7 +149,7 @@ pub enum Action {
     Answer(Answer),
 }
 
-/// Outstanding acknowledged commands, at most one per MAV_CMD.
+/// Outstanding answered requests, at most one per [`AnswerKey`] (MAV_CMD or GOPRO_COMMAND).
 #[derive(Debug)]
 pub struct AckTracker {
     policy: AckPolicy,
@@ -174,11 +181,11 @@ impl AckTracker {
         received: Instant,
         now: Instant,
     ) -> Option<Answer> {
-        let id = command.id();
+        let key = command.key();
         let superseded = self
             .pending
             .iter()
-            .position(|p| p.command.id() == id)
+            .position(|p| p.command.key() == key)
             .map(|i| self.pending.swap_remove(i))
             .map(|old| {
                 Answer::refused(
@@ -190,12 +197,17 @@ impl AckTracker {
                     ),
                 )
             });
+        let retries_left = if command.retransmits() {
+            self.policy.retries
+        } else {
+            0
+        };
         self.pending.push(Pending {
             origin,
             command,
             received,
             deadline: now + self.policy.timeout,
-            retries_left: self.policy.retries,
+            retries_left,
             in_progress: false,
         });
         superseded
@@ -214,7 +226,7 @@ impl AckTracker {
         let i = self
             .pending
             .iter()
-            .position(|p| p.command.id() as u32 == mav_cmd)?;
+            .position(|p| p.command.key() == AnswerKey::CommandAck(mav_cmd))?;
         let (result, reason) = classify(mav_result);
         let p = &mut self.pending[i];
         // Latency is to the first COMMAND_ACK (a final one after IN_PROGRESS is not a round trip).
@@ -249,6 +261,28 @@ impl AckTracker {
         })
     }
 
+    /// A GOPRO_SET_RESPONSE arrived from the vehicle's system. Returns the answer for
+    /// the outstanding GoPro request with that `cmd_id`, if there is one.
+    pub fn on_gopro_response(&mut self, cmd_id: u8, success: bool, now: Instant) -> Option<Answer> {
+        let i = self
+            .pending
+            .iter()
+            .position(|p| p.command.key() == AnswerKey::GoPro(cmd_id))?;
+        let p = self.pending.swap_remove(i);
+        let latency = Some(now.saturating_duration_since(p.received));
+        Some(if success {
+            Answer {
+                latency,
+                ..Answer::accepted(p.origin)
+            }
+        } else {
+            Answer {
+                latency,
+                ..Answer::refused(p.origin, RefusalReason::Failed, "GoPro: request failed")
+            }
+        })
+    }
+
     /// Retransmissions and timeouts due at `now`.
     pub fn poll(&mut self, now: Instant) -> Vec<Action> {
         let mut actions = Vec::new();
@@ -264,10 +298,10 @@ impl AckTracker {
                 actions.push(Action::Retransmit(p.command.clone()));
                 return true;
             }
-            let detail = if p.in_progress {
-                "no final answer after in progress"
-            } else {
-                "no COMMAND_ACK from the autopilot"
+            let detail = match p.command.key() {
+                AnswerKey::GoPro(_) => "no GOPRO_SET_RESPONSE from the gimbal",
+                AnswerKey::CommandAck(_) if p.in_progress => "no final answer after in progress",
+                AnswerKey::CommandAck(_) => "no COMMAND_ACK from the autopilot",
             };
             actions.push(Action::Answer(Answer::refused(
                 p.origin,
@@ -448,6 +482,89 @@ mod tests {
             panic!("{actions:?}")
         };
         assert_eq!(a.reason, RefusalReason::Timeout);
+    }
+
+    fn gopro(command: u8, value: u8) -> MavCommand {
+        plan_of(Command::GoProSet {
+            command,
+            value: [value, 0, 0, 0],
+        })
+        .command
+        .unwrap()
+    }
+
+    #[test]
+    fn a_gopro_response_answers_the_request_with_its_cmd_id() {
+        let t0 = Instant::now();
+        let ms = |n: u64| t0 + Duration::from_millis(n);
+        let mut t = tracker();
+        // Capture mode (1) and shutter (2) outstanding, and an arm waiting for its
+        // COMMAND_ACK: a MAV_CMD number never answers a GOPRO_COMMAND of that number.
+        assert_eq!(t.submit(origin(1), gopro(1, 1), t0, t0), None);
+        assert_eq!(t.submit(origin(2), gopro(2, 1), t0, t0), None);
+        assert_eq!(t.submit(origin(3), arm(), t0, t0), None);
+        // Nobody waits for cmd_id 5; a COMMAND_ACK never answers a GoPro request.
+        assert_eq!(t.on_gopro_response(5, true, ms(10)), None);
+        assert_eq!(t.on_ack(1, 0, None, ms(10)), None);
+        let a = t.on_gopro_response(2, true, ms(80)).unwrap();
+        assert_eq!(a.origin, origin(2));
+        assert_eq!(
+            (a.result, a.reason, a.mav_result),
+            (AckResult::Accepted, RefusalReason::None, 255)
+        );
+        assert_eq!(a.latency, Some(Duration::from_millis(80)));
+        assert_eq!(t.on_gopro_response(2, true, ms(90)), None, "answered once");
+        let a = t.on_gopro_response(1, false, ms(100)).unwrap();
+        assert_eq!(a.origin, origin(1));
+        assert_eq!(
+            (a.result, a.reason),
+            (AckResult::Refused, RefusalReason::Failed)
+        );
+        assert_eq!(a.detail, "GoPro: request failed");
+        assert_eq!(t.len(), 1, "the arm command is still waiting");
+        assert_eq!(t.on_ack(ARM, 0, None, ms(100)).unwrap().origin, origin(3));
+    }
+
+    #[test]
+    fn an_unanswered_gopro_request_times_out_without_retransmission() {
+        let t0 = Instant::now();
+        let ms = |n: u64| t0 + Duration::from_millis(n);
+        let mut t = tracker();
+        t.submit(origin(1), gopro(2, 1), t0, t0);
+        assert!(t.poll(ms(1499)).is_empty());
+        let actions = t.poll(ms(1500));
+        let [Action::Answer(a)] = actions.as_slice() else {
+            panic!("no retransmission, only the timeout: {actions:?}")
+        };
+        assert_eq!(
+            (a.result, a.reason, a.mav_result),
+            (AckResult::Refused, RefusalReason::Timeout, 255)
+        );
+        assert_eq!(a.detail, "no GOPRO_SET_RESPONSE from the gimbal");
+        assert!(t.is_empty());
+    }
+
+    #[test]
+    fn a_second_gopro_request_with_the_same_cmd_id_cancels_the_first() {
+        let t0 = Instant::now();
+        let mut t = tracker();
+        t.submit(origin(1), gopro(1, 0), t0, t0);
+        let old = t.submit(origin(2), gopro(1, 1), t0, t0).unwrap();
+        assert_eq!(old.origin, origin(1));
+        assert_eq!(
+            (old.result, old.reason),
+            (AckResult::Refused, RefusalReason::Cancelled)
+        );
+        assert_eq!(
+            t.submit(origin(3), gopro(2, 1), t0, t0),
+            None,
+            "other cmd_id"
+        );
+        assert_eq!(t.len(), 2);
+        assert_eq!(t.on_gopro_response(1, true, t0).unwrap().origin, origin(2));
+        let rest = t.fail_all(RefusalReason::LinkDown, "link lost");
+        assert_eq!(rest.len(), 1);
+        assert_eq!(rest[0].origin, origin(3));
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! Vehicle commands → MAVLink: intake checks and the mapping. Pure, no I/O.
 //!
-//! Commands go to the autopilot (target component 1). Mapping:
+//! Commands go to the autopilot (target component 1), GoPro requests to the gimbal
+//! (component 154, `MAV_COMP_ID_GIMBAL`, which bridges the GoPro on the Solo gimbal).
+//! Mapping:
 //!
 //! | `Command` | MAVLink | answered by |
 //! |---|---|---|
@@ -25,6 +27,7 @@
 //! | `EmergencyStop` | as `Brake`: brake and hover (motors keep running) | as `Brake` |
 //! | `MotorKill { emergency: false }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0: ArduPilot refuses it in the air | COMMAND_ACK |
 //! | `MotorKill { emergency: true }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196: motors stop even in flight | COMMAND_ACK |
+//! | `GoProSet { command, value }` | GOPRO_SET_REQUEST to (vehicle, 154), `cmd_id` = command, `value` as given; a command id the dialect has no GOPRO_COMMAND for (17..=31) is refused `unsupported` | GOPRO_SET_RESPONSE with that `cmd_id` from the vehicle's system: SUCCESS → accepted, FAILED → refused `failed`; none within `command_timeout` → refused `timeout` (never retransmitted) |
 //! | authority grab/release | no MAVLink: decided by the arbiter | — |
 //!
 //! `Gimbal` has no `DO_MOUNT_CONTROL` fallback: a gimbal without gimbal protocol v2
@@ -33,8 +36,9 @@
 //! Answers are tracked in [`crate::acks`].
 
 use mavlink::dialects::ardupilotmega::{
-    MavCmd, MavFrame, MavMessage, MavModeFlag, PositionTargetTypemask, COMMAND_INT_DATA,
-    COMMAND_LONG_DATA, SET_POSITION_TARGET_GLOBAL_INT_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+    GoproCommand, MavCmd, MavFrame, MavMessage, MavModeFlag, PositionTargetTypemask,
+    COMMAND_INT_DATA, COMMAND_LONG_DATA, GOPRO_SET_REQUEST_DATA,
+    SET_POSITION_TARGET_GLOBAL_INT_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use skymesh_ipc_types::{Command, FlightMode, RefusalReason, VehicleCommand};
 
@@ -49,19 +53,45 @@ pub struct Target {
     pub component: u8,
 }
 
-/// A MAVLink command that the autopilot answers with COMMAND_ACK.
+/// MAVLink component id of the gimbal (`MAV_COMP_ID_GIMBAL`), which answers GoPro
+/// requests on the Solo gimbal.
+pub const GIMBAL_COMPONENT: u8 = 154;
+
+/// A MAVLink request that is answered: COMMAND_LONG / COMMAND_INT by COMMAND_ACK,
+/// GOPRO_SET_REQUEST by GOPRO_SET_RESPONSE.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MavCommand {
     Long(COMMAND_LONG_DATA),
     Int(COMMAND_INT_DATA),
+    GoPro(GOPRO_SET_REQUEST_DATA),
+}
+
+/// What identifies the answer to a [`MavCommand`]: at most one of each is outstanding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AnswerKey {
+    /// A COMMAND_ACK for this MAV_CMD.
+    CommandAck(u32),
+    /// A GOPRO_SET_RESPONSE for this GOPRO_COMMAND.
+    GoPro(u8),
+}
+
+impl std::fmt::Display for AnswerKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AnswerKey::CommandAck(cmd) => write!(f, "MAV_CMD {cmd}"),
+            AnswerKey::GoPro(cmd) => write!(f, "GOPRO_COMMAND {cmd}"),
+        }
+    }
 }
 
 impl MavCommand {
-    /// The MAV_CMD, which is what its COMMAND_ACK carries.
-    pub fn id(&self) -> MavCmd {
+    /// What its answer carries: the MAV_CMD of a COMMAND_ACK or the `cmd_id` of a
+    /// GOPRO_SET_RESPONSE.
+    pub fn key(&self) -> AnswerKey {
         match self {
-            MavCommand::Long(c) => c.command,
-            MavCommand::Int(c) => c.command,
+            MavCommand::Long(c) => AnswerKey::CommandAck(c.command as u32),
+            MavCommand::Int(c) => AnswerKey::CommandAck(c.command as u32),
+            MavCommand::GoPro(r) => AnswerKey::GoPro(r.cmd_id as u8),
         }
     }
 
@@ -69,7 +99,15 @@ impl MavCommand {
         match self {
             MavCommand::Long(c) => MavMessage::COMMAND_LONG(c.clone()),
             MavCommand::Int(c) => MavMessage::COMMAND_INT(c.clone()),
+            MavCommand::GoPro(r) => MavMessage::GOPRO_SET_REQUEST(r.clone()),
         }
+    }
+
+    /// Whether an unanswered request is sent again. A GoPro request is not: the
+    /// gimbal has no `confirmation` to tell a repeat from a new request, and the
+    /// GoPro bridge is slow enough that a late answer would meet a second request.
+    pub fn retransmits(&self) -> bool {
+        !matches!(self, MavCommand::GoPro(_))
     }
 
     /// Prepares a retransmission: COMMAND_LONG counts it in `confirmation`.
@@ -78,6 +116,31 @@ impl MavCommand {
             c.confirmation = c.confirmation.saturating_add(1);
         }
     }
+}
+
+/// The dialect's GOPRO_COMMAND for a wire value (0..=16; 17..=31 are reserved).
+pub fn gopro_command(id: u8) -> Option<GoproCommand> {
+    use GoproCommand::*;
+    Some(match id {
+        0 => GOPRO_COMMAND_POWER,
+        1 => GOPRO_COMMAND_CAPTURE_MODE,
+        2 => GOPRO_COMMAND_SHUTTER,
+        3 => GOPRO_COMMAND_BATTERY,
+        4 => GOPRO_COMMAND_MODEL,
+        5 => GOPRO_COMMAND_VIDEO_SETTINGS,
+        6 => GOPRO_COMMAND_LOW_LIGHT,
+        7 => GOPRO_COMMAND_PHOTO_RESOLUTION,
+        8 => GOPRO_COMMAND_PHOTO_BURST_RATE,
+        9 => GOPRO_COMMAND_PROTUNE,
+        10 => GOPRO_COMMAND_PROTUNE_WHITE_BALANCE,
+        11 => GOPRO_COMMAND_PROTUNE_COLOUR,
+        12 => GOPRO_COMMAND_PROTUNE_GAIN,
+        13 => GOPRO_COMMAND_PROTUNE_SHARPNESS,
+        14 => GOPRO_COMMAND_PROTUNE_EXPOSURE,
+        15 => GOPRO_COMMAND_TIME,
+        16 => GOPRO_COMMAND_CHARGING,
+        _ => return None,
+    })
 }
 
 /// What one [`Command`] becomes on the wire: the acknowledged command (sent first)
@@ -320,7 +383,16 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 0.0,
             ],
         )),
-        Command::GoProSet { .. } => return Err("GoPro requests are not mapped to MAVLink yet"),
+        Command::GoProSet { command, value } => {
+            let cmd_id = gopro_command(command)
+                .ok_or("GoPro command ids above 16 have no MAVLink GOPRO_COMMAND")?;
+            only(MavCommand::GoPro(GOPRO_SET_REQUEST_DATA {
+                target_system: t.system,
+                target_component: GIMBAL_COMPONENT,
+                cmd_id,
+                value,
+            }))
+        }
         Command::Brake | Command::EmergencyStop if ctx.mode == FlightMode::Guided => Plan {
             command: None,
             setpoint: Some(velocity_setpoint(t, [0.0; 3], None)),
@@ -596,6 +668,36 @@ mod tests {
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
             assert_eq!(c.param2, 17.0);
         }
+    }
+
+    #[test]
+    fn gopro_set_is_a_gopro_set_request_to_the_gimbal() {
+        let p = plan_of(Command::GoProSet {
+            command: 1,
+            value: [1, 0, 0, 0],
+        });
+        assert!(p.setpoint.is_none());
+        let Some(MavCommand::GoPro(r)) = &p.command else {
+            panic!("{p:?}")
+        };
+        assert_eq!((r.target_system, r.target_component), (1, GIMBAL_COMPONENT));
+        assert_eq!(r.cmd_id, GoproCommand::GOPRO_COMMAND_CAPTURE_MODE);
+        assert_eq!(r.value, [1, 0, 0, 0]);
+        let cmd = p.command.unwrap();
+        assert_eq!(cmd.key(), AnswerKey::GoPro(1));
+        assert!(!cmd.retransmits());
+        assert!(matches!(cmd.message(), MavMessage::GOPRO_SET_REQUEST(_)));
+        // Every id the dialect knows maps to itself.
+        for id in 0..=16 {
+            assert_eq!(gopro_command(id).map(|c| c as u8), Some(id));
+        }
+        // ipc-types refuses ids above the dialect's last GOPRO_COMMAND; the mapping
+        // still refuses them should a wire struct carry one.
+        assert_eq!(skymesh_ipc_types::command::limits::MAX_GOPRO_COMMAND, 16);
+        assert!(gopro_command(17).is_none());
+        let arm = plan_of(Command::Arm { force: false }).command.unwrap();
+        assert_eq!(arm.key(), AnswerKey::CommandAck(400));
+        assert!(arm.retransmits());
     }
 
     fn sample(kind_cmd: &Command, id: u32) -> VehicleCommand {

@@ -132,6 +132,8 @@ pub struct StreamRates {
     pub battery_status_hz: f32,
     pub gps_raw_hz: f32,
     pub ekf_status_hz: f32,
+    /// GIMBAL_DEVICE_ATTITUDE_STATUS → `PayloadState`; `None` = not requested.
+    pub gimbal_attitude_hz: Option<f32>,
 }
 
 /// The validated configuration.
@@ -192,6 +194,8 @@ pub struct RawConfig {
     pub battery_status_hz: f64,
     pub gps_raw_hz: f64,
     pub ekf_status_hz: f64,
+    /// 0 = not requested.
+    pub gimbal_attitude_hz: f64,
     /// `[arbiter]`: authority, freshness, geofence envelope, limits.
     pub arbiter: RawArbiter,
 }
@@ -218,6 +222,7 @@ impl Default for RawConfig {
             battery_status_hz: 2.0,
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.0,
+            gimbal_attitude_hz: 10.0,
             arbiter: RawArbiter::default(),
         }
     }
@@ -329,6 +334,11 @@ impl ServiceConfig for RawConfig {
                 battery_status_hz: rate("battery_status_hz", self.battery_status_hz)?,
                 gps_raw_hz: rate("gps_raw_hz", self.gps_raw_hz)?,
                 ekf_status_hz: rate("ekf_status_hz", self.ekf_status_hz)?,
+                gimbal_attitude_hz: if self.gimbal_attitude_hz == 0.0 {
+                    None
+                } else {
+                    Some(rate("gimbal_attitude_hz", self.gimbal_attitude_hz)?)
+                },
             },
             request_data_streams: self.request_data_streams,
             arbiter: self.arbiter.validate()?,
@@ -493,6 +503,7 @@ mod tests {
         assert_eq!(shipped.system_id, shipped.vehicle_id);
         assert_eq!(shipped.command_timeout, Duration::from_millis(1500));
         assert_eq!(shipped.rates.attitude_hz, 50.0);
+        assert_eq!(shipped.rates.gimbal_attitude_hz, Some(10.0));
     }
 
     #[test]
@@ -612,6 +623,8 @@ mod tests {
             ("attitude_hz = 500.0", "attitude_hz"),
             ("ekf_status_hz = 0.01", "ekf_status_hz"),
             ("gps_raw_hz = inf", "gps_raw_hz"),
+            ("gimbal_attitude_hz = 0.05", "gimbal_attitude_hz"),
+            ("gimbal_attitude_hz = -1", "gimbal_attitude_hz"),
             (
                 "[arbiter]\nsetpoint_max_age_ms = 5",
                 "arbiter.setpoint_max_age_ms",
@@ -641,6 +654,14 @@ mod tests {
         assert_eq!(s.system_id, 42);
         assert_eq!(s.rates.attitude_hz, 20.0);
         assert_eq!(s.silence_reconnect, None);
+        assert_eq!(
+            parse_str("gimbal_attitude_hz = 0")
+                .unwrap()
+                .rates
+                .gimbal_attitude_hz,
+            None,
+            "0 = not requested"
+        );
         let s = parse_str("[arbiter]\nauthority_timeout_s = 2\n[arbiter.setpoint_max_age_by_source]\nvision = 200").unwrap();
         assert_eq!(s.arbiter.authority_timeout, Duration::from_secs(2));
         assert_eq!(

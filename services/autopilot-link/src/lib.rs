@@ -3,9 +3,10 @@
 //! It connects to the autopilot ([`link`]: serial, UDP or TCP, reconnecting with
 //! backoff), identifies it, asks for telemetry rates ([`requests`]), fuses the
 //! telemetry into `VehicleState` (once per ATTITUDE) and `VehicleStatus` (on change
-//! and at 1 Hz) ([`telemetry`]), executes `VehicleCommand` samples as MAVLink
-//! commands and setpoints ([`commands`]), answers each with a `CommandAck`
-//! ([`acks`]), and marks the link down when autopilot heartbeats stop. All iceoryx2
+//! and at 1 Hz) ([`telemetry`]) and the gimbal and GoPro into `PayloadState` (on change
+//! and at 1 Hz) ([`payload`]), executes `VehicleCommand` samples as MAVLink
+//! commands, setpoints and GoPro requests ([`commands`]), answers each with a
+//! `CommandAck` ([`acks`]), and marks the link down when autopilot heartbeats stop. All iceoryx2
 //! calls live in the runtime; this crate only uses its typed publishers and
 //! subscribers.
 //!
@@ -18,8 +19,9 @@
 //! | [`endpoints`] | router endpoints (ground stations): sockets and their tasks |
 //! | [`hub`] | moves frames between autopilot and endpoints; router metrics |
 //! | [`telemetry`] | MAVLink → samples (pure) |
+//! | [`payload`] | gimbal attitude and GoPro → `PayloadState` (pure) |
 //! | [`commands`] | intake checks, `Command` → MAVLink (pure) |
-//! | [`acks`] | COMMAND_ACK matching, retransmission, timeouts (pure) |
+//! | [`acks`] | COMMAND_ACK and GOPRO_SET_RESPONSE matching, retransmission, timeouts (pure) |
 //! | [`arbiter`] | authority, freshness, geofence envelope, audit: decides every command (pure) |
 //! | [`requests`] | our heartbeat, stream-rate and home requests (pure) |
 //! | [`metrics`] | the exported series |
@@ -35,6 +37,7 @@ pub mod frame;
 pub mod hub;
 pub mod link;
 pub mod metrics;
+pub mod payload;
 pub mod requests;
 pub mod router;
 mod service;
@@ -43,8 +46,8 @@ mod transport;
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, ArbiterEvent, AuthorityState, CommandAck, GeofenceSet, ServiceState, VehicleCommand,
-    VehicleState, VehicleStatus,
+    topics, ArbiterEvent, AuthorityState, CommandAck, GeofenceSet, PayloadState, ServiceState,
+    VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
 
@@ -90,7 +93,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 
 /// Runs autopilot-link on `bus` until `shutdown` is cancelled.
 ///
-/// Opens `skymesh/vehicle/{vehicle_id}/{state,status,command_ack,authority,arbiter_events}`
+/// Opens `skymesh/vehicle/{vehicle_id}/{state,status,payload,command_ack,authority,arbiter_events}`
 /// as publisher and `.../{command,geofence}` as subscriber, starts the link and returns once both have stopped
 /// (well within the runtime's 5 s grace period).
 pub async fn run_with(
@@ -122,6 +125,9 @@ pub async fn run_with_endpoints(
         status: bus
             .publisher::<VehicleStatus>(&topics::vehicle_status(id))
             .context("opening the vehicle status topic")?,
+        payload: bus
+            .publisher::<PayloadState>(&topics::vehicle_payload(id))
+            .context("opening the vehicle payload topic")?,
         acks: bus
             .publisher::<CommandAck>(&topics::vehicle_command_ack(id))
             .context("opening the command ack topic")?,

@@ -27,6 +27,9 @@ pub const RECEIVED: &[&str] = &[
     "HOME_POSITION",
     "STATUSTEXT",
     "COMMAND_ACK",
+    "GIMBAL_DEVICE_ATTITUDE_STATUS",
+    "GOPRO_HEARTBEAT",
+    "GOPRO_SET_RESPONSE",
 ];
 
 /// Messages autopilot-link sends (metric label `msg`).
@@ -37,6 +40,7 @@ pub const SENT: &[&str] = &[
     "SET_POSITION_TARGET_GLOBAL_INT",
     "SET_POSITION_TARGET_LOCAL_NED",
     "REQUEST_DATA_STREAM",
+    "GOPRO_SET_REQUEST",
 ];
 
 fn label(known: &[&'static str], name: &str) -> &'static str {
@@ -96,6 +100,7 @@ pub struct Metrics {
     received: LazyCounters,
     sent: LazyCounters,
     commands: LazyCounters,
+    gopro_responses: LazyCounters,
 }
 
 impl Metrics {
@@ -125,6 +130,11 @@ impl Metrics {
                 "skymesh_autopilot_commands_total",
                 ("kind", Some("result")),
             ),
+            gopro_responses: LazyCounters::new(
+                stats,
+                "skymesh_autopilot_gopro_responses_total",
+                ("status", None),
+            ),
         }
     }
 
@@ -142,6 +152,17 @@ impl Metrics {
     pub fn command(&self, kind: u8, result: AckResult) {
         let kind = CommandKind::try_from(kind).map_or("unknown", CommandKind::as_str);
         self.commands.get(kind, result.as_str()).inc();
+    }
+
+    /// Counts one GOPRO_SET_RESPONSE: `success`/`failed` when it answered one of our
+    /// requests, `unmatched` when none was waiting (a ground station's, or too late).
+    pub fn gopro_response(&self, matched: bool, success: bool) {
+        let status = match (matched, success) {
+            (false, _) => "unmatched",
+            (true, true) => "success",
+            (true, false) => "failed",
+        };
+        self.gopro_responses.get(status, "").inc();
     }
 
     pub fn observe_latency(&self, latency: Duration) {
@@ -165,6 +186,11 @@ mod tests {
         m.sent("COMMAND_LONG");
         m.command(CommandKind::Arm.to_wire(), AckResult::Accepted);
         m.command(250, AckResult::Refused);
+        m.received("GOPRO_HEARTBEAT");
+        m.sent("GOPRO_SET_REQUEST");
+        m.gopro_response(true, false);
+        m.gopro_response(false, true);
+        m.gopro_response(false, false);
         let mut out = Box::<ServiceStats>::default();
         stats.snapshot_into(&mut out);
         let find = |name: &str, labels: &str| {
@@ -188,5 +214,17 @@ mod tests {
         assert_eq!(find(cmds, "kind=arm,result=accepted"), Some(1.0));
         assert_eq!(find(cmds, "kind=unknown,result=refused"), Some(1.0));
         assert_eq!(find("skymesh_autopilot_link_up", ""), Some(0.0));
+        assert_eq!(find(rx, "msg=GOPRO_HEARTBEAT"), Some(1.0));
+        assert_eq!(
+            find(
+                "skymesh_autopilot_mavlink_messages_sent_total",
+                "msg=GOPRO_SET_REQUEST"
+            ),
+            Some(1.0)
+        );
+        let gopro = "skymesh_autopilot_gopro_responses_total";
+        assert_eq!(find(gopro, "status=failed"), Some(1.0));
+        assert_eq!(find(gopro, "status=unmatched"), Some(2.0));
+        assert_eq!(find(gopro, "status=success"), None);
     }
 }

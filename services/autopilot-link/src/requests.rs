@@ -8,8 +8,9 @@
 
 use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavState, MavType, ATTITUDE_DATA,
-    BATTERY_STATUS_DATA, COMMAND_LONG_DATA, EKF_STATUS_REPORT_DATA, GLOBAL_POSITION_INT_DATA,
-    GPS_RAW_INT_DATA, HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
+    BATTERY_STATUS_DATA, COMMAND_LONG_DATA, EKF_STATUS_REPORT_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA,
+    HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
 };
 use mavlink::MessageData;
 
@@ -52,12 +53,17 @@ pub fn request_home(t: Target) -> MavMessage {
     )
 }
 
-/// The messages that ask for every telemetry stream at `rates`.
+/// The messages that ask for every telemetry stream at `rates`. The gimbal attitude
+/// (GIMBAL_DEVICE_ATTITUDE_STATUS, which ArduPilot sends for the mount it drives) is
+/// asked for only with SET_MESSAGE_INTERVAL, and only when a rate is configured.
 pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavMessage> {
-    let mut out = Vec::with_capacity(12);
+    let mut out = Vec::with_capacity(13);
     if legacy {
         out.extend(legacy_stream_requests(rates, t));
     }
+    let gimbal = rates
+        .gimbal_attitude_hz
+        .map(|hz| (GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID, hz));
     for (id, hz) in [
         (ATTITUDE_DATA::ID, rates.attitude_hz),
         (GLOBAL_POSITION_INT_DATA::ID, rates.global_position_hz),
@@ -66,7 +72,10 @@ pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavM
         (BATTERY_STATUS_DATA::ID, rates.battery_status_hz),
         (GPS_RAW_INT_DATA::ID, rates.gps_raw_hz),
         (EKF_STATUS_REPORT_DATA::ID, rates.ekf_status_hz),
-    ] {
+    ]
+    .into_iter()
+    .chain(gimbal)
+    {
         let interval_us = (1e6 / f64::from(hz)).round() as f32;
         out.push(command_long(
             t,
@@ -136,13 +145,14 @@ mod tests {
             battery_status_hz: 0.5,
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.5,
+            gimbal_attitude_hz: Some(10.0),
         }
     }
 
     #[test]
     fn every_stream_gets_a_message_interval() {
         let msgs = stream_requests(&rates(), T, false);
-        assert_eq!(msgs.len(), 7);
+        assert_eq!(msgs.len(), 8);
         let intervals: Vec<(f32, f32)> = msgs
             .iter()
             .map(|m| match m {
@@ -170,13 +180,23 @@ mod tests {
             (193.0, 400_000.0),
             "EKF_STATUS_REPORT at 2.5 Hz"
         );
+        assert_eq!(
+            intervals[7],
+            (285.0, 100_000.0),
+            "GIMBAL_DEVICE_ATTITUDE_STATUS at 10 Hz"
+        );
+        let none = StreamRates {
+            gimbal_attitude_hz: None,
+            ..rates()
+        };
+        assert_eq!(stream_requests(&none, T, false).len(), 7, "0 = not asked");
     }
 
     #[test]
     #[allow(deprecated)]
     fn legacy_requests_come_first_in_whole_hz() {
         let msgs = stream_requests(&rates(), T, true);
-        assert_eq!(msgs.len(), 11);
+        assert_eq!(msgs.len(), 12);
         let legacy: Vec<(u8, u16)> = msgs[..4]
             .iter()
             .map(|m| match m {

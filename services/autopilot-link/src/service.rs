@@ -4,7 +4,10 @@
 //! Command path: intake ([`commands::admit`]) → [`Arbiter::decide`] (authority,
 //! freshness, geofence envelope; wiring of its effects in [`safety`]) → dispatch
 //! ([`commands::plan`] → link writer → [`AckTracker`]) → `CommandAck`.
+//! Gimbal and GoPro telemetry → `PayloadState`, and GoPro answers → [`AckTracker`]:
+//! [`payload`].
 
+mod payload;
 mod safety;
 
 use std::collections::HashMap;
@@ -12,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{
     AckResult, ArbiterEvent, AuthorityState, Command, CommandAck, CommandKind, CommandSource,
-    FixedStr, GeofenceSet, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
+    FixedStr, GeofenceSet, PayloadState, RefusalReason, VehicleCommand, VehicleState,
+    VehicleStatus,
 };
 use skymesh_runtime::{clock::monotonic_ns, IpcError, Publisher, Subscriber};
 use tokio::sync::mpsc;
@@ -25,6 +29,7 @@ use crate::commands::{self, PlanContext, Target};
 use crate::config::Settings;
 use crate::link::{LinkEvent, LinkWriter};
 use crate::metrics::Metrics;
+use crate::payload::Payload;
 use crate::requests;
 use crate::telemetry::{LinkChange, LinkMonitor, Telemetry, AUTOPILOT_COMPONENT};
 use crate::Lifecycle;
@@ -55,6 +60,8 @@ enum Wake {
 pub(crate) struct Ports {
     pub state: Publisher<VehicleState>,
     pub status: Publisher<VehicleStatus>,
+    /// Gimbal attitude and GoPro state: on change and at 1 Hz.
+    pub payload: Publisher<PayloadState>,
     pub acks: Publisher<CommandAck>,
     pub commands: Subscriber<VehicleCommand>,
     /// Who holds authority: on every change and with each tick.
@@ -78,6 +85,7 @@ pub(crate) struct Service<L> {
     last_state: Option<VehicleState>,
     ports: Ports,
     telemetry: Telemetry,
+    payload: Payload,
     link: LinkMonitor,
     tracker: AckTracker,
     /// Present while a connection is open (between `Connected` and `Disconnected`).
@@ -109,6 +117,7 @@ impl<L: Lifecycle> Service<L> {
         let now = Instant::now();
         Service {
             telemetry: Telemetry::new(settings.vehicle_id),
+            payload: Payload::new(settings.vehicle_id),
             link: LinkMonitor::new(settings.link_timeout),
             tracker: AckTracker::new(AckPolicy {
                 timeout: settings.command_timeout,
@@ -200,6 +209,7 @@ impl<L: Lifecycle> Service<L> {
             self.tracker.next_deadline(),
             unexplained,
             self.arbiter_deadline(),
+            Some(self.payload_deadline()),
         ]
         .into_iter()
         .flatten()
@@ -215,7 +225,7 @@ impl<L: Lifecycle> Service<L> {
         for action in self.tracker.poll(now) {
             match action {
                 Action::Retransmit(cmd) => {
-                    tracing::debug!(command = ?cmd.id(), "no COMMAND_ACK yet; retransmitting");
+                    tracing::debug!(command = %cmd.key(), "no COMMAND_ACK yet; retransmitting");
                     self.write(cmd.message());
                 }
                 Action::Answer(answer) => self.answer(answer)?,
@@ -230,6 +240,7 @@ impl<L: Lifecycle> Service<L> {
                 self.answer(answer)?;
             }
         }
+        self.publish_payload_if_due()?;
         if now >= self.next_tick {
             let next = self.next_tick + TICK;
             // Fell behind (a stalled machine): skip the missed ticks.
@@ -283,6 +294,7 @@ impl<L: Lifecycle> Service<L> {
                 }
             }
             LinkEvent::Message(header, msg) => {
+                self.on_payload_message(&header, &msg, now)?;
                 let u = self.telemetry.handle(&header, &msg, monotonic_ns());
                 if let Some(system) = u.foreign_autopilot {
                     tracing::warn!(
@@ -508,7 +520,7 @@ impl<L: Lifecycle> Service<L> {
         }
         match plan.command {
             Some(cmd) => {
-                tracing::debug!(kind = %kind_name(origin.kind), command_id = origin.command_id, mav_cmd = ?cmd.id(), "command sent");
+                tracing::debug!(kind = %kind_name(origin.kind), command_id = origin.command_id, answer = %cmd.key(), "command sent");
                 if let Some(superseded) = self.tracker.submit(origin, cmd, now, now) {
                     self.answer(superseded)?;
                 }

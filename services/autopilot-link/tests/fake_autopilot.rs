@@ -11,13 +11,16 @@ use std::time::Duration;
 
 use common::{Mesh, PATIENCE, VEHICLE};
 use mavlink::dialects::ardupilotmega::{
-    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType,
-    ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, STATUSTEXT_DATA,
+    GimbalDeviceFlags, GoproCaptureMode, GoproCommand, GoproHeartbeatFlags, GoproHeartbeatStatus,
+    GoproRequestStatus, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity,
+    MavState, MavType, ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, GOPRO_HEARTBEAT_DATA, GOPRO_SET_RESPONSE_DATA,
+    HEARTBEAT_DATA, STATUSTEXT_DATA,
 };
 use mavlink::{Connectable, Connection, MavConnection, MavHeader, TcpConfig};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::Settings;
-use skymesh_ipc_types::{AckResult, Command, FlightMode, RefusalReason};
+use skymesh_ipc_types::{AckResult, Command, FlightMode, GoProStatus, RefusalReason};
 use tokio::sync::mpsc;
 
 type Conn = Connection<MavMessage>;
@@ -435,5 +438,191 @@ async fn an_autopilot_with_another_system_id_is_ignored() {
     let a = mesh.command(Command::Land).await;
     assert_eq!(a.reason(), Some(RefusalReason::LinkDown));
     drop(fake);
+    mesh.stop().await;
+}
+
+/// The GoPro bridge of a Solo gimbal: capture mode 0..=6 succeeds, other values fail;
+/// the shutter is never answered.
+fn gopro_bridge(m: &MavMessage) -> Vec<Reply> {
+    let MavMessage::GOPRO_SET_REQUEST(r) = m else {
+        return Vec::new();
+    };
+    let status = match r.cmd_id {
+        GoproCommand::GOPRO_COMMAND_CAPTURE_MODE if r.value[0] <= 6 => {
+            GoproRequestStatus::GOPRO_REQUEST_SUCCESS
+        }
+        GoproCommand::GOPRO_COMMAND_CAPTURE_MODE => GoproRequestStatus::GOPRO_REQUEST_FAILED,
+        _ => return Vec::new(),
+    };
+    vec![Reply::Now(MavMessage::GOPRO_SET_RESPONSE(
+        GOPRO_SET_RESPONSE_DATA {
+            cmd_id: r.cmd_id,
+            status,
+        },
+    ))]
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn gopro_requests_go_to_the_gimbal_and_are_answered_by_the_matching_response() {
+    let mut fake = Fake::start(VEHICLE, Box::new(gopro_bridge));
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    mesh.wait_link_up().await;
+
+    let a = mesh
+        .command(Command::GoProSet {
+            command: 1,
+            value: [1, 0, 0, 0],
+        })
+        .await;
+    common::assert_accepted(&a, "capture mode photo");
+    assert_eq!(a.mav_result, 255, "a GoPro answer is no MAV_RESULT");
+    let (h, m) = fake
+        .expect("the GOPRO_SET_REQUEST", |_, m| {
+            matches!(m, MavMessage::GOPRO_SET_REQUEST(_))
+        })
+        .await;
+    assert_eq!((h.system_id, h.component_id), (u32::from(VEHICLE), 191));
+    let MavMessage::GOPRO_SET_REQUEST(r) = m else {
+        unreachable!()
+    };
+    assert_eq!((r.target_system, r.target_component), (VEHICLE, 154));
+    assert_eq!(r.cmd_id, GoproCommand::GOPRO_COMMAND_CAPTURE_MODE);
+    assert_eq!(r.value, [1, 0, 0, 0]);
+
+    let a = mesh
+        .command(Command::GoProSet {
+            command: 1,
+            value: [9, 0, 0, 0],
+        })
+        .await;
+    assert_eq!(a.result(), Some(AckResult::Refused));
+    assert_eq!(a.reason(), Some(RefusalReason::Failed));
+    assert_eq!(a.detail.as_str(), "GoPro: request failed");
+
+    // Unanswered: refused after command_timeout, and never sent twice.
+    let a = mesh
+        .command(Command::GoProSet {
+            command: 2,
+            value: [1, 0, 0, 0],
+        })
+        .await;
+    assert_eq!(a.result(), Some(AckResult::Refused));
+    assert_eq!(a.reason(), Some(RefusalReason::Timeout));
+    assert_eq!(a.detail.as_str(), "no GOPRO_SET_RESPONSE from the gimbal");
+    fake.expect("the shutter request", |_, m| {
+        matches!(m, MavMessage::GOPRO_SET_REQUEST(r) if r.cmd_id == GoproCommand::GOPRO_COMMAND_SHUTTER)
+    })
+    .await;
+    let mut again = 0;
+    while let Ok((_, m)) = fake.received.try_recv() {
+        again += usize::from(matches!(m, MavMessage::GOPRO_SET_REQUEST(_)));
+    }
+    assert_eq!(again, 0, "no retransmission of a GoPro request");
+
+    // A command id the dialect has no GOPRO_COMMAND for cannot even be built.
+    assert!(skymesh_ipc_types::VehicleCommand::new(
+        1,
+        skymesh_ipc_types::CommandSource::Operator,
+        1,
+        &Command::GoProSet {
+            command: 20,
+            value: [0; 4],
+        },
+    )
+    .is_err());
+
+    let gopro = "skymesh_autopilot_gopro_responses_total";
+    assert_eq!(mesh.metric(gopro, "status=success"), 1.0);
+    assert_eq!(mesh.metric(gopro, "status=failed"), 1.0);
+    assert_eq!(
+        mesh.metric(
+            "skymesh_autopilot_mavlink_messages_sent_total",
+            "msg=GOPRO_SET_REQUEST"
+        ),
+        3.0
+    );
+    let cmds = "skymesh_autopilot_commands_total";
+    assert_eq!(mesh.metric(cmds, "kind=gopro_set,result=accepted"), 1.0);
+    assert_eq!(mesh.metric(cmds, "kind=gopro_set,result=refused"), 2.0);
+    mesh.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn gimbal_attitude_and_gopro_heartbeat_become_payload_state_until_they_stop() {
+    // One gimbal attitude (30° down, 20° right, vehicle frame: yaw then pitch, roll 0)
+    // and one GoPro heartbeat, sent when the gimbal stream is asked for; then silence.
+    let half_pitch = (-30f32).to_radians() / 2.0;
+    let half_yaw = 20f32.to_radians() / 2.0;
+    let q = [
+        half_pitch.cos() * half_yaw.cos(),
+        -half_pitch.sin() * half_yaw.sin(),
+        half_pitch.sin() * half_yaw.cos(),
+        half_pitch.cos() * half_yaw.sin(),
+    ];
+    let mut fake = Fake::start(
+        VEHICLE,
+        Box::new(move |m| match m {
+            MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 285.0 =>
+            {
+                vec![
+                    Reply::Now(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(
+                        GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+                            q,
+                            flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+                            ..Default::default()
+                        },
+                    )),
+                    Reply::Now(MavMessage::GOPRO_HEARTBEAT(GOPRO_HEARTBEAT_DATA {
+                        status: GoproHeartbeatStatus::GOPRO_HEARTBEAT_STATUS_CONNECTED,
+                        capture_mode: GoproCaptureMode::GOPRO_CAPTURE_MODE_VIDEO,
+                        flags: GoproHeartbeatFlags::GOPRO_FLAG_RECORDING,
+                    })),
+                ]
+            }
+            _ => Vec::new(),
+        }),
+    );
+    let mut mesh = Mesh::start_with(settings(fake.port)).await;
+    let (_, m) = fake
+        .expect("the gimbal stream request", |_, m| {
+            matches!(m, MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 285.0)
+        })
+        .await;
+    let MavMessage::COMMAND_LONG(c) = m else {
+        unreachable!()
+    };
+    assert_eq!(c.param2, 100_000.0, "10 Hz by default");
+    assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
+
+    let p = mesh
+        .wait_payload("a gimbal attitude", |p| p.is_gimbal_valid())
+        .await;
+    assert_eq!(p.vehicle_id, VEHICLE);
+    assert!((p.gimbal_pitch_deg + 30.0).abs() < 0.1, "{p:?}");
+    assert!((p.gimbal_yaw_deg - 20.0).abs() < 0.1, "{p:?}");
+    assert!(p.gimbal_roll_deg.abs() < 0.1, "{p:?}");
+    assert!(p.gimbal_stamp_ns > 0 && p.gimbal_stamp_ns <= p.header.stamp_ns);
+    let p = mesh
+        .wait_payload("the GoPro", |p| p.gopro_status() == GoProStatus::Connected)
+        .await;
+    assert_eq!((p.gopro_capture_mode, p.gopro_recording), (0, 1));
+
+    // Nothing more arrives: invalid after 2 s, disconnected after 3 s.
+    let p = mesh
+        .wait_payload("the gimbal invalid", |p| !p.is_gimbal_valid())
+        .await;
+    assert!(p.header.stamp_ns - p.gimbal_stamp_ns >= 2_000_000_000);
+    let p = mesh
+        .wait_payload("the GoPro disconnected", |p| {
+            p.gopro_status() == GoProStatus::Disconnected
+        })
+        .await;
+    assert!(p.header.stamp_ns - p.gopro_stamp_ns >= 3_000_000_000);
+    assert_eq!((p.gopro_capture_mode, p.gopro_recording), (255, 0));
+    let rx = "skymesh_autopilot_mavlink_messages_received_total";
+    assert!(mesh.metric(rx, "msg=GIMBAL_DEVICE_ATTITUDE_STATUS") >= 1.0);
+    assert!(mesh.metric(rx, "msg=GOPRO_HEARTBEAT") >= 1.0);
     mesh.stop().await;
 }

@@ -13,9 +13,16 @@
 //! number; for the rest the decoder still extracts the command so the handler
 //! can answer MAV_RESULT_UNSUPPORTED, which needs a hand-encoded COMMAND_ACK
 //! because the typed one cannot carry an unknown command either.
+//!
+//! The dialect is built without MAVLink 2 extension fields, so
+//! GIMBAL_DEVICE_ATTITUDE_STATUS, whose `delta_yaw`, `delta_yaw_velocity` and
+//! `gimbal_device_id` are extensions, is encoded here by hand
+//! ([`encode_gimbal_device_attitude_status`]); receivers without the extensions
+//! read the base fields and ignore the rest, as MAVLink 2 requires.
 
 use mavlink::dialects::ardupilotmega::{
     MavMessage, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
 };
 use mavlink::error::ParserError;
 use mavlink::{
@@ -276,6 +283,71 @@ pub fn encode_command_ack_raw(
         result as u8,
     ]);
     let crc = calculate_crc(&out[start + 1..], COMMAND_ACK_DATA::EXTRA_CRC);
+    out.extend_from_slice(&crc.to_le_bytes());
+}
+
+/// GIMBAL_DEVICE_ATTITUDE_STATUS with its MAVLink 2 extension fields.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GimbalDeviceAttitudeStatus {
+    /// The base fields (all the dialect knows).
+    pub base: GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
+    /// Extension: yaw relating the vehicle and earth frames (the vehicle's
+    /// heading), radians; NaN if unknown.
+    pub delta_yaw: f32,
+    /// Extension: the vehicle's yaw rate, rad/s; NaN if unknown.
+    pub delta_yaw_velocity: f32,
+    /// Extension: gimbal device id (1..=6) when the device shares the
+    /// manager's component id, as an autopilot-driven mount does; 0 otherwise.
+    pub gimbal_device_id: u8,
+}
+
+/// Bytes of GIMBAL_DEVICE_ATTITUDE_STATUS's extension fields on the wire.
+pub const GIMBAL_STATUS_EXTENSION_LEN: usize = 9;
+
+/// Append a MAVLink 2 GIMBAL_DEVICE_ATTITUDE_STATUS frame including its
+/// extension fields (after the base payload, in declaration order).
+pub fn encode_gimbal_device_attitude_status(
+    header: MavHeader,
+    status: &GimbalDeviceAttitudeStatus,
+    out: &mut Vec<u8>,
+) {
+    type D = GIMBAL_DEVICE_ATTITUDE_STATUS_DATA;
+    let mut payload = [0u8; D::ENCODED_LEN + GIMBAL_STATUS_EXTENSION_LEN];
+    // `ser` may report a zero-truncated length; the zeros are in `payload` anyway.
+    status
+        .base
+        .ser(MavlinkVersion::V2, &mut payload[..D::ENCODED_LEN]);
+    let ext = &mut payload[D::ENCODED_LEN..];
+    ext[0..4].copy_from_slice(&status.delta_yaw.to_le_bytes());
+    ext[4..8].copy_from_slice(&status.delta_yaw_velocity.to_le_bytes());
+    ext[8] = status.gimbal_device_id;
+    frame_v2(header, D::ID, D::EXTRA_CRC, &payload, out);
+}
+
+/// Append a MAVLink 2 frame around `payload`, with trailing zero bytes
+/// truncated (at least one byte is kept), as MAVLink 2 senders do.
+fn frame_v2(header: MavHeader, msg_id: u32, extra_crc: u8, payload: &[u8], out: &mut Vec<u8>) {
+    let len = payload
+        .iter()
+        .rposition(|&b| b != 0)
+        .map_or(1, |last| last + 1)
+        .min(payload.len());
+    let id = msg_id.to_le_bytes();
+    let start = out.len();
+    out.extend_from_slice(&[
+        STX_V2,
+        len as u8,
+        0,
+        0,
+        header.sequence,
+        header.system_id as u8,
+        header.component_id,
+        id[0],
+        id[1],
+        id[2],
+    ]);
+    out.extend_from_slice(&payload[..len]);
+    let crc = calculate_crc(&out[start + 1..], extra_crc);
     out.extend_from_slice(&crc.to_le_bytes());
 }
 

@@ -18,6 +18,13 @@ pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../deploy/vehicle-sim.
 /// MAVLink component id of the simulated autopilot (MAV_COMP_ID_AUTOPILOT1).
 pub const COMPONENT_ID: u8 = 1;
 
+/// MAVLink component id of the simulated gimbal (MAV_COMP_ID_GIMBAL), which
+/// bridges the GoPro as the Solo gimbal does: GOPRO_* messages come from it.
+pub const GIMBAL_COMPONENT_ID: u8 = 154;
+
+/// The gimbal sends GOPRO_HEARTBEAT once a second while a GoPro is fitted.
+pub const GOPRO_HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
+
 /// The physics tick: the model is always stepped with this fixed dt, and
 /// telemetry streams are evaluated once per tick, so no stream can run faster.
 pub const PHYSICS_HZ: u32 = 100;
@@ -73,6 +80,12 @@ pub struct RawConfig {
     pub default_attitude_hz: f64,
     /// Default rate of the other periodic telemetry per link, Hz (0 = off).
     pub default_stream_hz: f64,
+    /// Default GIMBAL_DEVICE_ATTITUDE_STATUS rate per link, Hz (0 = off).
+    pub gimbal_attitude_hz: f64,
+    /// Gimbal slew rate, degrees/s.
+    pub gimbal_slew_rate_dps: f64,
+    /// A GoPro HERO4 Black sits behind the gimbal's MAVLink GoPro bridge.
+    pub gopro: bool,
     /// Maximum simultaneous TCP clients (further connections are refused) or
     /// remembered UDP peers (the oldest is forgotten).
     pub max_clients: u32,
@@ -104,6 +117,9 @@ impl Default for RawConfig {
             velocity_timeout_s: 3.0,
             default_attitude_hz: 10.0,
             default_stream_hz: 1.0,
+            gimbal_attitude_hz: 10.0,
+            gimbal_slew_rate_dps: 90.0,
+            gopro: true,
             max_clients: 16,
         }
     }
@@ -144,6 +160,10 @@ pub struct StreamDefaults {
     /// SYS_STATUS, GPS_RAW_INT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, VFR_HUD,
     /// BATTERY_STATUS, EKF_STATUS_REPORT.
     pub telemetry: Option<Duration>,
+    /// GIMBAL_DEVICE_ATTITUDE_STATUS.
+    pub gimbal_attitude: Option<Duration>,
+    /// GOPRO_HEARTBEAT (1 s with a GoPro, `None` without).
+    pub gopro_heartbeat: Option<Duration>,
 }
 
 /// Validated settings: parsed addresses, durations and ranges.
@@ -247,6 +267,13 @@ impl RawConfig {
         let max_hz = f64::from(PHYSICS_HZ);
         range("default_attitude_hz", self.default_attitude_hz, 0.0, max_hz)?;
         range("default_stream_hz", self.default_stream_hz, 0.0, max_hz)?;
+        range("gimbal_attitude_hz", self.gimbal_attitude_hz, 0.0, max_hz)?;
+        range(
+            "gimbal_slew_rate_dps",
+            self.gimbal_slew_rate_dps,
+            1.0,
+            720.0,
+        )?;
         range("max_clients", f64::from(self.max_clients), 1.0, 1024.0)?;
         if self.land_speed_mps > self.max_descent_mps {
             return Err(ConfigError::Inconsistent(format!(
@@ -277,6 +304,8 @@ impl RawConfig {
             rtl_alt_m: self.rtl_alt_m,
             disarm_delay_s: self.disarm_delay_s,
             velocity_timeout_s: self.velocity_timeout_s,
+            gimbal_slew_rate: self.gimbal_slew_rate_dps.to_radians(),
+            gopro: self.gopro,
         };
         Ok(Settings {
             endpoint,
@@ -285,6 +314,8 @@ impl RawConfig {
             streams: StreamDefaults {
                 attitude: hz_to_interval(self.default_attitude_hz),
                 telemetry: hz_to_interval(self.default_stream_hz),
+                gimbal_attitude: hz_to_interval(self.gimbal_attitude_hz),
+                gopro_heartbeat: self.gopro.then_some(GOPRO_HEARTBEAT_INTERVAL),
             },
             max_clients: self.max_clients as usize,
         })
@@ -341,6 +372,26 @@ mod tests {
         );
         assert_eq!(s.system_id, 1);
         assert_eq!(s.streams.attitude, Some(Duration::from_millis(100)));
+        assert_eq!(s.streams.gimbal_attitude, Some(Duration::from_millis(100)));
+        assert_eq!(s.streams.gopro_heartbeat, Some(Duration::from_secs(1)));
+        assert!(s.vehicle.gopro);
+    }
+
+    #[test]
+    fn gopro_off_and_gimbal_keys() {
+        let s = RawConfig::from_toml("gopro = false\ngimbal_attitude_hz = 0\n")
+            .and_then(RawConfig::validate)
+            .expect("valid");
+        assert!(!s.vehicle.gopro);
+        assert_eq!(s.streams.gopro_heartbeat, None);
+        assert_eq!(s.streams.gimbal_attitude, None);
+        let e = RawConfig {
+            gimbal_slew_rate_dps: 0.0,
+            ..RawConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.to_string().contains("gimbal_slew_rate_dps"), "{e}");
     }
 
     #[test]
@@ -362,9 +413,10 @@ mod tests {
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
         assert!(close(s.vehicle.max_yaw_rate, m.max_yaw_rate));
         assert!(close(s.vehicle.initial_heading_rad, m.initial_heading_rad));
+        assert!(close(s.vehicle.gimbal_slew_rate, m.gimbal_slew_rate));
         let (mut a, mut b) = (s.vehicle, m);
-        (a.max_yaw_rate, a.initial_heading_rad) = (0.0, 0.0);
-        (b.max_yaw_rate, b.initial_heading_rad) = (0.0, 0.0);
+        (a.max_yaw_rate, a.initial_heading_rad, a.gimbal_slew_rate) = (0.0, 0.0, 0.0);
+        (b.max_yaw_rate, b.initial_heading_rad, b.gimbal_slew_rate) = (0.0, 0.0, 0.0);
         assert_eq!(a, b);
     }
 

@@ -17,7 +17,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::{debug, info};
 
 use crate::codec::{self, Inbound};
-use crate::config::{Settings, StreamDefaults, COMPONENT_ID, PHYSICS_HZ};
+use crate::config::{Settings, StreamDefaults, PHYSICS_HZ};
 use crate::handler::{Handler, Outgoing, StreamRequest};
 use crate::model::{Event, Vehicle};
 use crate::stats::{self, SimStats};
@@ -58,8 +58,9 @@ struct Link {
     /// Encoded frames for the link's I/O task; bounded, never awaited.
     tx: mpsc::Sender<Vec<u8>>,
     streams: StreamScheduler,
-    /// MAVLink sequence numbers are per link, as on ArduPilot's channels.
-    seq: u8,
+    /// MAVLink sequence numbers per sending component on this link (the
+    /// autopilot's and the gimbal's count separately, as two devices would).
+    seq: [u8; 256],
 }
 
 /// The simulation task's state.
@@ -72,6 +73,8 @@ pub(crate) struct Engine {
     stats: Arc<SimStats>,
     /// Physics steps taken; sim time is `steps × dt`.
     steps: u64,
+    /// The GoPro heartbeat changed; send one to every link after the replies.
+    gopro_changed: bool,
 }
 
 impl std::fmt::Debug for Engine {
@@ -101,6 +104,7 @@ impl Engine {
             stream_defaults: settings.streams,
             stats,
             steps: 0,
+            gopro_changed: false,
         }
     }
 
@@ -154,14 +158,16 @@ impl Engine {
             self.steps += 1;
         }
         self.broadcast_events();
+        self.flush_gopro_heartbeat();
         let now = self.sim_now();
         for link in self.links.values_mut() {
             for id in link.streams.due(now) {
-                if let Some(msg) = telemetry::build(id, &self.vehicle, self.system_id) {
-                    send(link, self.system_id, &Outgoing::Message(msg), &self.stats);
+                if let Some(out) = telemetry::build_outgoing(id, &self.vehicle, self.system_id) {
+                    send(link, self.system_id, &out, &self.stats);
                 }
             }
         }
+        self.stats.observe(&self.vehicle);
     }
 
     fn on_event(&mut self, ev: LinkEvent) {
@@ -175,7 +181,7 @@ impl Engine {
                         peer,
                         tx,
                         streams,
-                        seq: 0,
+                        seq: [0; 256],
                     },
                 );
             }
@@ -192,6 +198,9 @@ impl Engine {
         let resp = self.handler.handle(&mut self.vehicle, frame);
         if let Some(result) = resp.ack {
             self.stats.count_command(result);
+        }
+        if let Some((request, status)) = resp.gopro {
+            self.stats.count_gopro(request, status);
         }
         // Status texts raised while handling (e.g. the PreArm reason) go out
         // before the COMMAND_ACK, as on ArduPilot.
@@ -217,10 +226,28 @@ impl Engine {
         for reply in &resp.replies {
             send(link, self.system_id, reply, &self.stats);
         }
+        // A GoPro change is announced after its GOPRO_SET_RESPONSE.
+        self.flush_gopro_heartbeat();
+    }
+
+    /// The GoPro's state changed: the gimbal sends a GOPRO_HEARTBEAT at once
+    /// (besides its 1 Hz ones) to every link.
+    fn flush_gopro_heartbeat(&mut self) {
+        if !std::mem::take(&mut self.gopro_changed) {
+            return;
+        }
+        let Some(msg) = telemetry::gopro_heartbeat(&self.vehicle) else {
+            return;
+        };
+        let out = Outgoing::from_gimbal(msg);
+        for link in self.links.values_mut() {
+            send(link, self.system_id, &out, &self.stats);
+        }
     }
 
     /// Vehicle events go to every link: STATUSTEXT, and HOME_POSITION when
-    /// home changes (ArduPilot announces a new home unasked).
+    /// home changes (ArduPilot announces a new home unasked). A GoPro change
+    /// only marks the GoPro heartbeat due ([`Self::flush_gopro_heartbeat`]).
     fn broadcast_events(&mut self) {
         for ev in self.vehicle.take_events() {
             let msg: MavMessage = match ev {
@@ -234,6 +261,10 @@ impl Engine {
                         None => continue,
                     }
                 }
+                Event::GoProChanged => {
+                    self.gopro_changed = true;
+                    continue;
+                }
             };
             let out = Outgoing::Message(msg);
             for link in self.links.values_mut() {
@@ -245,17 +276,24 @@ impl Engine {
 
 /// Encode `out` for `link` and queue it without waiting.
 fn send(link: &mut Link, system_id: u8, out: &Outgoing, stats: &SimStats) {
+    let component = out.component();
+    let seq = &mut link.seq[usize::from(component)];
     let header = MavHeader {
         system_id: u32::from(system_id),
-        component_id: COMPONENT_ID,
-        sequence: link.seq,
+        component_id: component,
+        sequence: *seq,
     };
-    link.seq = link.seq.wrapping_add(1);
+    *seq = seq.wrapping_add(1);
     let mut buf = Vec::with_capacity(64);
     match out {
-        Outgoing::Message(msg) => codec::encode(header, msg, &mut buf),
+        Outgoing::Message(msg) | Outgoing::FromComponent { msg, .. } => {
+            codec::encode(header, msg, &mut buf)
+        }
         Outgoing::CommandAckRaw { command, result } => {
             codec::encode_command_ack_raw(header, *command, *result, &mut buf)
+        }
+        Outgoing::GimbalStatus(status) => {
+            codec::encode_gimbal_device_attitude_status(header, status, &mut buf)
         }
     }
     match link.tx.try_send(buf) {

@@ -4,7 +4,8 @@
 //!
 //! Layers, each usable on its own:
 //! - [`model`]: the vehicle, a pure point-mass simulation stepped with an
-//!   explicit `dt` (modes, arming, guidance, battery).
+//!   explicit `dt` (modes, arming, guidance, battery), its gimbal and the GoPro
+//!   behind the gimbal's MAVLink bridge.
 //! - [`handler`]: MAVLink message in → vehicle change + replies out (pure).
 //! - [`telemetry`] / [`streams`]: state → messages, and which are due when.
 //! - [`codec`]: MAVLink 1/2 framing over byte buffers (pure).

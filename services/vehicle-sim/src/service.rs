@@ -57,6 +57,22 @@ async fn export_stats(sim: Arc<SimStats>, stats: Stats, stop: tokio_util::sync::
         by_result("unsupported"),
         by_result("failed"),
     );
+    let gopro_recording = stats.gauge("skymesh_sim_gopro_recording", &[]);
+    let gopro_photos = stats.counter("skymesh_sim_gopro_photos_total", &[]);
+    let gopro = |request: &str, status: &str| {
+        stats.counter(
+            "skymesh_sim_gopro_requests_total",
+            &[("request", request), ("status", status)],
+        )
+    };
+    let (set_ok, set_failed, get_ok, get_failed) = (
+        gopro("set", "success"),
+        gopro("set", "failed"),
+        gopro("get", "success"),
+        gopro("get", "failed"),
+    );
+    let gimbal_pitch = stats.gauge("skymesh_sim_gimbal_pitch_degrees", &[]);
+    let gimbal_yaw = stats.gauge("skymesh_sim_gimbal_yaw_degrees", &[]);
     let mut prev = SimStatsSnapshot::default();
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {
@@ -85,6 +101,14 @@ async fn export_stats(sim: Arc<SimStats>, stats: Stats, stop: tokio_util::sync::
         );
         failed.add(now.commands_failed.saturating_sub(prev.commands_failed));
         clients.set(now.clients_connected as f64);
+        gopro_recording.set(now.gopro_recording as f64);
+        gopro_photos.add(now.gopro_photos.saturating_sub(prev.gopro_photos));
+        set_ok.add(now.gopro_set_success.saturating_sub(prev.gopro_set_success));
+        set_failed.add(now.gopro_set_failed.saturating_sub(prev.gopro_set_failed));
+        get_ok.add(now.gopro_get_success.saturating_sub(prev.gopro_get_success));
+        get_failed.add(now.gopro_get_failed.saturating_sub(prev.gopro_get_failed));
+        gimbal_pitch.set(now.gimbal_pitch_cdeg as f64 / 100.0);
+        gimbal_yaw.set(now.gimbal_yaw_cdeg as f64 / 100.0);
         prev = now;
         if stopping {
             return;

@@ -1,11 +1,15 @@
 //! Counters for metrics, shared by `Arc` between [`crate::run`] (which updates
 //! them) and whoever exports them (the service's stats sample, tests).
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 
-use mavlink::dialects::ardupilotmega::MavResult;
+use mavlink::dialects::ardupilotmega::{GoproRequestStatus, MavResult};
 
-/// Live counters. All are monotonic except `clients_connected`.
+use crate::handler::GoProRequest;
+use crate::model::Vehicle;
+
+/// Live counters. All are monotonic except `clients_connected` and the payload
+/// state (`gopro_recording`, `gimbal_*`).
 #[derive(Debug, Default)]
 pub struct SimStats {
     /// Frames decoded from clients.
@@ -34,6 +38,22 @@ pub struct SimStats {
     pub commands_unsupported: AtomicU64,
     /// … MAV_RESULT_FAILED (and any other result).
     pub commands_failed: AtomicU64,
+    /// 1 while the GoPro records (video or time lapse), else 0.
+    pub gopro_recording: AtomicU64,
+    /// Photos the GoPro has taken (single, burst and time-lapse frames).
+    pub gopro_photos: AtomicU64,
+    /// GOPRO_SET_REQUESTs answered SUCCESS.
+    pub gopro_set_success: AtomicU64,
+    /// GOPRO_SET_REQUESTs answered FAILED.
+    pub gopro_set_failed: AtomicU64,
+    /// GOPRO_GET_REQUESTs answered SUCCESS.
+    pub gopro_get_success: AtomicU64,
+    /// GOPRO_GET_REQUESTs answered FAILED.
+    pub gopro_get_failed: AtomicU64,
+    /// Gimbal pitch, centidegrees (negative down).
+    pub gimbal_pitch_cdeg: AtomicI64,
+    /// Gimbal yaw relative to the nose, centidegrees.
+    pub gimbal_yaw_cdeg: AtomicI64,
 }
 
 /// A plain copy of [`SimStats`] at one instant.
@@ -53,6 +73,14 @@ pub struct SimStatsSnapshot {
     pub commands_denied: u64,
     pub commands_unsupported: u64,
     pub commands_failed: u64,
+    pub gopro_recording: u64,
+    pub gopro_photos: u64,
+    pub gopro_set_success: u64,
+    pub gopro_set_failed: u64,
+    pub gopro_get_success: u64,
+    pub gopro_get_failed: u64,
+    pub gimbal_pitch_cdeg: i64,
+    pub gimbal_yaw_cdeg: i64,
 }
 
 impl SimStats {
@@ -73,6 +101,41 @@ impl SimStats {
             commands_denied: r(&self.commands_denied),
             commands_unsupported: r(&self.commands_unsupported),
             commands_failed: r(&self.commands_failed),
+            gopro_recording: r(&self.gopro_recording),
+            gopro_photos: r(&self.gopro_photos),
+            gopro_set_success: r(&self.gopro_set_success),
+            gopro_set_failed: r(&self.gopro_set_failed),
+            gopro_get_success: r(&self.gopro_get_success),
+            gopro_get_failed: r(&self.gopro_get_failed),
+            gimbal_pitch_cdeg: self.gimbal_pitch_cdeg.load(Ordering::Relaxed),
+            gimbal_yaw_cdeg: self.gimbal_yaw_cdeg.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Count one GoPro request answer.
+    pub(crate) fn count_gopro(&self, request: GoProRequest, status: GoproRequestStatus) {
+        let ok = status == GoproRequestStatus::GOPRO_REQUEST_SUCCESS;
+        let c = match (request, ok) {
+            (GoProRequest::Set, true) => &self.gopro_set_success,
+            (GoProRequest::Set, false) => &self.gopro_set_failed,
+            (GoProRequest::Get, true) => &self.gopro_get_success,
+            (GoProRequest::Get, false) => &self.gopro_get_failed,
+        };
+        add(c, 1);
+    }
+
+    /// Copy the payload state (gimbal attitude, GoPro) after a physics tick.
+    pub(crate) fn observe(&self, v: &Vehicle) {
+        let g = v.gimbal().attitude();
+        let cdeg = |rad: f64| (rad.to_degrees() * 100.0).round() as i64;
+        self.gimbal_pitch_cdeg
+            .store(cdeg(g.pitch), Ordering::Relaxed);
+        self.gimbal_yaw_cdeg.store(cdeg(g.yaw), Ordering::Relaxed);
+        if let Some(gopro) = v.gopro() {
+            self.gopro_recording
+                .store(u64::from(gopro.heartbeat().recording), Ordering::Relaxed);
+            self.gopro_photos
+                .store(gopro.photos_taken(), Ordering::Relaxed);
         }
     }
 

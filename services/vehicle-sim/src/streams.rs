@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mavlink::dialects::ardupilotmega::{
     MavDataStream, ATTITUDE_DATA, BATTERY_STATUS_DATA, EKF_STATUS_REPORT_DATA,
-    GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
-    SYS_STATUS_DATA, VFR_HUD_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, GLOBAL_POSITION_INT_DATA, GOPRO_HEARTBEAT_DATA,
+    GPS_RAW_INT_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 use mavlink::MessageData;
 
@@ -61,9 +61,11 @@ pub fn stream_group(stream: MavDataStream) -> &'static [u32] {
         }
         MavDataStream::MAV_DATA_STREAM_EXTRA1 => &[ATTITUDE_DATA::ID],
         MavDataStream::MAV_DATA_STREAM_EXTRA2 => &[VFR_HUD_DATA::ID],
-        MavDataStream::MAV_DATA_STREAM_EXTRA3 => {
-            &[BATTERY_STATUS_DATA::ID, EKF_STATUS_REPORT_DATA::ID]
-        }
+        MavDataStream::MAV_DATA_STREAM_EXTRA3 => &[
+            BATTERY_STATUS_DATA::ID,
+            EKF_STATUS_REPORT_DATA::ID,
+            GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
+        ],
         MavDataStream::MAV_DATA_STREAM_ALL => &[
             SYS_STATUS_DATA::ID,
             GPS_RAW_INT_DATA::ID,
@@ -73,6 +75,7 @@ pub fn stream_group(stream: MavDataStream) -> &'static [u32] {
             VFR_HUD_DATA::ID,
             BATTERY_STATUS_DATA::ID,
             EKF_STATUS_REPORT_DATA::ID,
+            GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
         ],
         // RAW_SENSORS, RC_CHANNELS, RAW_CONTROLLER: nothing the sim produces.
         _ => &[],
@@ -93,17 +96,21 @@ pub struct StreamScheduler {
 }
 
 impl StreamScheduler {
-    /// Default rates: HEARTBEAT 1 Hz, ATTITUDE and the rest from `defaults`;
-    /// everything due at `now` so a new link hears a heartbeat at once.
+    /// Default rates: HEARTBEAT 1 Hz, ATTITUDE, the gimbal attitude, the GoPro
+    /// heartbeat and the rest from `defaults`; everything due at `now` so a new
+    /// link hears a heartbeat at once.
     pub fn new(defaults: &StreamDefaults, now: Duration) -> Self {
         let mut d = BTreeMap::new();
         d.insert(HEARTBEAT_DATA::ID, Some(Duration::from_secs(1)));
-        d.insert(ATTITUDE_DATA::ID, defaults.attitude);
         for id in stream_group(MavDataStream::MAV_DATA_STREAM_ALL) {
-            if *id != ATTITUDE_DATA::ID {
-                d.insert(*id, defaults.telemetry);
-            }
+            d.insert(*id, defaults.telemetry);
         }
+        d.insert(ATTITUDE_DATA::ID, defaults.attitude);
+        d.insert(
+            GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
+            defaults.gimbal_attitude,
+        );
+        d.insert(GOPRO_HEARTBEAT_DATA::ID, defaults.gopro_heartbeat);
         let streams = d
             .iter()
             .map(|(id, interval)| {
@@ -189,6 +196,8 @@ mod tests {
         StreamDefaults {
             attitude: Some(Duration::from_millis(100)),
             telemetry: Some(Duration::from_secs(1)),
+            gimbal_attitude: Some(Duration::from_millis(100)),
+            gopro_heartbeat: Some(Duration::from_secs(1)),
         }
     }
 
@@ -288,6 +297,32 @@ mod tests {
         assert_eq!(
             IntervalRequest::from_param(10_000.0),
             Some(IntervalRequest::Every(Duration::from_millis(10)))
+        );
+    }
+
+    #[test]
+    fn gimbal_attitude_and_gopro_heartbeat_defaults() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        let gimbal = GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID;
+        assert_eq!(count(&mut s.clone(), gimbal, Duration::ZERO, 10), 100);
+        assert_eq!(
+            count(&mut s.clone(), GOPRO_HEARTBEAT_DATA::ID, Duration::ZERO, 10),
+            10
+        );
+        s.set_interval(
+            gimbal,
+            IntervalRequest::Every(Duration::from_millis(50)),
+            Duration::ZERO,
+        );
+        assert_eq!(count(&mut s, gimbal, Duration::ZERO, 2), 40);
+        let no_gopro = StreamDefaults {
+            gopro_heartbeat: None,
+            ..defaults()
+        };
+        let mut s = StreamScheduler::new(&no_gopro, Duration::ZERO);
+        assert_eq!(
+            count(&mut s, GOPRO_HEARTBEAT_DATA::ID, Duration::ZERO, 5),
+            0
         );
     }
 

@@ -3,20 +3,29 @@
 //! one).
 
 use mavlink::dialects::ardupilotmega::{
-    EkfStatusFlags, GpsFixType, MavAutopilot, MavBatteryFunction, MavBatteryType, MavCmd,
+    EkfStatusFlags, GimbalDeviceErrorFlags, GimbalDeviceFlags, GoproHeartbeatFlags,
+    GoproHeartbeatStatus, GpsFixType, MavAutopilot, MavBatteryFunction, MavBatteryType, MavCmd,
     MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity, MavState,
     MavSysStatusSensor, MavType, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA,
-    COMMAND_ACK_DATA, EKF_STATUS_REPORT_DATA, GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA,
-    HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
-    VFR_HUD_DATA,
+    COMMAND_ACK_DATA, EKF_STATUS_REPORT_DATA, GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
+    GLOBAL_POSITION_INT_DATA, GOPRO_HEARTBEAT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA,
+    HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 use mavlink::MessageData;
 
+use crate::codec::GimbalDeviceAttitudeStatus;
+use crate::handler::Outgoing;
 use crate::model::Vehicle;
 
+/// GIMBAL_DEVICE_ATTITUDE_STATUS.gimbal_device_id: the autopilot drives the
+/// mount, so device and manager share component 1 and the device is numbered
+/// (ArduPilot: mount instance + 1).
+pub const GIMBAL_DEVICE_ID: u8 = 1;
+
 /// Message ids [`build`] can produce: the only ones SET_MESSAGE_INTERVAL and
-/// REQUEST_MESSAGE accept.
-pub const PRODUCIBLE: [u32; 11] = [
+/// REQUEST_MESSAGE accept. (GOPRO_HEARTBEAT is the gimbal's, not the
+/// autopilot's: it is always sent at 1 Hz and cannot be asked for.)
+pub const PRODUCIBLE: [u32; 12] = [
     HEARTBEAT_DATA::ID,
     SYS_STATUS_DATA::ID,
     GPS_RAW_INT_DATA::ID,
@@ -28,6 +37,7 @@ pub const PRODUCIBLE: [u32; 11] = [
     AUTOPILOT_VERSION_DATA::ID,
     EKF_STATUS_REPORT_DATA::ID,
     HOME_POSITION_DATA::ID,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
 ];
 
 /// ArduCopter 4.5.7, FIRMWARE_VERSION_TYPE_OFFICIAL.
@@ -51,7 +61,23 @@ pub fn build(id: u32, v: &Vehicle, system_id: u8) -> Option<MavMessage> {
         AUTOPILOT_VERSION_DATA::ID => Some(autopilot_version(system_id)),
         EKF_STATUS_REPORT_DATA::ID => Some(ekf_status_report(v)),
         HOME_POSITION_DATA::ID => home_position(v),
+        GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => Some(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(
+            gimbal_device_attitude_status(v).base,
+        )),
         _ => None,
+    }
+}
+
+/// Message `id` as it goes on the wire: GIMBAL_DEVICE_ATTITUDE_STATUS with its
+/// extension fields, GOPRO_HEARTBEAT from the gimbal (`None` without a GoPro),
+/// the rest as [`build`] makes them, from the autopilot.
+pub fn build_outgoing(id: u32, v: &Vehicle, system_id: u8) -> Option<Outgoing> {
+    match id {
+        GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => {
+            Some(Outgoing::GimbalStatus(gimbal_device_attitude_status(v)))
+        }
+        GOPRO_HEARTBEAT_DATA::ID => gopro_heartbeat(v).map(Outgoing::from_gimbal),
+        _ => build(id, v, system_id).map(Outgoing::Message),
     }
 }
 
@@ -304,6 +330,55 @@ fn home_position(v: &Vehicle) -> Option<MavMessage> {
         z: ned.z as f32,
         q: [1.0, 0.0, 0.0, 0.0],
         ..HOME_POSITION_DATA::DEFAULT
+    }))
+}
+
+/// The gimbal attitude, as ArduPilot reports the mount it drives: yaw in the
+/// vehicle frame (relative to the nose), delta_yaw = the vehicle's heading.
+pub fn gimbal_device_attitude_status(v: &Vehicle) -> GimbalDeviceAttitudeStatus {
+    let g = v.gimbal().attitude();
+    let w = g.angular_velocity();
+    let a = v.attitude();
+    // Euler yaw rate from the body rates.
+    let (sr, cr) = a.roll.sin_cos();
+    let heading_rate = (a.rates.y * sr + a.rates.z * cr) / a.pitch.cos();
+    GimbalDeviceAttitudeStatus {
+        base: GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+            time_boot_ms: time_boot_ms(v),
+            q: g.quaternion(),
+            angular_velocity_x: w.x as f32,
+            angular_velocity_y: w.y as f32,
+            angular_velocity_z: w.z as f32,
+            failure_flags: GimbalDeviceErrorFlags::empty(),
+            flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+            target_system: 0,
+            target_component: 0,
+        },
+        delta_yaw: a.yaw as f32,
+        delta_yaw_velocity: if heading_rate.is_finite() {
+            heading_rate as f32
+        } else {
+            f32::NAN
+        },
+        gimbal_device_id: GIMBAL_DEVICE_ID,
+    }
+}
+
+/// GOPRO_HEARTBEAT (sent by the gimbal); `None` when no GoPro is fitted.
+pub fn gopro_heartbeat(v: &Vehicle) -> Option<MavMessage> {
+    let hb = v.gopro()?.heartbeat();
+    Some(MavMessage::GOPRO_HEARTBEAT(GOPRO_HEARTBEAT_DATA {
+        status: if hb.powered {
+            GoproHeartbeatStatus::GOPRO_HEARTBEAT_STATUS_CONNECTED
+        } else {
+            GoproHeartbeatStatus::GOPRO_HEARTBEAT_STATUS_DISCONNECTED
+        },
+        capture_mode: hb.capture_mode,
+        flags: if hb.recording {
+            GoproHeartbeatFlags::GOPRO_FLAG_RECORDING
+        } else {
+            GoproHeartbeatFlags::empty()
+        },
     }))
 }
 

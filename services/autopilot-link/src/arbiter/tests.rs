@@ -209,6 +209,43 @@ fn stale_setpoints_are_refused_and_a_stopped_stream_is_braked() {
 }
 
 #[test]
+fn gopro_set_needs_payload_authority_only_and_leaves_the_flight_alone() {
+    let mut a = Arbiter::new(settings());
+    // In the air (unknown position counts as flying) with a velocity stream running.
+    let v = VehicleView {
+        armed: true,
+        ..VehicleView::default()
+    };
+    let gopro = Command::GoProSet {
+        command: 1,
+        value: [1, 0, 0, 0],
+    };
+    a.decide(S, &sample(ShotEngine, vel(2.0, 0.0, 0.0), S), &v);
+    // A lower-ranked source holds no flight authority, but takes payload authority.
+    let d = a.decide(S + 100 * MS, &sample(Imc, gopro, S + 100 * MS), &v);
+    assert_eq!(executed(&d), gopro, "no envelope change, no in-air refusal");
+    assert_eq!(d.result(), AckResult::Accepted);
+    let st = a.authority().state(1);
+    assert_eq!((st.flight(), st.payload()), (Some(ShotEngine), Some(Imc)));
+    // The velocity stream was not ended by it: its stale brake is still due.
+    assert_eq!(
+        a.poll(S + 500 * MS),
+        [Effect::StaleBrake { source: ShotEngine }]
+    );
+    // The payload holder's priority decides between GoPro senders.
+    let d = a.decide(2 * S, &sample(Vision, gopro, 2 * S), &v);
+    assert_eq!(
+        refusal(&d),
+        (RefusalReason::NoAuthority, "payload authority held by imc")
+    );
+    let d = a.decide(2 * S, &sample(ShotEngine, gopro, 2 * S), &v);
+    assert_eq!(executed(&d), gopro);
+    assert_eq!(authority_changes(&d.effects), [AuthorityChange::Preempted]);
+    assert_eq!(a.authority().state(1).payload(), Some(ShotEngine));
+    assert_eq!(a.authority().state(1).flight(), Some(ShotEngine));
+}
+
+#[test]
 fn emergency_stop_from_anyone_blocks_everyone_but_safety_until_it_releases() {
     let mut a = Arbiter::new(settings());
     let v = flying(0.0, 0.0, [2.0, 0.0, 0.0]);

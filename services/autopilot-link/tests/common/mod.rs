@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::{run_with, Detached, Settings};
 use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, RefusalReason, ServiceId, ServiceStats,
-    VehicleCommand, VehicleState, VehicleStatus,
+    topics, AckResult, Command, CommandAck, CommandSource, PayloadState, RefusalReason, ServiceId,
+    ServiceStats, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, CancellationToken, Domain, Publisher, Stats, Subscriber};
 use tokio::task::JoinHandle;
@@ -41,6 +41,7 @@ pub struct Mesh {
     pub acks: Subscriber<CommandAck>,
     pub state: Subscriber<VehicleState>,
     pub status: Subscriber<VehicleStatus>,
+    pub payload: Subscriber<PayloadState>,
     pub next_command_id: u32,
 }
 
@@ -86,6 +87,9 @@ impl Mesh {
         let status = tool
             .subscriber::<VehicleStatus>(&topics::vehicle_status(VEHICLE))
             .expect("status subscriber");
+        let payload = tool
+            .subscriber::<PayloadState>(&topics::vehicle_payload(VEHICLE))
+            .expect("payload subscriber");
         let commands = tool
             .publisher::<VehicleCommand>(&topics::vehicle_command(VEHICLE))
             .expect("command publisher");
@@ -116,6 +120,7 @@ impl Mesh {
             acks,
             state,
             status,
+            payload,
             next_command_id: 1,
         }
     }
@@ -129,7 +134,13 @@ impl Mesh {
             .expect("autopilot-link task")
             .expect("autopilot-link result");
         let domain = self.domain.clone();
-        drop((self.commands, self.acks, self.state, self.status));
+        drop((
+            self.commands,
+            self.acks,
+            self.state,
+            self.status,
+            self.payload,
+        ));
         domain.remove_leftover_files();
     }
 
@@ -146,6 +157,23 @@ impl Mesh {
                 Some(s) if pred(&s) => return s,
                 Some(_) => {}
                 None => panic!("no VehicleStatus with {what} within {PATIENCE:?}"),
+            }
+        }
+    }
+
+    /// Waits for a payload sample matching `pred` (on change and at 1 Hz).
+    pub async fn wait_payload(
+        &mut self,
+        what: &str,
+        pred: impl Fn(&PayloadState) -> bool,
+    ) -> PayloadState {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.payload.recv_timeout(left).await.expect("payload") {
+                Some(p) if pred(&p) => return p,
+                Some(_) => {}
+                None => panic!("no PayloadState with {what} within {PATIENCE:?}"),
             }
         }
     }

@@ -2,7 +2,8 @@
 
 use super::*;
 use mavlink::dialects::ardupilotmega::{
-    MavAutopilot, MavCmd, MavModeFlag, MavState, MavType, COMMAND_ACK_DATA, HEARTBEAT_DATA,
+    GimbalDeviceFlags, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType, COMMAND_ACK_DATA,
+    HEARTBEAT_DATA,
 };
 
 fn hdr(seq: u8) -> MavHeader {
@@ -280,4 +281,71 @@ fn random_bytes_never_panic_and_a_later_frame_survives() {
         );
         assert_eq!(d.buffered(), 0, "round {round}: every byte consumed");
     }
+}
+
+fn gimbal_status(delta_yaw: f32, device: u8) -> GimbalDeviceAttitudeStatus {
+    GimbalDeviceAttitudeStatus {
+        base: GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+            time_boot_ms: 1234,
+            q: [0.9, -0.1, -0.2, 0.3],
+            flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+            ..GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::DEFAULT
+        },
+        delta_yaw,
+        delta_yaw_velocity: -0.25,
+        gimbal_device_id: device,
+    }
+}
+
+#[test]
+fn gimbal_status_carries_its_extension_fields() {
+    type D = GIMBAL_DEVICE_ATTITUDE_STATUS_DATA;
+    let status = gimbal_status(1.5, 1);
+    let mut frame = Vec::new();
+    encode_gimbal_device_attitude_status(hdr(3), &status, &mut frame);
+    // Full payload: nothing to truncate, the device id (last byte) is 1.
+    assert_eq!(
+        usize::from(frame[1]),
+        D::ENCODED_LEN + GIMBAL_STATUS_EXTENSION_LEN
+    );
+    let ext = &frame[HEADER_V2 + D::ENCODED_LEN..];
+    assert_eq!(ext[0..4], 1.5f32.to_le_bytes());
+    assert_eq!(ext[4..8], (-0.25f32).to_le_bytes());
+    assert_eq!(ext[8], 1);
+    assert_eq!(
+        frame.len(),
+        HEADER_V2 + usize::from(frame[1]) + CHECKSUM_LEN
+    );
+
+    // A decoder without the extensions reads the base fields and the checksum.
+    let mut d = FrameDecoder::new();
+    d.push(&frame);
+    let (ok, bad) = drain(&mut d);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert_eq!(
+        ok,
+        vec![Inbound::Message {
+            header: hdr(3),
+            version: MavlinkVersion::V2,
+            msg: MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(status.base.clone()),
+        }]
+    );
+}
+
+#[test]
+fn gimbal_status_truncates_trailing_zeros_across_the_extensions() {
+    let mut zero = gimbal_status(0.0, 0);
+    zero.delta_yaw_velocity = 0.0;
+    let mut frame = Vec::new();
+    encode_gimbal_device_attitude_status(hdr(0), &zero, &mut frame);
+    // The last non-zero base byte is the flags' low byte (offset 36).
+    assert_eq!(frame[1], 37);
+    let mut d = FrameDecoder::new();
+    d.push(&frame);
+    let (ok, bad) = drain(&mut d);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert_eq!(
+        msgs(&ok),
+        vec![MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(zero.base)]
+    );
 }

@@ -6,16 +6,17 @@
 #![allow(deprecated)]
 
 use mavlink::dialects::ardupilotmega::{
-    MavCmd, MavFrame, MavMessage, MavModeFlag, MavResult, MavSeverity, AUTOPILOT_VERSION_DATA,
+    MavCmd, MavFrame, MavModeFlag, MavResult, MavSeverity, AUTOPILOT_VERSION_DATA,
     COMMAND_INT_DATA, COMMAND_LONG_DATA, HOME_POSITION_DATA,
 };
 use mavlink::MessageData;
 use nalgebra::Vector3;
 use tracing::{debug, info, warn};
 
+use super::gimbal;
 use super::setpoint::global_to_ned;
 use super::{set_mode, Outgoing, Response, StreamRequest};
-use crate::model::{FlightMode, MountTarget, SpeedKind, Vehicle};
+use crate::model::{FlightMode, SpeedKind, Vehicle};
 use crate::streams::IntervalRequest;
 use crate::telemetry;
 
@@ -114,8 +115,8 @@ pub(super) fn execute(v: &mut Vehicle, system_id: u8, cmd: &Cmd, resp: &mut Resp
     )));
     resp.ack = Some(result);
     // ArduPilot sends the ACK first, then the requested message.
-    if let Some(msg) = extra {
-        resp.replies.push(Outgoing::Message(msg));
+    if let Some(out) = extra {
+        resp.replies.push(out);
     }
 }
 
@@ -124,7 +125,7 @@ fn run(
     system_id: u8,
     cmd: &Cmd,
     resp: &mut Response,
-    extra: &mut Option<MavMessage>,
+    extra: &mut Option<Outgoing>,
 ) -> MavResult {
     use MavResult::*;
     let [p1, p2, p3, p4] = cmd.p;
@@ -213,26 +214,8 @@ fn run(
                 _ => MAV_RESULT_FAILED,
             }
         }
-        MavCmd::MAV_CMD_DO_MOUNT_CONTROL => {
-            v.payload_mut().mount = Some(MountTarget {
-                pitch_deg: f64::from(p1),
-                roll_deg: f64::from(p2),
-                yaw_deg: f64::from(p3),
-                pitch_rate_dps: f64::NAN,
-                yaw_rate_dps: f64::NAN,
-            });
-            MAV_RESULT_ACCEPTED
-        }
-        MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => {
-            v.payload_mut().mount = Some(MountTarget {
-                pitch_deg: f64::from(p1),
-                roll_deg: 0.0,
-                yaw_deg: f64::from(p2),
-                pitch_rate_dps: f64::from(p3),
-                yaw_rate_dps: f64::from(p4),
-            });
-            MAV_RESULT_ACCEPTED
-        }
+        MavCmd::MAV_CMD_DO_MOUNT_CONTROL => gimbal::mount_control(v, cmd),
+        MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => gimbal::manager_pitchyaw(v, cmd),
         MavCmd::MAV_CMD_IMAGE_START_CAPTURE => {
             // param3 = total images (0 = until stopped), param2 = interval.
             let payload = v.payload_mut();
@@ -351,13 +334,13 @@ fn request_message(
     v: &Vehicle,
     system_id: u8,
     id_param: f32,
-    extra: &mut Option<MavMessage>,
+    extra: &mut Option<Outgoing>,
 ) -> MavResult {
     let id = id_param as u32;
     if !(id_param >= 0.0 && telemetry::PRODUCIBLE.contains(&id)) {
         return MavResult::MAV_RESULT_DENIED;
     }
-    match telemetry::build(id, v, system_id) {
+    match telemetry::build_outgoing(id, v, system_id) {
         Some(msg) => {
             *extra = Some(msg);
             MavResult::MAV_RESULT_ACCEPTED

@@ -6,14 +6,18 @@
 #![allow(deprecated)]
 
 mod command;
+mod gimbal;
+mod gopro;
 mod setpoint;
 
-use mavlink::dialects::ardupilotmega::{MavDataStream, MavMessage, MavModeFlag, MavResult};
+use mavlink::dialects::ardupilotmega::{
+    GoproRequestStatus, MavDataStream, MavMessage, MavModeFlag, MavResult,
+};
 use mavlink::Message;
 use tracing::{debug, info};
 
-use crate::codec::Inbound;
-use crate::config::COMPONENT_ID;
+use crate::codec::{GimbalDeviceAttitudeStatus, Inbound};
+use crate::config::{COMPONENT_ID, GIMBAL_COMPONENT_ID};
 use crate::model::Vehicle;
 use crate::streams::IntervalRequest;
 
@@ -29,8 +33,16 @@ const SET_MODE_ACK_COMMAND: u16 = 11;
 // it would add an allocation per frame and save nothing.
 #[allow(clippy::large_enum_variant)]
 pub enum Outgoing {
-    /// A dialect message.
+    /// A dialect message from the autopilot (component 1).
     Message(MavMessage),
+    /// A dialect message from another component of the vehicle, e.g. the
+    /// gimbal's GoPro bridge ([`GIMBAL_COMPONENT_ID`]).
+    FromComponent {
+        /// Sending component id.
+        component: u8,
+        /// The message.
+        msg: MavMessage,
+    },
     /// A COMMAND_ACK for a command number the dialect cannot represent.
     CommandAckRaw {
         /// The raw command number.
@@ -38,6 +50,36 @@ pub enum Outgoing {
         /// The result.
         result: MavResult,
     },
+    /// GIMBAL_DEVICE_ATTITUDE_STATUS with its extension fields, from the
+    /// autopilot (which drives the mount, as ArduPilot does).
+    GimbalStatus(GimbalDeviceAttitudeStatus),
+}
+
+impl Outgoing {
+    /// The component the frame is sent from.
+    pub fn component(&self) -> u8 {
+        match self {
+            Outgoing::FromComponent { component, .. } => *component,
+            _ => COMPONENT_ID,
+        }
+    }
+
+    /// A message from the gimbal (the GoPro bridge).
+    pub fn from_gimbal(msg: MavMessage) -> Self {
+        Outgoing::FromComponent {
+            component: GIMBAL_COMPONENT_ID,
+            msg,
+        }
+    }
+}
+
+/// Which GoPro request was answered, for statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GoProRequest {
+    /// GOPRO_SET_REQUEST.
+    Set,
+    /// GOPRO_GET_REQUEST.
+    Get,
 }
 
 /// A change to the sender link's telemetry schedule.
@@ -70,6 +112,8 @@ pub struct Response {
     pub streams: Vec<StreamRequest>,
     /// The COMMAND_ACK result, if one was sent (for statistics).
     pub ack: Option<MavResult>,
+    /// The GoPro request answered and its status, if any (for statistics).
+    pub gopro: Option<(GoProRequest, GoproRequestStatus)>,
 }
 
 impl Response {
@@ -96,6 +140,13 @@ impl Handler {
     fn for_us(&self, target_system: u8, target_component: Option<u8>) -> bool {
         (target_system == 0 || target_system == self.system_id)
             && target_component.is_none_or(|c| c == 0 || c == COMPONENT_ID)
+    }
+
+    /// GoPro requests are for the gimbal (component 154, or 0 = every
+    /// component) of this system (or 0, broadcast).
+    fn for_gimbal(&self, target_system: u8, target_component: u8) -> bool {
+        (target_system == 0 || target_system == self.system_id)
+            && (target_component == 0 || target_component == GIMBAL_COMPONENT_ID)
     }
 
     /// Handle one inbound frame.
@@ -165,6 +216,16 @@ impl Handler {
                         rate_hz: d.req_message_rate,
                         start: d.start_stop != 0,
                     });
+                }
+            }
+            MavMessage::GOPRO_SET_REQUEST(d) => {
+                if self.for_gimbal(d.target_system, d.target_component) {
+                    gopro::set_request(v, d, from, resp);
+                }
+            }
+            MavMessage::GOPRO_GET_REQUEST(d) => {
+                if self.for_gimbal(d.target_system, d.target_component) {
+                    gopro::get_request(v, d, from, resp);
                 }
             }
             // Ground stations' heartbeats and everything else need no answer.

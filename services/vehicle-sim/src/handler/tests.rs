@@ -13,6 +13,8 @@ use nalgebra::Vector3;
 
 use crate::model::{FlightMode, VehicleParams};
 
+mod payload;
+
 const GCS: MavHeader = MavHeader {
     system_id: 255,
     component_id: 190,

@@ -1,14 +1,16 @@
-//! Inputs to the model: arming, modes, takeoff, guided setpoints, speed, yaw
-//! and ROI. Each either changes the vehicle or says why it refused, in
+//! Inputs to the model: arming, modes, takeoff, guided setpoints, speed, yaw,
+//! ROI, gimbal targets and GoPro settings. Each either changes the vehicle or says why it refused, in
 //! ArduCopter's terms; mapping refusals to MAV_RESULT is the handler's job.
 
-use mavlink::dialects::ardupilotmega::MavSeverity;
+use mavlink::dialects::ardupilotmega::{GoproCommand, MavSeverity};
 use nalgebra::{Vector2, Vector3};
 
 use super::geo::wrap_pi;
+use super::gimbal::GimbalTarget;
+use super::gopro::GoProRefusal;
 use super::guidance::Guidance;
 use super::yaw::YawMode;
-use super::{FlightMode, SpeedOverride, Vehicle};
+use super::{Event, FlightMode, SpeedOverride, Vehicle};
 
 /// Farther than this from a position target (with no yaw given), the vehicle
 /// turns to face it (ArduCopter WP_YAW_BEHAVIOR 2, "face next waypoint").
@@ -366,6 +368,33 @@ impl Vehicle {
             Some(p) => YawMode::Face(p),
             None => YawMode::Hold,
         };
+    }
+
+    /// Point the gimbal (DO_GIMBAL_MANAGER_PITCHYAW, DO_MOUNT_CONTROL). While an
+    /// ROI is set the ROI wins: the target is dropped and `false` says so (the
+    /// handler still records the request in [`super::Payload::mount`]). After the
+    /// ROI is cleared the gimbal holds where it points until the next target.
+    pub fn point_gimbal(&mut self, target: GimbalTarget) -> bool {
+        if self.roi.is_some() {
+            return false;
+        }
+        self.gimbal.set_target(target);
+        true
+    }
+
+    /// GOPRO_SET_REQUEST; `None` when no GoPro is fitted. A change to what the
+    /// GoPro heartbeat reports queues [`Event::GoProChanged`].
+    pub fn gopro_set(
+        &mut self,
+        command: GoproCommand,
+        value: [u8; 4],
+    ) -> Option<Result<(), GoProRefusal>> {
+        let gopro = self.gopro.as_mut()?;
+        Some(gopro.set(command, value).map(|changed| {
+            if changed {
+                self.events.push(Event::GoProChanged);
+            }
+        }))
     }
 
     /// DO_SET_HOME: move home (RTL's destination) to a local NED point.

@@ -10,6 +10,8 @@ mod battery;
 mod commands;
 pub mod control;
 pub mod geo;
+pub mod gimbal;
+pub mod gopro;
 mod guidance;
 mod mode;
 mod params;
@@ -25,6 +27,8 @@ pub use commands::{
 };
 pub use control::Attitude;
 pub use geo::{GeoPoint, LocalFrame};
+pub use gimbal::{Gimbal, GimbalAttitude, GimbalTarget, YawFrame};
+pub use gopro::{GoPro, GoProHeartbeat, GoProRefusal};
 pub use mode::FlightMode;
 pub use params::VehicleParams;
 pub use payload::{MountTarget, Payload};
@@ -65,6 +69,8 @@ pub enum Event {
     },
     /// Home was set or moved (ArduPilot then sends HOME_POSITION).
     HomeChanged,
+    /// What the GoPro heartbeat reports changed (the bridge then sends one at once).
+    GoProChanged,
 }
 
 /// DO_CHANGE_SPEED overrides; cleared on every mode change, as ArduCopter
@@ -102,6 +108,9 @@ pub struct Vehicle {
     landed_armed_s: f64,
     battery: Battery,
     payload: Payload,
+    gimbal: Gimbal,
+    /// `None` when no GoPro is fitted (`VehicleParams::gopro` false).
+    gopro: Option<GoPro>,
     events: Vec<Event>,
 }
 
@@ -139,6 +148,8 @@ impl Vehicle {
             landed_armed_s: 0.0,
             battery,
             payload: Payload::default(),
+            gimbal: Gimbal::new(params.gimbal_slew_rate),
+            gopro: params.gopro.then(GoPro::default),
             events: Vec::new(),
             params,
         };
@@ -167,6 +178,15 @@ impl Vehicle {
         self.thrust = thrust;
         self.att = update_attitude(&self.att, roll_t, pitch_t, yaw, dt);
         self.battery.step(self.current_draw(), dt);
+        let aim = self
+            .roi
+            .map(|roi| gimbal::aim_at(&self.pos, &roi, self.att.yaw));
+        self.gimbal.step(self.att.yaw, aim, dt);
+        if let Some(gopro) = &mut self.gopro {
+            if gopro.step(dt) {
+                self.events.push(Event::GoProChanged);
+            }
+        }
     }
 
     /// GPS fix and EKF readiness follow sim time; the EKF setting its origin
@@ -389,6 +409,14 @@ impl Vehicle {
     /// Current region of interest, local NED.
     pub fn roi(&self) -> Option<Vector3<f64>> {
         self.roi
+    }
+    /// The camera gimbal.
+    pub fn gimbal(&self) -> &Gimbal {
+        &self.gimbal
+    }
+    /// The GoPro, if one is fitted.
+    pub fn gopro(&self) -> Option<&GoPro> {
+        self.gopro.as_ref()
     }
     /// Model parameters.
     pub fn params(&self) -> &VehicleParams {

@@ -40,6 +40,10 @@ pub struct VehicleParams {
     pub disarm_delay_s: f64,
     /// Guided velocity / yaw-rate setpoint lifetime, s.
     pub velocity_timeout_s: f64,
+    /// Gimbal slew rate, rad/s.
+    pub gimbal_slew_rate: f64,
+    /// A GoPro sits on the gimbal (behind its MAVLink GoPro bridge).
+    pub gopro: bool,
 }
 
 impl Default for VehicleParams {
@@ -67,6 +71,8 @@ impl Default for VehicleParams {
             rtl_alt_m: 15.0,
             disarm_delay_s: 10.0,
             velocity_timeout_s: 3.0,
+            gimbal_slew_rate: 90.0_f64.to_radians(),
+            gopro: true,
         }
     }
 }

@@ -1,10 +1,11 @@
-//! Payload state the simulator only records: servo outputs, mount/gimbal
-//! targets and camera counters. There is no camera or gimbal to move; tests and
-//! operators read these back to see what a client asked for.
+//! Payload requests the simulator records: servo outputs, the last mount/gimbal
+//! target asked for and MAVLink camera-protocol counters; tests and operators
+//! read these back to see what a client asked for. The gimbal that moves is
+//! [`super::Gimbal`], the GoPro behind the gimbal's bridge [`super::GoPro`].
 
 use std::collections::BTreeMap;
 
-/// The last gimbal/mount target a client set.
+/// The last gimbal/mount target a client asked for (also while an ROI overrides it).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct MountTarget {
     /// Pitch, degrees (negative down).

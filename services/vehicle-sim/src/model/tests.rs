@@ -17,7 +17,7 @@ fn texts(v: &mut Vehicle) -> Vec<String> {
         .into_iter()
         .filter_map(|e| match e {
             Event::Text { text, .. } => Some(text),
-            Event::HomeChanged => None,
+            Event::HomeChanged | Event::GoProChanged => None,
         })
         .collect()
 }

@@ -1,0 +1,371 @@
+//! App messages and controller buttons: dispatch, entry, button mappings, and the
+//! honest answers to what this version does not implement.
+//!
+//! Not in this milestone (each answered with SHOTMANAGER_ERROR "`<what>` is not
+//! implemented in this skymesh version" and counted): SET_CURRENT_SHOT zipline,
+//! multipoint, pano, rewind, transect, RTL (plus GET_CURRENT_SHOT of the current
+//! shot, so the app leaves the shot screen when idle); INSPECT_*, SCAN_START,
+//! SURVEY_START; SPLINE_* (SPLINE_POINT also gets one SPLINE_POINT back with status
+//! −4, the spec's one-reply rule); ZIPLINE_*, PANO_*, REWIND_OPTIONS, HOME_LOCATION;
+//! GEOFENCE_* (SET_DATA, UPDATE_POLY and CLEAR also get GEOFENCE_SET_ACK {0, false},
+//! the spec's ack for each).
+//!
+//! Buttons (Press only, "we only use Press"): FLY ends the shot (and with no shot,
+//! switches an armed vehicle to LOITER, the Solo's FLY mode); Pause toggles pause
+//! (and tells the app with SOLO_PAUSE); A/B go to the shot when in one (orbit: A
+//! locks the ROI; cable cam: A records a point; otherwise ignored), and when idle do
+//! what they are mapped to: enter a shot (follow is refused: the spec says it is not
+//! enterable from the controller), or set an ArduCopter mode.
+
+use skymesh_ipc_types::{AppMessage, Button, ButtonEvent, ButtonEventKind, Command, FlightMode};
+use solo_proto::{shots, ButtonSetting, SoloMessage};
+
+use super::shot::{Active, ShotKind};
+use super::{shot_label, shot_title, Engine, ExitReason};
+use crate::persist::Mapping;
+
+/// How a shot was asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Via {
+    App,
+    Button,
+}
+
+impl Engine {
+    /// One app message from the gateway (already checked by the gateway; decoded
+    /// again here with the same codec).
+    pub fn handle_app(&mut self, msg: &AppMessage, now_ns: u64) {
+        let decoded = match SoloMessage::decode(msg.msg_type, msg.value()) {
+            Ok(m) => m,
+            Err(e) => {
+                self.out.metrics.decode_errors.inc();
+                tracing::warn!(msg_type = msg.msg_type, error = %e, "app message does not decode; ignored");
+                return;
+            }
+        };
+        self.out.metrics.app_in(decoded.name());
+        if msg.is_follow_stream() {
+            self.app_heard_ns = now_ns;
+            match &decoded {
+                SoloMessage::Location(loc) => self.follow_fix(loc, now_ns),
+                other => {
+                    tracing::debug!(msg = other.name(), "follow stream: not a location; ignored")
+                }
+            }
+            return;
+        }
+        self.app_heard(msg.session, now_ns);
+        self.dispatch(decoded, now_ns);
+    }
+
+    fn dispatch(&mut self, msg: SoloMessage, now_ns: u64) {
+        use SoloMessage as M;
+        match msg {
+            M::SetCurrentShot(shot) => self.set_current_shot(shot, Via::App, now_ns),
+            M::Location(loc) => self.shot_location(&loc, now_ns),
+            M::RecordPosition => self.record_position(now_ns),
+            M::CableCamOptions {
+                cam_interpolation,
+                yaw_direction_cw,
+                cruise_speed,
+            } => self.cable_options(cam_interpolation, yaw_direction_cw, cruise_speed),
+            M::GetButtonSetting(b) => self.get_button_setting(b),
+            M::SetButtonSetting(b) => self.set_button_setting(b),
+            M::Pause => self.pause(false),
+            M::FollowOptions {
+                cruise_speed,
+                look_at,
+            } => self.follow_options(cruise_speed, look_at, None),
+            M::FollowOptionsV2 {
+                cruise_speed,
+                look_at,
+                follow_preference,
+            } => self.follow_options(cruise_speed, look_at, Some(follow_preference)),
+            M::ShotOptions { cruise_speed } => self.shot_options(cruise_speed),
+            M::GoProSetEnabled(on) => self.gopro_set_enabled(on != 0),
+            M::GoProSetRequest { command, value } => self.gopro_set_request(command, value),
+            M::GoProSetExtendedRequest { command, value } => self.gopro_set(command, value),
+            M::GoProRecord(what) => self.gopro_record(what),
+            M::GoProRequestState => self.gopro_send_state(),
+            M::SplinePoint(p) => {
+                self.not_implemented("multipoint cable cam");
+                self.out
+                    .app(M::SplinePoint(solo_proto::SplinePoint { status: -4, ..p }));
+            }
+            M::GeofenceSetData(_) | M::GeofenceUpdatePoly { .. } | M::GeofenceClear => {
+                self.not_implemented("geofence");
+                self.out.app(M::GeofenceSetAck {
+                    count: 0,
+                    valid: false,
+                });
+            }
+            M::SplineRecord
+            | M::SplinePlay
+            | M::SplineSeek { .. }
+            | M::SplinePathSettings { .. }
+            | M::SplineAttach(_) => self.not_implemented("multipoint cable cam"),
+            M::ZiplineOptions { .. } | M::ZiplineLock => self.not_implemented("zipline"),
+            M::PanoOptions { .. } => self.not_implemented("pano"),
+            M::RewindOptions { .. } => self.not_implemented("rewind"),
+            M::HomeLocation(_) => self.not_implemented("home location"),
+            M::InspectStart { .. }
+            | M::InspectSetWaypoint { .. }
+            | M::InspectMoveGimbal { .. }
+            | M::InspectMoveVehicle { .. } => self.not_implemented("site scan inspect"),
+            M::ScanStart => self.not_implemented("site scan scan"),
+            M::SurveyStart => self.not_implemented("site scan survey"),
+            // ShotManager → app only: an app has no reason to send these.
+            other @ (M::GetCurrentShot(_)
+            | M::ShotError(_)
+            | M::ShotManagerError(_)
+            | M::CableCamWaypoint { .. }
+            | M::SecondPhoneNotification
+            | M::GeofenceSetAck { .. }
+            | M::GeofenceActivated
+            | M::GoProV1State(_)
+            | M::GoProV2State(_)
+            | M::GoProPhoto { .. }
+            | M::PanoState { .. }
+            | M::SplinePlaybackStatus { .. }
+            | M::SplineDurations { .. }) => {
+                tracing::info!(
+                    msg = other.name(),
+                    "message the app should not send; ignored"
+                )
+            }
+        }
+    }
+
+    fn not_implemented(&mut self, what: &str) {
+        self.out.metrics.unimplemented.inc();
+        tracing::info!(
+            what,
+            "request for something this version does not implement"
+        );
+        self.out.error(&format!(
+            "{what} is not implemented in this skymesh version"
+        ));
+    }
+
+    /// SET_CURRENT_SHOT, or a button mapped to a shot.
+    pub(crate) fn set_current_shot(&mut self, shot: i32, via: Via, now_ns: u64) {
+        match shot {
+            shots::NONE => {
+                if self.active.is_some() {
+                    self.exit_shot(ExitReason::App);
+                } else {
+                    self.out.current_shot(shots::NONE);
+                }
+            }
+            shots::SELFIE | shots::ORBIT | shots::CABLECAM | shots::FOLLOW => {
+                self.enter(shot, via, now_ns)
+            }
+            shots::ZIPLINE
+            | shots::MULTIPOINT
+            | shots::PANO
+            | shots::REWIND
+            | shots::TRANSECT
+            | shots::RTL => {
+                self.not_implemented(shot_title(shot));
+                self.out.current_shot(self.current_shot());
+            }
+            other => {
+                tracing::warn!(shot = other, "unknown shot index");
+                self.out.error(&format!("shot {other} does not exist"));
+                self.out.current_shot(self.current_shot());
+            }
+        }
+    }
+
+    /// Gate, then enter `shot`, telling the app.
+    fn enter(&mut self, shot: i32, via: Via, now_ns: u64) {
+        let label = shot_label(shot);
+        if via == Via::Button && shot == shots::FOLLOW {
+            self.out.metrics.refused_entry("not_from_controller");
+            tracing::info!("follow cannot be entered from the controller");
+            self.out
+                .error("follow cannot be started from the controller; start it in the app");
+            return;
+        }
+        if self.current_shot() == shot {
+            tracing::info!(shot = label, "already in this shot");
+            self.out.current_shot(shot);
+            return;
+        }
+        let view = match self.gate(now_ns) {
+            Ok(v) => v,
+            Err(r) => {
+                self.out.metrics.refused_entry(r.label);
+                tracing::info!(shot = label, code = r.code, why = %r.why, ?via, "shot refused");
+                self.out.app(SoloMessage::ShotError(r.code));
+                return;
+            }
+        };
+        self.exit_shot(ExitReason::Replaced);
+        let Some(active) = Active::new(shot, &view, &self.settings) else {
+            return;
+        };
+        tracing::info!(shot = label, ?via, "shot entered");
+        self.active = Some(active);
+        self.last_exit = "";
+        self.out.metrics.entered(label);
+        self.out.metrics.current_shot.set(f64::from(shot));
+        self.persist(|s| s.active_shot = Some(shot));
+        self.out.current_shot(shot);
+        if !matches!(
+            self.active.as_ref().map(|a| &a.kind),
+            Some(ShotKind::Cable { .. })
+        ) {
+            self.send_options();
+        }
+    }
+
+    fn mapping(&self, button: i32) -> Option<Mapping> {
+        let b = &self.store.state().buttons;
+        if button == i32::from(Button::A.to_wire()) {
+            Some(b.a)
+        } else if button == i32::from(Button::B.to_wire()) {
+            Some(b.b)
+        } else {
+            None
+        }
+    }
+
+    fn get_button_setting(&mut self, req: ButtonSetting) {
+        let press = i32::from(ButtonEventKind::Press.to_wire());
+        let m = self
+            .mapping(req.button)
+            .filter(|_| req.event == press)
+            .unwrap_or(Mapping::NONE);
+        self.out.app(SoloMessage::GetButtonSetting(ButtonSetting {
+            shot: m.shot,
+            mode: m.mode,
+            ..req
+        }));
+    }
+
+    fn set_button_setting(&mut self, s: ButtonSetting) {
+        if self.mapping(s.button).is_none() {
+            self.out.error("only the A and B buttons can be mapped");
+            return;
+        }
+        if s.event != i32::from(ButtonEventKind::Press.to_wire()) {
+            self.out.error("only Press events can be mapped");
+            return;
+        }
+        if !(shots::MIN..=shots::MAX).contains(&s.shot) || !(-1..=255).contains(&s.mode) {
+            self.out.error(&format!(
+                "button mapping shot {} / mode {} is out of range",
+                s.shot, s.mode
+            ));
+            return;
+        }
+        let m = Mapping {
+            shot: s.shot,
+            mode: s.mode,
+        };
+        let is_a = s.button == i32::from(Button::A.to_wire());
+        tracing::info!(
+            button = if is_a { "A" } else { "B" },
+            shot = m.shot,
+            mode = m.mode,
+            "button mapped"
+        );
+        self.persist(|p| {
+            if is_a {
+                p.buttons.a = m;
+            } else {
+                p.buttons.b = m;
+            }
+        });
+    }
+
+    /// The app went away: end the shots that need it.
+    pub(crate) fn app_lost(&mut self, _now_ns: u64) {
+        let Some(a) = &self.active else {
+            return;
+        };
+        let needs_app =
+            matches!(a.kind, ShotKind::Selfie { .. } | ShotKind::Follow(_)) || a.flight.is_none();
+        if needs_app {
+            self.exit_shot(ExitReason::AppDisconnected);
+        } else {
+            tracing::info!(
+                shot = shot_title(a.shot),
+                "app gone; the shot keeps flying (the pilot ends it with FLY)"
+            );
+        }
+    }
+}
+
+/// A controller button event.
+pub(crate) fn button(engine: &mut Engine, ev: &ButtonEvent, now_ns: u64) {
+    if ev.vehicle_id != engine.settings.vehicle_id {
+        return;
+    }
+    let (Ok(button), Ok(kind)) = (ev.button(), ev.event()) else {
+        tracing::warn!(
+            button = ev.button,
+            event = ev.event,
+            "unknown button event; ignored"
+        );
+        return;
+    };
+    if kind != ButtonEventKind::Press {
+        return;
+    }
+    match button {
+        Button::Fly if engine.active.is_some() => engine.exit_shot(ExitReason::FlyButton),
+        Button::Fly => idle_fly(engine),
+        Button::Pause => engine.pause(true),
+        Button::A | Button::B if engine.active.is_some() => engine.shot_button(button, now_ns),
+        Button::A | Button::B => idle_mapped(engine, button, now_ns),
+        other => tracing::debug!(button = %other, "button not handled by the shot engine"),
+    }
+}
+
+/// FLY with no shot: the Solo's FLY button always means "LOITER, sticks to the
+/// pilot". Needed when nothing else would give the sticks back, e.g. after the
+/// engine restarted mid-shot and left the vehicle braked in GUIDED.
+fn idle_fly(engine: &mut Engine) {
+    let Some(status) = engine.inputs.status.as_ref() else {
+        return;
+    };
+    let mode = status.flight_mode();
+    if !status.is_armed() || mode == FlightMode::Loiter {
+        return;
+    }
+    tracing::info!(from = %mode, "FLY: LOITER");
+    engine.out.command(Command::SetMode(FlightMode::Loiter));
+    engine.out.command(Command::ReleaseFlightAuthority);
+}
+
+/// A or B pressed with no shot active: do what it is mapped to.
+fn idle_mapped(engine: &mut Engine, button: Button, now_ns: u64) {
+    let Some(m) = engine.mapping(button.to_wire().into()) else {
+        return;
+    };
+    if m.shot != shots::NONE {
+        if !engine.out.app_connected {
+            engine.out.metrics.refused_entry("no_app");
+            tracing::warn!(%button, shot = shot_label(m.shot), "shots from the controller need a connected app");
+            return;
+        }
+        engine.set_current_shot(m.shot, Via::Button, now_ns);
+    } else if m.mode >= 0 {
+        let mode = FlightMode::from_copter_custom_mode(m.mode as u32);
+        if mode.to_copter_custom_mode().is_none() {
+            tracing::warn!(%button, mode = m.mode, "button mapped to a mode skymesh does not know");
+            engine.out.error(&format!(
+                "button mapped to ArduCopter mode {}, which skymesh cannot command",
+                m.mode
+            ));
+            return;
+        }
+        tracing::info!(%button, %mode, "button: mode change");
+        engine.out.command(Command::SetMode(mode));
+        engine.out.command(Command::ReleaseFlightAuthority);
+    } else {
+        tracing::info!(%button, "button is not mapped");
+    }
+}

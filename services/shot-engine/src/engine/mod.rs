@@ -1,0 +1,392 @@
+//! The ShotManager state machine: pure, no I/O, no clock. Every input is a method
+//! call with the `CLOCK_MONOTONIC` time in ns; everything the engine wants done
+//! comes back as [`Outputs`] (vehicle commands, app messages, a status sample), so
+//! the whole behaviour is tested without processes (`engine/tests/`). The bus glue
+//! is `service.rs`.
+//!
+//! # Inputs and outputs
+//!
+//! | input | method |
+//! |---|---|
+//! | app message (TCP or follow stream) | [`Engine::handle_app`] |
+//! | app connected / disconnected | [`Engine::handle_app_session`] |
+//! | controller button | [`Engine::handle_button`] |
+//! | vehicle state, status, payload | [`Engine::handle_state`], [`Engine::handle_status`], [`Engine::handle_payload`] |
+//! | arbiter: authority, events, acks | [`Engine::handle_authority`], [`Engine::handle_arbiter_event`], [`Engine::handle_ack`] |
+//! | loop tick (`loop_hz`) | [`Engine::tick`]: steps the flying shot, then returns everything pending |
+//! | between ticks | [`Engine::drain`]: returns what the handlers produced |
+//!
+//! # Shots (this milestone: selfie, orbit, cable cam, follow)
+//!
+//! A shot is *entered* (SET_CURRENT_SHOT from the app, or A/B mapped to it) after the
+//! entry gate (`flight.rs`), spends a *setup* phase collecting what it needs (selfie:
+//! three locations; orbit: an ROI; cable cam: two recorded points; follow: the first
+//! phone position), then *flies*: grab flight authority, GUIDED, set the ROI if it
+//! has one, and a velocity setpoint every tick from `shots::*::step`. Camera commands
+//! are sent only when they change meaningfully (`camera.rs`). Per-shot state is in
+//! `shot.rs`, what the app and pilot do inside a shot in `controls.rs`; app dispatch,
+//! buttons and not-implemented answers in `app.rs`; the arbiter's answers in
+//! `arbiter.rs`; the GoPro model in `gopro.rs`; outputs in `out.rs` and `status.rs`.
+//!
+//! # Where the spec is silent, what this engine does
+//!
+//! - Entering the shot that is already active only re-announces it
+//!   (GET_CURRENT_SHOT n); it does not restart it (an app that reconnects and
+//!   re-sends its shot must not reset an orbit in flight). Entering another shot
+//!   ends the current one first (exit reason `replaced`). A refused entry leaves the
+//!   current shot running, as the Solo does.
+//! - Entering from a button needs a connected app (the spec: "this only works if
+//!   an app is connected").
+//! - On entry the engine sends the shot's options (SOLO_SHOT_OPTIONS for selfie and
+//!   orbit, SOLO_FOLLOW_OPTIONS then _V2 for follow) so the app shows the speed the
+//!   engine will use; cable cam sends its options after the second point, as the
+//!   spec says.
+//! - Exits that hand the vehicle back to the pilot — FLY, the app's SET_CURRENT_SHOT
+//!   −1, app loss, another shot replacing this one, service shutdown — send `Brake`
+//!   then `SetMode(Loiter)` when the vehicle is GUIDED, because GUIDED ignores the
+//!   sticks: leaving the pilot in a braked GUIDED would leave them without control
+//!   until they press FLY. A pilot or autopilot mode change is left alone (they
+//!   chose the mode). Exits after losing authority or the link send nothing (it
+//!   would be refused); the arbiter's freshness brake stops the vehicle.
+//! - Orbit and cable cam already flying continue when the app disconnects: the pilot
+//!   still has FLY (and the RC sticks through a mode change). Selfie and follow end
+//!   (follow has no target without the phone; a selfie cannot be watched or
+//!   stopped from the app). Any shot still in setup ends (it waits for app input).
+//! - A link-down ends any shot, in setup too: nothing can be flown until it is back.
+//! - Pause toggles the cruise speed between 0 and the previous speed; a new cruise
+//!   speed from the app while paused ends the pause. Follow answers a pause with
+//!   SOLO_FOLLOW_OPTIONS and _V2.
+//! - A vehicle state older than one second while flying: the shot is not stepped
+//!   and the setpoint is zero (hover) until fresh state returns.
+//! - SET_CURRENT_SHOT of a shot this version does not fly is answered with
+//!   SHOTMANAGER_ERROR and GET_CURRENT_SHOT of the *current* shot (−1 when idle, so
+//!   the app leaves the shot screen; the running shot when one is active, which
+//!   keeps flying).
+
+mod app;
+mod arbiter;
+mod camera;
+mod controls;
+mod flight;
+mod gopro;
+mod out;
+mod shot;
+mod status;
+#[cfg(test)]
+mod tests;
+
+use skymesh_ipc_types::{
+    AppSession, ButtonEvent, FlightMode, PayloadState, ShotStatus, VehicleCommand, VehicleState,
+    VehicleStatus,
+};
+use solo_proto::SoloMessage;
+
+use crate::config::Settings;
+use crate::metrics::Metrics;
+use crate::persist::{Loaded, Store};
+use crate::shots::VehicleView;
+
+pub use flight::{ExitReason, Refusal};
+pub(crate) use out::Out;
+use shot::Active;
+use status::StatusKey;
+
+/// A vehicle state older than this (since it was received) is not flown on.
+pub const STATE_MAX_AGE_NS: u64 = 1_000_000_000;
+/// `ShotStatus` is published at least this often (5 Hz) and on every change.
+pub const STATUS_PERIOD_NS: u64 = 200_000_000;
+/// SHOTMANAGER_ERROR text is cut to this many bytes (the bus carries 240).
+pub const MAX_ERROR_TEXT: usize = 200;
+
+/// What the engine wants done: publish these, in this order.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct Outputs {
+    /// For `skymesh/vehicle/{id}/command`, source `ShotEngine`.
+    pub commands: Vec<VehicleCommand>,
+    /// For the app (session 0 = whichever app is connected).
+    pub to_app: Vec<SoloMessage>,
+    /// A `ShotStatus` when it changed or is due (5 Hz).
+    pub status: Option<ShotStatus>,
+}
+
+/// The latest vehicle inputs, with the time each was received.
+#[derive(Debug, Default)]
+pub(crate) struct Inputs {
+    state: Option<(VehicleState, u64)>,
+    status: Option<VehicleStatus>,
+    payload: Option<PayloadState>,
+}
+
+impl Inputs {
+    fn mode(&self) -> FlightMode {
+        self.status
+            .as_ref()
+            .map_or(FlightMode::Unknown, VehicleStatus::flight_mode)
+    }
+
+    /// The vehicle as the shots see it, if a valid position is fresh at `now_ns`.
+    fn view(&self, now_ns: u64) -> Option<VehicleView> {
+        let (s, rx_ns) = self.state.as_ref()?;
+        if s.position_valid == 0 || now_ns.saturating_sub(*rx_ns) > STATE_MAX_AGE_NS {
+            return None;
+        }
+        let position = crate::shots::GeoPoint {
+            lat_deg: s.lat_deg,
+            lon_deg: s.lon_deg,
+            alt_rel_m: s.alt_rel_m,
+        };
+        let heading = s.heading_deg.rem_euclid(360.0);
+        let (pitch, yaw) = match self.payload.as_ref().filter(|p| p.is_gimbal_valid()) {
+            Some(p) => (
+                p.gimbal_pitch_deg,
+                (heading + p.gimbal_yaw_deg).rem_euclid(360.0),
+            ),
+            None => (0.0, heading),
+        };
+        Some(VehicleView {
+            position,
+            vel_ned_mps: s.vel_ned_mps,
+            heading_deg: heading,
+            camera_pitch_deg: pitch,
+            camera_yaw_deg: yaw,
+        })
+    }
+}
+
+/// The shot engine of one vehicle.
+#[derive(Debug)]
+pub struct Engine {
+    settings: Settings,
+    store: Store,
+    inputs: Inputs,
+    out: Out,
+    active: Option<Active>,
+    gopro: gopro::GoPro,
+    /// Current (or last) app session number; 0 = none seen.
+    app_session: u32,
+    /// When the gateway last said anything (session sample or app message).
+    app_heard_ns: u64,
+    /// Told to the app once one is connected: the shot a crash ended.
+    restart_notice: Option<String>,
+    /// Why the last shot ended; empty while in a shot.
+    last_exit: &'static str,
+    last_status: Option<(StatusKey, u64)>,
+    /// We sent payload commands (gimbal, GoPro) and may hold payload authority.
+    payload_used: bool,
+}
+
+impl Engine {
+    /// An idle engine. `store` says what the last run left: a shot that was active
+    /// then is reported (`last_exit = "restarted"`, and to the app once connected),
+    /// never resumed, and no command is sent for it.
+    pub fn new(settings: Settings, mut store: Store, metrics: Metrics) -> Engine {
+        let mut restart_notice = None;
+        let mut last_exit = "";
+        if let Some(shot) = store.state().active_shot {
+            let name = shot_title(shot);
+            tracing::warn!(
+                shot = name,
+                "the shot engine restarted while a shot was active; it is not resumed (the arbiter's freshness brake stopped the vehicle when the setpoints stopped)"
+            );
+            restart_notice = Some(format!("shot engine restarted; {name} ended"));
+            last_exit = "restarted";
+            if let Err(e) = store.update(|s| s.active_shot = None) {
+                metrics.state_file_errors.inc();
+                tracing::error!(error = %e, "cannot write the state file");
+            }
+        }
+        let gopro = gopro::GoPro::new(store.state().gopro_enabled);
+        Engine {
+            out: Out {
+                vehicle_id: settings.vehicle_id,
+                max_age_ms: settings.setpoint_max_age_ms,
+                next_id: 1,
+                metrics,
+                app_connected: false,
+                commands: Vec::new(),
+                to_app: Vec::new(),
+            },
+            settings,
+            store,
+            inputs: Inputs::default(),
+            active: None,
+            gopro,
+            app_session: 0,
+            app_heard_ns: 0,
+            restart_notice,
+            last_exit,
+            last_status: None,
+            payload_used: false,
+        }
+    }
+
+    /// Opens the state file and builds the engine, logging what was found.
+    pub fn open(settings: Settings, metrics: Metrics) -> Engine {
+        let (store, loaded) = Store::open(settings.state_file.clone());
+        let path = store.path().display().to_string();
+        match loaded {
+            Loaded::Fresh => tracing::info!(state_file = %path, "no state file yet; defaults"),
+            Loaded::Existing => tracing::info!(state_file = %path, "state loaded"),
+            Loaded::Corrupt { error, kept } => {
+                metrics.state_file_errors.inc();
+                tracing::error!(state_file = %path, error, kept = ?kept, "state file is corrupt; starting from defaults (the bad file is kept)")
+            }
+            Loaded::Unreadable { error } => {
+                metrics.state_file_errors.inc();
+                tracing::error!(state_file = %path, error, "cannot read the state file; starting from defaults")
+            }
+        }
+        Engine::new(settings, store, metrics)
+    }
+
+    /// The Solo shot index being set up or flown, −1 when idle.
+    pub fn current_shot(&self) -> i32 {
+        self.active
+            .as_ref()
+            .map_or(solo_proto::shots::NONE, |a| a.shot)
+    }
+
+    /// True while a shot flies (authority asked for, setpoints every tick).
+    pub fn is_flying(&self) -> bool {
+        self.active.as_ref().is_some_and(|a| a.flight.is_some())
+    }
+
+    /// Why the last shot ended (empty while in a shot).
+    pub fn last_exit(&self) -> &'static str {
+        self.last_exit
+    }
+
+    pub fn handle_state(&mut self, state: &VehicleState, now_ns: u64) {
+        if state.vehicle_id == self.settings.vehicle_id {
+            self.inputs.state = Some((*state, now_ns));
+        }
+    }
+
+    pub fn handle_payload(&mut self, payload: &PayloadState, _now_ns: u64) {
+        if payload.vehicle_id != self.settings.vehicle_id {
+            return;
+        }
+        self.inputs.payload = Some(*payload);
+        self.gopro_sync();
+    }
+
+    pub fn handle_app_session(&mut self, session: &AppSession, now_ns: u64) {
+        self.app_heard_ns = now_ns;
+        let connected = session.connected != 0;
+        if connected && (!self.out.app_connected || session.session != self.app_session) {
+            if self.out.app_connected {
+                tracing::info!(
+                    old = self.app_session,
+                    new = session.session,
+                    "the app reconnected"
+                );
+                self.app_lost(now_ns);
+            }
+            tracing::info!(
+                session = session.session,
+                peer = session.peer.as_str(),
+                "app connected"
+            );
+            self.app_connected(session.session);
+        } else if !connected && self.out.app_connected {
+            tracing::info!(session = self.app_session, "app disconnected");
+            self.out.app_connected = false;
+            self.app_lost(now_ns);
+        }
+    }
+
+    pub fn handle_button(&mut self, event: &ButtonEvent, now_ns: u64) {
+        app::button(self, event, now_ns);
+    }
+
+    /// Steps the flying shot and returns everything pending.
+    pub fn tick(&mut self, now_ns: u64) -> Outputs {
+        if self.out.app_connected
+            && now_ns.saturating_sub(self.app_heard_ns)
+                > u64::try_from(self.settings.app_session_timeout.as_nanos()).unwrap_or(u64::MAX)
+        {
+            tracing::warn!(
+                timeout = ?self.settings.app_session_timeout,
+                "no app session from the gateway; treating the app as disconnected"
+            );
+            self.out.app_connected = false;
+            self.app_lost(now_ns);
+        }
+        self.step(now_ns);
+        self.drain(now_ns)
+    }
+
+    /// Returns what the handlers produced since the last call (no stepping), with a
+    /// status sample if it changed or is due.
+    pub fn drain(&mut self, now_ns: u64) -> Outputs {
+        Outputs {
+            commands: std::mem::take(&mut self.out.commands),
+            to_app: std::mem::take(&mut self.out.to_app),
+            status: self.status_due(now_ns),
+        }
+    }
+
+    /// Graceful stop: ends an active shot (handing the vehicle back to the pilot in
+    /// LOITER) and returns the last outputs.
+    pub fn shutdown(&mut self, now_ns: u64) -> Outputs {
+        self.exit_shot(ExitReason::Shutdown);
+        let mut out = self.drain(now_ns);
+        out.status = Some(self.status());
+        out
+    }
+
+    fn app_connected(&mut self, session: u32) {
+        self.out.app_connected = true;
+        self.app_session = session;
+        if let Some(notice) = self.restart_notice.take() {
+            self.out.error(&notice);
+        }
+        self.out.current_shot(self.current_shot());
+        self.gopro_send_state();
+    }
+
+    /// An app message arrived: the gateway is alive and an app is connected.
+    fn app_heard(&mut self, session: u32, now_ns: u64) {
+        self.app_heard_ns = now_ns;
+        if session != 0 && (!self.out.app_connected || session != self.app_session) {
+            tracing::info!(
+                session,
+                "message from an app the engine had not seen connect"
+            );
+            if self.out.app_connected {
+                self.app_lost(now_ns);
+            }
+            self.app_connected(session);
+        }
+    }
+
+    /// The persisted state changed; a failed write is logged and counted.
+    fn persist(&mut self, change: impl FnOnce(&mut crate::persist::Persisted)) {
+        if let Err(e) = self.store.update(change) {
+            self.out.metrics.state_file_errors.inc();
+            tracing::error!(error = %e, "cannot write the state file");
+        }
+    }
+}
+
+/// How a shot is named to the app's user.
+pub fn shot_title(shot: i32) -> &'static str {
+    match shot {
+        solo_proto::shots::SELFIE => "selfie",
+        solo_proto::shots::ORBIT => "orbit",
+        solo_proto::shots::CABLECAM => "cable cam",
+        solo_proto::shots::ZIPLINE => "zipline",
+        solo_proto::shots::FOLLOW => "follow",
+        solo_proto::shots::MULTIPOINT => "multipoint cable cam",
+        solo_proto::shots::PANO => "pano",
+        solo_proto::shots::REWIND => "rewind",
+        solo_proto::shots::TRANSECT => "transect",
+        solo_proto::shots::RTL => "return home shot",
+        _ => "shot",
+    }
+}
+
+/// The metric label of a shot index.
+pub fn shot_label(shot: i32) -> &'static str {
+    solo_proto::shots::name(shot).unwrap_or("unknown")
+}

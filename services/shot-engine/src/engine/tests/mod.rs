@@ -1,0 +1,314 @@
+//! The engine driven through its public methods, with simulated time: no
+//! processes, no bus, no clock.
+
+mod entry;
+mod exits;
+mod follow;
+mod gopro;
+mod persistence;
+mod shots;
+mod unimplemented;
+
+use std::path::{Path, PathBuf};
+
+use skymesh_ipc_types::{
+    AckResult, AppSession, AuthorityState, Button, ButtonEvent, ButtonEventKind, Command,
+    CommandAck, CommandKind, CommandSource, FixedStr, FlightMode, PayloadState, RefusalReason,
+    VehicleCommand, VehicleState, VehicleStatus,
+};
+use skymesh_runtime::Stats;
+use solo_proto::{Location, SoloMessage};
+
+use super::{Engine, Outputs};
+use crate::config::{RawConfig, Settings};
+use crate::ipc::app_message;
+use crate::metrics::Metrics;
+use crate::persist::Store;
+
+pub const VEHICLE: u8 = 1;
+pub const MS: u64 = 1_000_000;
+/// Where the simulated vehicle hovers: SITL's field, 20 m up.
+pub const LAT: f64 = -35.363261;
+pub const LON: f64 = 149.165230;
+pub const ALT: f32 = 20.0;
+
+/// One metre of latitude, degrees.
+pub const M_LAT: f64 = 1.0 / 111_320.0;
+
+pub fn settings(state_file: &Path) -> Settings {
+    let mut s = RawConfig::default()
+        .validate_with_env(None, Some("test"))
+        .unwrap();
+    s.state_file = state_file.to_path_buf();
+    s
+}
+
+/// An engine with its own state file and a simulated clock.
+pub struct Harness {
+    pub engine: Engine,
+    pub now: u64,
+    pub stats: Stats,
+    pub state_file: PathBuf,
+    pub status: VehicleStatus,
+    pub state: VehicleState,
+    /// The app session the simulated gateway republishes with every tick (like its
+    /// 1 s republish), while `gateway_alive`.
+    pub app_session: Option<u32>,
+    pub gateway_alive: bool,
+    _dir: Option<tempfile::TempDir>,
+}
+
+impl Harness {
+    pub fn new() -> Harness {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("shot-engine.json");
+        let mut h = Harness::on_file(&path);
+        h._dir = Some(dir);
+        h
+    }
+
+    /// An engine on an existing state file (the caller keeps the directory).
+    pub fn on_file(path: &Path) -> Harness {
+        let stats = Stats::new();
+        let (store, _) = Store::open(path);
+        let engine = Engine::new(settings(path), store, Metrics::new(&stats));
+        Harness {
+            engine,
+            now: 1_000 * MS,
+            stats,
+            state_file: path.to_path_buf(),
+            status: VehicleStatus::default(),
+            state: VehicleState::default(),
+            app_session: None,
+            gateway_alive: true,
+            _dir: None,
+        }
+    }
+
+    /// Armed, healthy, LOITER, link up, 80 % battery, hovering at 20 m; an app connected.
+    pub fn ready() -> Harness {
+        let mut h = Harness::new();
+        h.vehicle_ok();
+        h.connect_app(1);
+        h.drain();
+        h
+    }
+
+    pub fn vehicle_ok(&mut self) {
+        self.status = VehicleStatus {
+            vehicle_id: VEHICLE,
+            mode: FlightMode::Loiter.to_wire(),
+            armed: 1,
+            ekf_healthy: 1,
+            gps_fix: 3,
+            link_up: 1,
+            battery_remaining_pct: 80,
+            home_valid: 1,
+            ..VehicleStatus::default()
+        };
+        self.state = VehicleState {
+            vehicle_id: VEHICLE,
+            position_valid: 1,
+            attitude_valid: 1,
+            lat_deg: LAT,
+            lon_deg: LON,
+            alt_rel_m: ALT,
+            heading_deg: 90.0,
+            ..VehicleState::default()
+        };
+        self.push_status();
+        self.push_state();
+    }
+
+    pub fn push_status(&mut self) {
+        let s = self.status;
+        self.engine.handle_status(&s, self.now);
+    }
+
+    pub fn push_state(&mut self) {
+        let s = self.state;
+        self.engine.handle_state(&s, self.now);
+    }
+
+    pub fn set_mode(&mut self, mode: FlightMode) -> Outputs {
+        self.status.mode = mode.to_wire();
+        self.push_status();
+        self.drain()
+    }
+
+    /// Moves the simulated vehicle `north_m` metres north.
+    pub fn move_north(&mut self, north_m: f64) {
+        self.state.lat_deg += north_m * M_LAT;
+        self.push_state();
+    }
+
+    pub fn payload(&mut self, p: PayloadState) -> Outputs {
+        self.engine.handle_payload(
+            &PayloadState {
+                vehicle_id: VEHICLE,
+                ..p
+            },
+            self.now,
+        );
+        self.drain()
+    }
+
+    pub fn connect_app(&mut self, session: u32) -> Outputs {
+        self.session(session, true)
+    }
+
+    pub fn session(&mut self, session: u32, connected: bool) -> Outputs {
+        self.app_session = connected.then_some(session);
+        self.engine.handle_app_session(
+            &AppSession {
+                session,
+                connected: connected.into(),
+                peer: FixedStr::new("10.1.1.10:40000"),
+                ..AppSession::default()
+            },
+            self.now,
+        );
+        self.drain()
+    }
+
+    pub fn app(&mut self, msg: SoloMessage) -> Outputs {
+        let mut m = app_message(&msg).unwrap();
+        m.session = 1;
+        self.engine.handle_app(&m, self.now);
+        self.drain()
+    }
+
+    /// A follow-stream position (UDP) `north_m` north of the vehicle's start.
+    pub fn fix(&mut self, north_m: f64) {
+        let mut m = app_message(&SoloMessage::Location(Location {
+            lat_deg: LAT + north_m * M_LAT,
+            lon_deg: LON,
+            alt_m: 0.0,
+        }))
+        .unwrap();
+        m.session = 1;
+        m.flags = skymesh_ipc_types::shot::app_flags::FOLLOW_STREAM;
+        self.engine.handle_app(&m, self.now);
+    }
+
+    pub fn button(&mut self, button: Button) -> Outputs {
+        self.engine.handle_button(
+            &ButtonEvent::new(VEHICLE, button, ButtonEventKind::Press),
+            self.now,
+        );
+        self.drain()
+    }
+
+    pub fn drain(&mut self) -> Outputs {
+        self.engine.drain(self.now)
+    }
+
+    /// One loop tick 40 ms later (the vehicle state is refreshed first).
+    pub fn tick(&mut self) -> Outputs {
+        self.now += 40 * MS;
+        self.push_state();
+        if let (true, Some(session)) = (self.gateway_alive, self.app_session) {
+            self.engine.handle_app_session(
+                &AppSession {
+                    session,
+                    connected: 1,
+                    ..AppSession::default()
+                },
+                self.now,
+            );
+        }
+        self.engine.tick(self.now)
+    }
+
+    /// Ticks for `ms` of simulated time, collecting everything.
+    pub fn run(&mut self, ms: u64) -> Outputs {
+        let mut all = Outputs::default();
+        for _ in 0..ms / 40 {
+            let o = self.tick();
+            all.commands.extend(o.commands);
+            all.to_app.extend(o.to_app);
+            all.status = o.status.or(all.status);
+        }
+        all
+    }
+
+    pub fn authority(&mut self, holder: Option<CommandSource>) -> Outputs {
+        let st = AuthorityState {
+            vehicle_id: VEHICLE,
+            flight_holder: holder.map_or(skymesh_ipc_types::NO_HOLDER, CommandSource::to_wire),
+            ..AuthorityState::default()
+        };
+        self.engine.handle_authority(&st, self.now);
+        self.drain()
+    }
+
+    /// The ack autopilot-link would publish for `cmd`.
+    pub fn ack(
+        &mut self,
+        cmd: &VehicleCommand,
+        result: AckResult,
+        reason: RefusalReason,
+    ) -> Outputs {
+        let ack = CommandAck {
+            vehicle_id: VEHICLE,
+            source: CommandSource::ShotEngine.to_wire(),
+            kind: cmd.kind,
+            result: result.to_wire(),
+            command_id: cmd.command_id,
+            reason: reason.to_wire(),
+            detail: FixedStr::new("test"),
+            ..CommandAck::default()
+        };
+        self.engine.handle_ack(&ack, self.now);
+        self.drain()
+    }
+
+    pub fn counter(&self, name: &str, labels: &[(&str, &str)]) -> u64 {
+        self.stats.counter(name, labels).get()
+    }
+
+    /// Enters orbit and locks an ROI 30 m north: flying.
+    pub fn orbiting(&mut self) -> Outputs {
+        self.app(SoloMessage::SetCurrentShot(solo_proto::shots::ORBIT));
+        let out = self.app(SoloMessage::Location(loc(30.0)));
+        self.set_mode(FlightMode::Guided);
+        out
+    }
+}
+
+/// A location `north_m` north of the start, on the ground.
+pub fn loc(north_m: f64) -> Location {
+    Location {
+        lat_deg: LAT + north_m * M_LAT,
+        lon_deg: LON,
+        alt_m: 0.0,
+    }
+}
+
+/// The typed commands of `out`.
+pub fn cmds(out: &Outputs) -> Vec<Command> {
+    out.commands.iter().map(|c| c.command().unwrap()).collect()
+}
+
+/// The kinds of the commands of `out`, without the velocity setpoints.
+pub fn kinds(out: &Outputs) -> Vec<CommandKind> {
+    out.commands
+        .iter()
+        .map(|c| c.kind().unwrap())
+        .filter(|k| *k != CommandKind::VelocityNed)
+        .collect()
+}
+
+pub fn find(out: &Outputs, kind: CommandKind) -> Option<VehicleCommand> {
+    out.commands
+        .iter()
+        .copied()
+        .find(|c| c.kind == kind.to_wire())
+}
+
+/// Every command of `out` is from the shot engine for our vehicle.
+pub fn all_ours(out: &Outputs) -> bool {
+    out.commands
+        .iter()
+        .all(|c| c.vehicle_id == VEHICLE && c.source == CommandSource::ShotEngine.to_wire())
+}

@@ -1,0 +1,69 @@
+//! skymesh shot-engine: the Solo app's ShotManager.
+//!
+//! The `solo-gateway` owns the app's sockets and hands every decoded app message to
+//! this engine as an `AppMessage`; the engine answers with `AppMessage`s, reads the
+//! vehicle from `autopilot-link`, and flies the smart shots (selfie, orbit, follow,
+//! cable cam) only through `VehicleCommand`s from source `ShotEngine`, which the
+//! arbiter admits or refuses (authority, setpoint freshness, geofence envelope).
+//!
+//! | module | role |
+//! |---|---|
+//! | [`config`] | TOML → [`Settings`] |
+//! | [`engine`] | the ShotManager state machine (pure; time passed in) |
+//! | [`shots`] | shot geometry: velocity and camera per tick (pure) |
+//! | [`persist`] | button mappings, GoPro enable, active shot: a JSON file written atomically |
+//! | [`metrics`] | the exported `skymesh_shot_*` series |
+//! | [`ipc`] | the bus ports |
+//! | `service` | the event loop tying them together |
+//!
+//! A restarted engine never resumes a shot: the arbiter's freshness brake stopped
+//! the vehicle when the setpoints stopped, and the engine only tells the app.
+#![forbid(unsafe_code)]
+
+pub mod config;
+pub mod engine;
+pub mod ipc;
+pub mod metrics;
+pub mod persist;
+mod service;
+pub mod shots;
+
+use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
+
+pub use config::{RawConfig, Settings};
+pub use engine::{Engine, Outputs};
+
+/// The service entry point for `service_main`.
+pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
+    let (bus, stats, shutdown) = (ctx.bus.clone(), ctx.stats.clone(), ctx.shutdown.clone());
+    run_with(settings, bus, stats, shutdown, || ctx.ready()).await
+}
+
+/// Runs the engine on `bus` until `shutdown` is cancelled; `ready` is called once
+/// every port is open.
+///
+/// Subscribes to `skymesh/shot/{from_app,app_session}`, `skymesh/input/buttons` and
+/// `skymesh/vehicle/{vehicle_id}/{state,status,payload,authority,arbiter_events,command_ack}`;
+/// publishes `skymesh/vehicle/{vehicle_id}/command`, `skymesh/shot/to_app` and
+/// `skymesh/shot/status`.
+pub async fn run_with(
+    settings: Settings,
+    bus: Bus,
+    stats: Stats,
+    shutdown: CancellationToken,
+    ready: impl FnOnce(),
+) -> anyhow::Result<()> {
+    let ports = ipc::Ports::open(&bus, settings.vehicle_id)?;
+    let metrics = metrics::Metrics::new(&stats);
+    let overruns = metrics.overruns.clone();
+    tracing::info!(
+        vehicle_id = settings.vehicle_id,
+        loop_period = ?settings.loop_period,
+        state_file = %settings.state_file.display(),
+        "shot-engine starting"
+    );
+    let period = settings.loop_period;
+    let engine = Engine::open(settings, metrics);
+    ready();
+    service::run_loop(engine, ports, period, shutdown, overruns).await
+}

@@ -1,0 +1,136 @@
+//! The metrics of the shot engine (`skymesh_shot_*`), exported through the runtime's
+//! stats sample.
+//!
+//! Label sets are bounded: shot names come from `solo_proto::shots::name`, message
+//! names from `SoloMessage::name`, command kinds and refusal reasons from the
+//! ipc-types enums, exit reasons and entry errors from fixed lists in `engine`.
+//! Labelled series are registered on first use so an idle engine does not spend the
+//! stats sample's fixed number of entries on series that stay zero.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError};
+
+use skymesh_runtime::{Counter, Gauge, Stats};
+
+/// A counter family with one label, each series registered on first use.
+#[derive(Debug, Clone)]
+struct Family {
+    stats: Stats,
+    name: &'static str,
+    key: &'static str,
+    cache: Arc<Mutex<HashMap<&'static str, Counter>>>,
+}
+
+impl Family {
+    fn new(stats: &Stats, name: &'static str, key: &'static str) -> Self {
+        Family {
+            stats: stats.clone(),
+            name,
+            key,
+            cache: Arc::default(),
+        }
+    }
+
+    fn inc(&self, value: &'static str) {
+        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
+        cache
+            .entry(value)
+            .or_insert_with(|| self.stats.counter(self.name, &[(self.key, value)]))
+            .inc();
+    }
+}
+
+/// Every series the engine exports.
+#[derive(Debug, Clone)]
+pub struct Metrics {
+    /// `skymesh_shot_current`: the Solo shot index being flown or set up, −1 idle.
+    pub current_shot: Gauge,
+    entered: Family,
+    exits: Family,
+    refusals: Family,
+    app_in: Family,
+    app_out: Family,
+    /// `skymesh_shot_unimplemented_requests_total`: requests answered "not implemented".
+    pub unimplemented: Counter,
+    commands: Family,
+    refused: Family,
+    /// `skymesh_shot_loop_overruns_total`: ticks that took longer than the loop period
+    /// or came late by more than one period.
+    pub overruns: Counter,
+    /// `skymesh_shot_app_decode_errors_total`: bus messages whose value did not decode.
+    pub decode_errors: Counter,
+    /// `skymesh_shot_state_file_errors_total`: failed writes of the state file.
+    pub state_file_errors: Counter,
+}
+
+impl Metrics {
+    pub fn new(stats: &Stats) -> Self {
+        let current_shot = stats.gauge("skymesh_shot_current", &[]);
+        current_shot.set(-1.0);
+        Metrics {
+            current_shot,
+            entered: Family::new(stats, "skymesh_shot_entered_total", "shot"),
+            exits: Family::new(stats, "skymesh_shot_exits_total", "reason"),
+            refusals: Family::new(stats, "skymesh_shot_entry_refusals_total", "error"),
+            app_in: Family::new(stats, "skymesh_shot_app_messages_in_total", "msg"),
+            app_out: Family::new(stats, "skymesh_shot_app_messages_out_total", "msg"),
+            unimplemented: stats.counter("skymesh_shot_unimplemented_requests_total", &[]),
+            commands: Family::new(stats, "skymesh_shot_commands_sent_total", "kind"),
+            refused: Family::new(stats, "skymesh_shot_commands_refused_total", "reason"),
+            overruns: stats.counter("skymesh_shot_loop_overruns_total", &[]),
+            decode_errors: stats.counter("skymesh_shot_app_decode_errors_total", &[]),
+            state_file_errors: stats.counter("skymesh_shot_state_file_errors_total", &[]),
+        }
+    }
+
+    pub fn entered(&self, shot: &'static str) {
+        self.entered.inc(shot);
+    }
+    pub fn exited(&self, reason: &'static str) {
+        self.exits.inc(reason);
+    }
+    pub fn refused_entry(&self, error: &'static str) {
+        self.refusals.inc(error);
+    }
+    pub fn app_in(&self, msg: &'static str) {
+        self.app_in.inc(msg);
+    }
+    pub fn app_out(&self, msg: &'static str) {
+        self.app_out.inc(msg);
+    }
+    pub fn command_sent(&self, kind: &'static str) {
+        self.commands.inc(kind);
+    }
+    pub fn command_refused(&self, reason: &'static str) {
+        self.refused.inc(reason);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skymesh_ipc_types::ServiceStats;
+
+    #[test]
+    fn labelled_series_appear_on_first_use() {
+        let stats = Stats::new();
+        let m = Metrics::new(&stats);
+        let count = |s: &Stats| {
+            let mut out = ServiceStats::default();
+            s.snapshot_into(&mut out);
+            out.len
+        };
+        let idle = count(&stats);
+        m.entered("orbit");
+        m.entered("orbit");
+        assert_eq!(count(&stats), idle + 1);
+        m.exited("fly_button");
+        assert_eq!(count(&stats), idle + 2);
+        assert_eq!(
+            stats
+                .counter("skymesh_shot_entered_total", &[("shot", "orbit")])
+                .get(),
+            2
+        );
+    }
+}

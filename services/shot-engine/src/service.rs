@@ -1,0 +1,130 @@
+//! The event loop: one task owns the engine and every port (no locks).
+//!
+//! App messages, the app session and buttons wake the loop as they arrive (the
+//! engine's answers go out at once, decided on the newest vehicle samples: the
+//! vehicle topics are drained first); the interval (`loop_hz`) drains the vehicle's
+//! state, status, payload, authority, arbiter events and acks, steps the flying
+//! shot and publishes what the engine asks for. A tick that takes longer than the
+//! period, or starts more than a period late, counts as an overrun.
+
+use std::time::Duration;
+
+use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::{Counter, IpcError};
+use tokio::time::MissedTickBehavior;
+use tokio_util::sync::CancellationToken;
+
+use crate::engine::{Engine, Outputs};
+use crate::ipc::{app_message, Ports};
+
+/// What woke the loop.
+enum Wake {
+    Tick,
+    App(Result<skymesh_ipc_types::AppMessage, IpcError>),
+    Session(Result<skymesh_ipc_types::AppSession, IpcError>),
+    Button(Result<skymesh_ipc_types::ButtonEvent, IpcError>),
+}
+
+/// Runs until `shutdown`; then ends an active shot and publishes the last outputs.
+pub(crate) async fn run_loop(
+    mut engine: Engine,
+    mut ports: Ports,
+    period: Duration,
+    shutdown: CancellationToken,
+    overruns: Counter,
+) -> anyhow::Result<()> {
+    let mut interval = tokio::time::interval(period);
+    interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
+    let mut last_tick: Option<u64> = None;
+    let result = loop {
+        let wake = tokio::select! {
+            biased;
+            _ = shutdown.cancelled() => break Ok(()),
+            _ = interval.tick() => Wake::Tick,
+            m = ports.from_app.recv() => Wake::App(m),
+            s = ports.app_session.recv() => Wake::Session(s),
+            b = ports.buttons.recv() => Wake::Button(b),
+        };
+        let now = monotonic_ns();
+        let step = match wake {
+            Wake::Tick => {
+                if last_tick.is_some_and(|t| now.saturating_sub(t) > 2 * period_ns) {
+                    overruns.inc();
+                }
+                last_tick = Some(now);
+                let r = drain_vehicle(&mut engine, &ports, now)
+                    .and_then(|()| publish(&mut ports, engine.tick(now)));
+                if monotonic_ns().saturating_sub(now) > period_ns {
+                    overruns.inc();
+                }
+                r
+            }
+            Wake::App(m) => m.and_then(|m| {
+                drain_vehicle(&mut engine, &ports, now)?;
+                engine.handle_app(&m, now);
+                publish(&mut ports, engine.drain(now))
+            }),
+            Wake::Session(s) => s.and_then(|s| {
+                engine.handle_app_session(&s, now);
+                publish(&mut ports, engine.drain(now))
+            }),
+            Wake::Button(b) => b.and_then(|b| {
+                drain_vehicle(&mut engine, &ports, now)?;
+                engine.handle_button(&b, now);
+                publish(&mut ports, engine.drain(now))
+            }),
+        };
+        if let Err(e) = step {
+            break Err(anyhow::Error::new(e));
+        }
+    };
+    let last = engine.shutdown(monotonic_ns());
+    if let Err(e) = publish(&mut ports, last) {
+        tracing::warn!(error = %e, "publishing the final outputs failed");
+    }
+    result
+}
+
+/// Everything the vehicle topics hold, oldest first (the newest state wins).
+fn drain_vehicle(engine: &mut Engine, ports: &Ports, now: u64) -> Result<(), IpcError> {
+    if let Some(s) = ports.state.latest()? {
+        engine.handle_state(&s, now);
+    }
+    while let Some(s) = ports.status.try_recv()? {
+        engine.handle_status(&s, now);
+    }
+    if let Some(p) = ports.payload.latest()? {
+        engine.handle_payload(&p, now);
+    }
+    while let Some(a) = ports.authority.try_recv()? {
+        engine.handle_authority(&a, now);
+    }
+    while let Some(e) = ports.events.try_recv()? {
+        engine.handle_arbiter_event(&e, now);
+    }
+    while let Some(a) = ports.acks.try_recv()? {
+        engine.handle_ack(&a, now);
+    }
+    Ok(())
+}
+
+fn publish(ports: &mut Ports, out: Outputs) -> Result<(), IpcError> {
+    for c in out.commands {
+        ports.commands.publish(c)?;
+    }
+    for m in &out.to_app {
+        match app_message(m) {
+            Ok(sample) => {
+                ports.to_app.publish(sample)?;
+            }
+            Err(e) => {
+                tracing::warn!(msg = m.name(), error = %e, "app message too long for the bus; not sent")
+            }
+        }
+    }
+    if let Some(s) = out.status {
+        ports.shot_status.publish(s)?;
+    }
+    Ok(())
+}

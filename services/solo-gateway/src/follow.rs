@@ -1,0 +1,142 @@
+//! The follow stream: during the Follow shot the app sends its position as one
+//! LOCATION datagram (TLV type 2, 20-byte value) at about 25 Hz. Only the connected
+//! app's address is listened to; each good datagram is forwarded to the engine
+//! (flagged `FOLLOW_STREAM`), which uses the newest one per tick.
+
+use std::net::{IpAddr, SocketAddr};
+
+use solo_proto::{ids, SoloMessage};
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+use tokio_util::sync::CancellationToken;
+
+use crate::drops::Drops;
+use crate::hub::AppAddr;
+use crate::ipc::{FromApp, PublishError};
+use crate::metrics::Malformed;
+
+/// Larger than any valid datagram (28 bytes); a longer one is cut here and refused.
+const DATAGRAM_BUF: usize = 2048;
+
+/// Checks one datagram (pure): the session to forward it under, or why not.
+pub fn check(
+    datagram: &[u8],
+    from: IpAddr,
+    app: Option<AppAddr>,
+) -> Result<u32, (Malformed, String)> {
+    let Some(app) = app else {
+        return Err((Malformed::NoApp, "no app is connected".to_string()));
+    };
+    if from.to_canonical() != app.ip {
+        return Err((
+            Malformed::Unauthorised,
+            format!("not from the connected app's address {}", app.ip),
+        ));
+    }
+    match solo_proto::decode_datagram(datagram) {
+        Ok(SoloMessage::Location(_)) => Ok(app.session),
+        Ok(other) => Err((
+            Malformed::BadDatagram,
+            format!(
+                "{} (type {}) is not a LOCATION",
+                other.name(),
+                other.msg_type()
+            ),
+        )),
+        Err(e) => Err((Malformed::BadDatagram, e.to_string())),
+    }
+}
+
+/// Receives follow datagrams until `stop`; returns an error only if the bus fails.
+pub(crate) async fn run(
+    socket: UdpSocket,
+    app: watch::Receiver<Option<AppAddr>>,
+    from_app: FromApp,
+    drops: Drops,
+    stop: CancellationToken,
+) -> Result<(), PublishError> {
+    let mut buf = vec![0u8; DATAGRAM_BUF];
+    loop {
+        let (n, from): (usize, SocketAddr) = tokio::select! {
+            _ = stop.cancelled() => return Ok(()),
+            r = socket.recv_from(&mut buf) => match r {
+                Ok(v) => v,
+                Err(e) => {
+                    tracing::debug!(error = %e, "follow stream receive failed");
+                    continue;
+                }
+            },
+        };
+        let datagram = &buf[..n];
+        let current = *app.borrow();
+        match check(datagram, from.ip(), current) {
+            Ok(session) => {
+                from_app.publish(
+                    session,
+                    ids::LOCATION,
+                    &datagram[solo_proto::HEADER_LEN..],
+                    true,
+                )?;
+                drops.metrics().follow_datagram(true);
+            }
+            Err((kind, reason)) => {
+                drops.metrics().follow_datagram(false);
+                drops.record(kind, from, &reason);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use solo_proto::Location;
+
+    fn location() -> Vec<u8> {
+        SoloMessage::Location(Location {
+            lat_deg: 37.8,
+            lon_deg: -122.3,
+            alt_m: 1.5,
+        })
+        .to_bytes()
+        .to_vec()
+    }
+
+    #[test]
+    fn only_the_connected_apps_locations_pass() {
+        let app_ip: IpAddr = "127.0.0.1".parse().unwrap();
+        let other: IpAddr = "127.0.0.2".parse().unwrap();
+        let app = Some(AppAddr {
+            session: 7,
+            ip: app_ip,
+        });
+        assert_eq!(check(&location(), app_ip, app), Ok(7));
+        assert_eq!(
+            check(&location(), "::ffff:127.0.0.1".parse().unwrap(), app),
+            Ok(7)
+        );
+        assert_eq!(
+            check(&location(), other, app).unwrap_err().0,
+            Malformed::Unauthorised
+        );
+        assert_eq!(
+            check(&location(), app_ip, None).unwrap_err().0,
+            Malformed::NoApp
+        );
+        let mut long = location();
+        long.push(0);
+        assert_eq!(
+            check(&long, app_ip, app).unwrap_err().0,
+            Malformed::BadDatagram
+        );
+        assert_eq!(
+            check(&location()[..20], app_ip, app).unwrap_err().0,
+            Malformed::BadDatagram
+        );
+        let pause = SoloMessage::Pause.to_bytes();
+        assert_eq!(
+            check(&pause, app_ip, app).unwrap_err().0,
+            Malformed::BadDatagram
+        );
+    }
+}

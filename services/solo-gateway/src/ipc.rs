@@ -1,0 +1,98 @@
+//! Every bus call of solo-gateway: the three shot topics, typed.
+//!
+//! | topic | direction | type |
+//! |---|---|---|
+//! | `skymesh/shot/from_app` | publish (sessions, follow stream) | `AppMessage` |
+//! | `skymesh/shot/app_session` | publish (hub) | `AppSession` |
+//! | `skymesh/shot/to_app` | subscribe (hub) | `AppMessage` |
+
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex, PoisonError};
+
+use anyhow::Context as _;
+use skymesh_ipc_types::shot::{app_flags, ValueTooLong};
+use skymesh_ipc_types::{topics, AppMessage, AppSession, FixedStr};
+use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
+
+/// Why a message could not be published.
+#[derive(Debug, thiserror::Error)]
+pub enum PublishError {
+    /// The value does not fit an `AppMessage` (checked before, so a bug if seen).
+    #[error(transparent)]
+    TooLong(#[from] ValueTooLong),
+    /// The bus failed: the service cannot work on and stops (and is restarted).
+    #[error(transparent)]
+    Bus(#[from] IpcError),
+}
+
+/// The `from_app` publisher, shared by every session and the follow stream.
+///
+/// One publisher per gateway (the topic allows two, for a restart overlap), so the
+/// tasks share it behind a mutex held only for the copy into shared memory.
+#[derive(Debug, Clone)]
+pub struct FromApp(Arc<Mutex<Publisher<AppMessage>>>);
+
+impl FromApp {
+    /// Publishes one validated app message.
+    pub fn publish(
+        &self,
+        session: u32,
+        msg_type: u32,
+        value: &[u8],
+        follow_stream: bool,
+    ) -> Result<(), PublishError> {
+        let mut m = AppMessage::new(session, msg_type, value)?;
+        if follow_stream {
+            m.flags |= app_flags::FOLLOW_STREAM;
+        }
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .publish(m)?;
+        Ok(())
+    }
+}
+
+/// The hub's ports.
+#[derive(Debug)]
+pub struct Ports {
+    pub from_app: FromApp,
+    session: Publisher<AppSession>,
+    /// Messages from the shot engine; the hub routes them to the app.
+    pub to_app: Subscriber<AppMessage>,
+}
+
+impl Ports {
+    pub fn open(bus: &Bus) -> anyhow::Result<Ports> {
+        Ok(Ports {
+            from_app: FromApp(Arc::new(Mutex::new(
+                bus.publisher::<AppMessage>(&topics::shot_from_app())
+                    .context("opening the from_app topic")?,
+            ))),
+            session: bus
+                .publisher::<AppSession>(&topics::shot_app_session())
+                .context("opening the app_session topic")?,
+            to_app: bus
+                .subscriber::<AppMessage>(&topics::shot_to_app())
+                .context("opening the to_app topic")?,
+        })
+    }
+
+    /// Publishes the app connection state: `session` is the current one, or the last
+    /// one when `peer` is `None` (0 = never connected).
+    pub fn publish_session(
+        &mut self,
+        session: u32,
+        connected: bool,
+        peer: Option<SocketAddr>,
+    ) -> Result<(), IpcError> {
+        let peer = peer.map(|p| p.to_string()).unwrap_or_default();
+        self.session.publish(AppSession {
+            session,
+            connected: u8::from(connected),
+            peer: FixedStr::new(&peer),
+            ..AppSession::default()
+        })?;
+        Ok(())
+    }
+}

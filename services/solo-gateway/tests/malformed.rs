@@ -1,0 +1,176 @@
+//! Bad input never crashes the gateway and never loses other state: each case is
+//! counted, and what follows it still works.
+
+mod common;
+
+use std::time::Duration;
+
+use common::{value_of, Gateway, PATIENCE};
+use skymesh_ipc_types::APP_VALUE_CAPACITY;
+use skymesh_solo_gateway::client::AppClient;
+use skymesh_solo_gateway::Settings;
+use solo_proto::{ids, GeofenceData, Location, SoloMessage};
+
+/// `header + value` with any declared type and value.
+fn frame(msg_type: u32, value: &[u8]) -> Vec<u8> {
+    let mut b = msg_type.to_le_bytes().to_vec();
+    b.extend((value.len() as u32).to_le_bytes());
+    b.extend_from_slice(value);
+    b
+}
+
+#[tokio::test]
+async fn bad_frames_are_counted_and_the_next_one_in_the_same_write_arrives() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+
+    let mut nan = value_of(&SoloMessage::Location(Location {
+        lat_deg: 1.0,
+        lon_deg: 2.0,
+        alt_m: 3.0,
+    }));
+    nan[..8].copy_from_slice(&f64::NAN.to_le_bytes());
+    let mut bytes = Vec::new();
+    bytes.extend(frame(ids::SET_CURRENT_SHOT, &[1, 0, 0])); // wrong length
+    bytes.extend(frame(4242, &[7, 7])); // unknown type
+    bytes.extend(frame(ids::LOCATION, &nan)); // invalid value
+    bytes.extend(SoloMessage::GetCurrentShot(1).to_bytes()); // only the vehicle sends it
+    bytes.extend(SoloMessage::SetCurrentShot(2).to_bytes()); // valid
+    app.send_raw(&bytes).await.expect("send");
+
+    let got = gw.next_from_app().await;
+    assert_eq!((got.session, got.msg_type), (1, ids::SET_CURRENT_SHOT));
+    assert_eq!(
+        got.value(),
+        value_of(&SoloMessage::SetCurrentShot(2)).as_slice()
+    );
+    for kind in [
+        "wrong_length",
+        "unknown_type",
+        "invalid_value",
+        "wrong_direction",
+    ] {
+        gw.wait_malformed(kind, 1.0).await;
+    }
+    // The connection is still up and in the same session.
+    app.send(&SoloMessage::Pause).await.expect("send");
+    let got = gw.next_from_app().await;
+    assert_eq!((got.session, got.msg_type), (1, ids::PAUSE));
+    assert!(!app.is_closed());
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn a_declared_length_above_64_kib_closes_the_connection() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let mut header = ids::LOCATION.to_le_bytes().to_vec();
+    header.extend((64 * 1024 + 1u32).to_le_bytes());
+    app.send_raw(&header).await.expect("send");
+    assert!(app.wait_closed(PATIENCE).await, "closed");
+    gw.wait_malformed("too_long", 1.0).await;
+    gw.wait_session("session 1 disconnected", |s| {
+        s.session == 1 && s.connected == 0
+    })
+    .await;
+
+    // The gateway serves the next connection.
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(2).await;
+    app.send(&SoloMessage::RecordPosition).await.expect("send");
+    assert_eq!(gw.next_from_app().await.session, 2);
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn half_a_frame_then_silence_is_dropped() {
+    let mut settings = Settings::loopback_any_port();
+    settings.frame_timeout = Duration::from_millis(200);
+    let mut gw = Gateway::start_with(settings).await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let bytes = SoloMessage::SetCurrentShot(1).to_bytes();
+    app.send_raw(&bytes[..5]).await.expect("send");
+    assert!(
+        app.wait_closed(PATIENCE).await,
+        "a stalled client is closed"
+    );
+    gw.wait_malformed("stalled", 1.0).await;
+    gw.wait_session("session 1 disconnected", |s| {
+        s.session == 1 && s.connected == 0
+    })
+    .await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn frames_delivered_one_byte_at_a_time_arrive() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let mut bytes = SoloMessage::Location(Location {
+        lat_deg: 37.87,
+        lon_deg: -122.30,
+        alt_m: 20.0,
+    })
+    .to_bytes()
+    .to_vec();
+    bytes.extend(
+        SoloMessage::CableCamOptions {
+            cam_interpolation: 1,
+            yaw_direction_cw: 0,
+            cruise_speed: 4.0,
+        }
+        .to_bytes(),
+    );
+    for b in &bytes {
+        app.send_raw(&[*b]).await.expect("send");
+        // Pace the bytes so they arrive in separate reads (not a wait for anything).
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    assert_eq!(gw.next_from_app().await.msg_type, ids::LOCATION);
+    assert_eq!(gw.next_from_app().await.msg_type, ids::CABLE_CAM_OPTIONS);
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let square = vec![
+        [37.873_391_778_8, -122.301_244_403_2],
+        [37.873_425_469_3, -122.300_884_203_8],
+        [37.872_895_782_9, -122.300_712_401_1],
+        [37.872_942_621_2, -122.301_244_403_2],
+    ];
+    let fence = SoloMessage::GeofenceSetData(GeofenceData {
+        coord: vec![square.clone()],
+        sub_coord: vec![square],
+        kinds: vec![0],
+    });
+    assert!(value_of(&fence).len() > APP_VALUE_CAPACITY);
+    app.send(&fence).await.expect("send");
+    assert_eq!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false
+        })
+    );
+    match app.recv(PATIENCE).await {
+        Some(SoloMessage::ShotManagerError(text)) => {
+            assert!(text.contains("not implemented"), "{text}")
+        }
+        other => panic!("expected SHOTMANAGER_ERROR, got {other:?}"),
+    }
+    gw.wait_malformed("too_large_for_bus", 1.0).await;
+    // Nothing of it went on the bus; the connection works on.
+    app.send(&SoloMessage::SetCurrentShot(1))
+        .await
+        .expect("send");
+    assert_eq!(gw.next_from_app().await.msg_type, ids::SET_CURRENT_SHOT);
+    gw.stop().await;
+}

@@ -1,0 +1,444 @@
+//! Solo app packet in → first resulting MAVLink setpoint out, through the real mesh.
+//!
+//! Runs vehicle-sim, autopilot-link, solo-gateway and shot-engine under the
+//! supervisor, with a tap between autopilot-link and vehicle-sim that timestamps every
+//! `SET_POSITION_TARGET_*` frame. The vehicle hovers at 10 m; each round enters orbit
+//! over TCP 5507, then measures:
+//!
+//! - `roi`: SOLO_MESSAGE_LOCATION (the orbit's ROI) → the first setpoint on the wire
+//!   (includes the engine's GUIDED switch, authority grab and ROI command);
+//! - `speed`: SOLO_SHOT_OPTIONS (cruise speed change) while orbiting → the first
+//!   setpoint whose velocity reflects it;
+//!
+//! and a baseline in the same run: the same TLV packet over loopback TCP to a thread
+//! that decodes it and writes a MAVLink setpoint over a second loopback TCP socket to
+//! the same tap (what a single-process translator would cost).
+//!
+//! `cargo run --release -p skymesh-e2e --bin solo-bench -- --rounds 30`
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use skymesh_e2e::{Mesh, MeshOptions};
+use skymesh_ipc_types::{
+    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
+    VehicleState, VehicleStatus,
+};
+use solo_proto::{shots, Location, SoloMessage};
+
+/// One setpoint seen on the wire: when, and its NED velocity.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    at: Instant,
+    vel: [f32; 3],
+}
+
+fn arg(name: &str, default: u64) -> u64 {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let idx = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[idx]
+}
+
+/// Cuts MAVLink v1/v2 frames out of `buf` and reports every SET_POSITION_TARGET_LOCAL_NED
+/// (84) and SET_POSITION_TARGET_GLOBAL_INT (86). Returns the bytes consumed.
+fn scan_frames(buf: &[u8], now: Instant, out: &mpsc::Sender<Seen>) -> usize {
+    let mut i = 0;
+    while i < buf.len() {
+        let (header, msgid, len) = match buf[i] {
+            0xFD if buf.len() - i >= 10 => {
+                let len = buf[i + 1] as usize;
+                let signed = buf[i + 2] & 1 != 0;
+                let id = u32::from_le_bytes([buf[i + 7], buf[i + 8], buf[i + 9], 0]);
+                (10, id, len + 2 + if signed { 13 } else { 0 })
+            }
+            0xFE if buf.len() - i >= 6 => (6, u32::from(buf[i + 5]), buf[i + 1] as usize + 2),
+            0xFD | 0xFE => break,
+            _ => {
+                i += 1;
+                continue;
+            }
+        };
+        if buf.len() - i < header + len {
+            break;
+        }
+        if msgid == 84 || msgid == 86 {
+            // Trailing zero bytes may be truncated (MAVLink 2): pad with zeros.
+            let mut p = [0u8; 64];
+            let n = (buf[i + 1] as usize).min(64);
+            p[..n].copy_from_slice(&buf[i + header..i + header + n]);
+            // Both messages put vx, vy, vz at payload offsets 16, 20, 24 (fields sorted by size).
+            let f = |o: usize| f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]);
+            let _ = out.send(Seen {
+                at: now,
+                vel: [f(16), f(20), f(24)],
+            });
+        }
+        i += header + len;
+    }
+    i
+}
+
+/// Forwards bytes both ways between autopilot-link (`listener`) and vehicle-sim,
+/// reporting setpoints that autopilot-link sends.
+fn tap(listener: TcpListener, sim_port: u16, out: mpsc::Sender<Seen>) {
+    std::thread::spawn(move || loop {
+        let Ok((link, _)) = listener.accept() else {
+            return;
+        };
+        let Ok(sim) = TcpStream::connect(("127.0.0.1", sim_port)) else {
+            continue;
+        };
+        let _ = link.set_nodelay(true);
+        let _ = sim.set_nodelay(true);
+        let (mut link_r, mut sim_w) = (
+            link.try_clone().expect("clone"),
+            sim.try_clone().expect("clone"),
+        );
+        let (mut sim_r, mut link_w) = (sim, link);
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = sim_r.read(&mut buf) {
+                if n == 0 || link_w.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        });
+        let out = out.clone();
+        std::thread::spawn(move || {
+            let mut pending = Vec::new();
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = link_r.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                let now = Instant::now();
+                if sim_w.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+                pending.extend_from_slice(&buf[..n]);
+                let used = scan_frames(&pending, now, &out);
+                pending.drain(..used);
+            }
+        });
+    });
+}
+
+/// Reads TLV frames from the app connection into a channel.
+fn app_reader(mut stream: TcpStream, out: mpsc::Sender<SoloMessage>) {
+    std::thread::spawn(move || {
+        let mut header = [0u8; 8];
+        loop {
+            if stream.read_exact(&mut header).is_err() {
+                return;
+            }
+            let ty = u32::from_le_bytes(header[..4].try_into().expect("4 bytes"));
+            let len = u32::from_le_bytes(header[4..].try_into().expect("4 bytes")) as usize;
+            let mut value = vec![0u8; len.min(1 << 16)];
+            if stream.read_exact(&mut value).is_err() {
+                return;
+            }
+            if let Ok(m) = SoloMessage::decode(ty, &value) {
+                let _ = out.send(m);
+            }
+        }
+    });
+}
+
+fn expect_app(
+    rx: &mpsc::Receiver<SoloMessage>,
+    what: &str,
+    f: impl Fn(&SoloMessage) -> bool,
+) -> Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        if let Ok(m) = rx.recv_timeout(left) {
+            if f(&m) {
+                return Ok(());
+            }
+        }
+    }
+    bail!("no {what} from the shot engine")
+}
+
+/// Waits for the first setpoint after `t0` that satisfies `f`; returns its latency.
+fn first_setpoint(
+    rx: &mpsc::Receiver<Seen>,
+    t0: Instant,
+    f: impl Fn(&Seen) -> bool,
+) -> Result<Duration> {
+    let deadline = t0 + Duration::from_secs(10);
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(s) if s.at >= t0 && f(&s) => return Ok(s.at - t0),
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    bail!("no setpoint within 10 s")
+}
+
+fn drain<T>(rx: &mpsc::Receiver<T>) {
+    while rx.try_recv().is_ok() {}
+}
+
+/// Operator: GUIDED, arm, take off to 10 m, then give authority back.
+fn take_off(mesh: &Mesh) -> Result<()> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async {
+        let bus = mesh.bus("solo-bench")?;
+        let mut status = bus.subscriber::<VehicleStatus>(&topics::vehicle_status(1))?;
+        let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1))?;
+        let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1))?;
+        let mut cmds = bus.publisher::<VehicleCommand>(&topics::vehicle_command(1))?;
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let s = status.recv_timeout(Duration::from_secs(5)).await?;
+            if s.is_some_and(|s| s.ekf_healthy != 0) {
+                break;
+            }
+            if Instant::now() > deadline {
+                bail!("EKF never became healthy");
+            }
+        }
+        let steps = [
+            Command::SetMode(FlightMode::Guided),
+            Command::Arm { force: false },
+            Command::Takeoff { alt_rel_m: 10.0 },
+        ];
+        for (i, cmd) in steps.iter().enumerate() {
+            let id = 9000 + i as u32;
+            cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd)?)?;
+            loop {
+                let a = acks
+                    .recv_timeout(Duration::from_secs(10))
+                    .await?
+                    .context("no ack")?;
+                if a.command_id == id {
+                    if a.result() != Some(AckResult::Accepted) {
+                        bail!("{cmd:?} refused: {a:?}");
+                    }
+                    break;
+                }
+            }
+        }
+        loop {
+            let s = state
+                .recv_timeout(Duration::from_secs(5))
+                .await?
+                .context("no state")?;
+            if s.alt_rel_m > 9.5 {
+                break;
+            }
+            if Instant::now() > deadline {
+                bail!("take-off did not reach 10 m");
+            }
+        }
+        let id = 9100;
+        cmds.publish(VehicleCommand::new(
+            1,
+            CommandSource::Operator,
+            id,
+            &Command::ReleaseFlightAuthority,
+        )?)?;
+        Ok(())
+    })
+}
+
+/// The baseline: the same TLV over loopback TCP, decoded by a thread that writes one
+/// MAVLink SET_POSITION_TARGET_LOCAL_NED over a second loopback socket to a reader
+/// that scans it exactly as the tap does.
+fn baseline(rounds: usize) -> Result<Vec<f64>> {
+    let app_side = TcpListener::bind("127.0.0.1:0")?;
+    let wire_side = TcpListener::bind("127.0.0.1:0")?;
+    let app_addr = app_side.local_addr()?;
+    let wire_addr = wire_side.local_addr()?;
+    let (seen_tx, seen_rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let Ok((mut wire_in, _)) = wire_side.accept() else {
+            return;
+        };
+        let mut pending = Vec::new();
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = wire_in.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            let now = Instant::now();
+            pending.extend_from_slice(&buf[..n]);
+            let used = scan_frames(&pending, now, &seen_tx);
+            pending.drain(..used);
+        }
+    });
+    std::thread::spawn(move || {
+        let Ok((mut app_in, _)) = app_side.accept() else {
+            return;
+        };
+        let Ok(mut wire_out) = TcpStream::connect(wire_addr) else {
+            return;
+        };
+        let _ = wire_out.set_nodelay(true);
+        let mut header = [0u8; 8];
+        let mut seq = 0u8;
+        while app_in.read_exact(&mut header).is_ok() {
+            let ty = u32::from_le_bytes(header[..4].try_into().expect("4 bytes"));
+            let len = u32::from_le_bytes(header[4..].try_into().expect("4 bytes")) as usize;
+            let mut value = vec![0u8; len];
+            if app_in.read_exact(&mut value).is_err() {
+                return;
+            }
+            if SoloMessage::decode(ty, &value).is_err() {
+                continue;
+            }
+            // A 53-byte SET_POSITION_TARGET_LOCAL_NED (CRC not needed by the scanner).
+            let mut frame = vec![0xFD, 53, 0, 0, seq, 255, 190, 84, 0, 0];
+            frame.extend_from_slice(&[0u8; 53]);
+            frame.extend_from_slice(&[0, 0]);
+            seq = seq.wrapping_add(1);
+            if wire_out.write_all(&frame).is_err() {
+                return;
+            }
+        }
+    });
+    let mut app = TcpStream::connect(app_addr)?;
+    app.set_nodelay(true)?;
+    let packet = SoloMessage::Location(Location {
+        lat_deg: 35.0,
+        lon_deg: 149.0,
+        alt_m: 0.0,
+    })
+    .to_bytes();
+    let mut out = Vec::with_capacity(rounds);
+    for _ in 0..rounds {
+        std::thread::sleep(Duration::from_millis(20));
+        let t0 = Instant::now();
+        app.write_all(&packet)?;
+        out.push(first_setpoint(&seen_rx, t0, |_| true)?.as_secs_f64() * 1e3);
+    }
+    Ok(out)
+}
+
+fn report(name: &str, mut ms: Vec<f64>, base_p50: f64) {
+    ms.sort_by(f64::total_cmp);
+    let p50 = percentile(&ms, 0.5);
+    println!(
+        "{name:<8} n={:<4} p50={p50:8.3} ms  p99={:8.3} ms  max={:8.3} ms  p50/baseline={:.0}x",
+        ms.len(),
+        percentile(&ms, 0.99),
+        percentile(&ms, 1.0),
+        p50 / base_p50
+    );
+}
+
+fn main() -> Result<()> {
+    let rounds = arg("--rounds", 20) as usize;
+    let tap_listener = TcpListener::bind("127.0.0.1:0")?;
+    let tap_port = tap_listener.local_addr()?.port();
+    let opts = MeshOptions {
+        solo: true,
+        link_via: Some(tap_port),
+        attitude_hz: 25.0,
+        ..Default::default()
+    };
+    let mut mesh = Mesh::start(opts)?;
+    let (seen_tx, seen_rx) = mpsc::channel();
+    tap(tap_listener, mesh.mavlink_port, seen_tx);
+    for name in [
+        "vehicle-sim",
+        "autopilot-link",
+        "solo-gateway",
+        "shot-engine",
+    ] {
+        mesh.wait_running(name, Duration::from_secs(40))?;
+    }
+    take_off(&mesh)?;
+
+    let app = TcpStream::connect(("127.0.0.1", mesh.solo_port))?;
+    app.set_nodelay(true)?;
+    let (app_tx, app_rx) = mpsc::channel();
+    app_reader(app.try_clone()?, app_tx);
+    let mut app_w = app;
+    let here = {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        rt.block_on(async {
+            let bus = mesh.bus("solo-bench-pos")?;
+            let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1))?;
+            state
+                .recv_timeout(Duration::from_secs(5))
+                .await?
+                .context("no vehicle state")
+        })?
+    };
+    // ROI 30 m north of the hover point, on the ground.
+    let roi = Location {
+        lat_deg: here.lat_deg + 30.0 / 111_320.0,
+        lon_deg: here.lon_deg,
+        alt_m: 0.0,
+    };
+
+    let (mut roi_ms, mut speed_ms) = (Vec::new(), Vec::new());
+    for round in 0..rounds {
+        app_w.write_all(&SoloMessage::SetCurrentShot(shots::ORBIT).to_bytes())?;
+        expect_app(
+            &app_rx,
+            "GET_CURRENT_SHOT orbit",
+            |m| matches!(m, SoloMessage::GetCurrentShot(s) if *s == shots::ORBIT),
+        )?;
+        std::thread::sleep(Duration::from_millis(200));
+        drain(&seen_rx);
+        let t0 = Instant::now();
+        app_w.write_all(&SoloMessage::Location(roi).to_bytes())?;
+        roi_ms.push(first_setpoint(&seen_rx, t0, |_| true)?.as_secs_f64() * 1e3);
+
+        // Orbiting at 0 m/s: change the cruise speed and wait for a moving setpoint.
+        std::thread::sleep(Duration::from_millis(500));
+        let speed = if round % 2 == 0 { 3.0 } else { -3.0 };
+        drain(&seen_rx);
+        let t0 = Instant::now();
+        app_w.write_all(
+            &SoloMessage::ShotOptions {
+                cruise_speed: speed,
+            }
+            .to_bytes(),
+        )?;
+        speed_ms.push(
+            first_setpoint(&seen_rx, t0, |s| s.vel[0].hypot(s.vel[1]) > 0.05)?.as_secs_f64() * 1e3,
+        );
+        std::thread::sleep(Duration::from_millis(300));
+        app_w.write_all(&SoloMessage::SetCurrentShot(shots::NONE).to_bytes())?;
+        expect_app(
+            &app_rx,
+            "GET_CURRENT_SHOT -1",
+            |m| matches!(m, SoloMessage::GetCurrentShot(s) if *s == shots::NONE),
+        )?;
+        std::thread::sleep(Duration::from_millis(700));
+    }
+    let mut base = baseline(rounds.max(50))?;
+    base.sort_by(f64::total_cmp);
+    let base_p50 = percentile(&base, 0.5);
+    println!(
+        "solo-bench: {rounds} rounds (app packet in over TCP 5507 → first MAVLink setpoint out)"
+    );
+    report("baseline", base, base_p50);
+    report("roi", roi_ms, base_p50);
+    report("speed", speed_ms, base_p50);
+    mesh.stop(Duration::from_secs(10))?;
+    Ok(())
+}

@@ -1,0 +1,581 @@
+//! The Solo app protocol end to end: a test app speaks TLV over TCP (and the follow
+//! stream over UDP) to the real `skymesh-solo-gateway`, the real `skymesh-shot-engine`
+//! decides, the real `autopilot-link` arbitrates and `vehicle-sim` flies. Every check
+//! is made on what the vehicle actually did (its `VehicleState` / `PayloadState`) and
+//! on the bytes the app received.
+
+use std::time::{Duration, Instant};
+
+use skymesh_e2e::{Mesh, MeshOptions};
+use skymesh_ipc_types::{
+    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, PayloadState,
+    VehicleCommand, VehicleState, VehicleStatus,
+};
+use skymesh_runtime::ipc::{Bus, Subscriber};
+use skymesh_solo_gateway::client::{AppClient, FollowStreamer};
+use solo_proto::{shots, Location, SoloMessage};
+
+const STARTUP: Duration = Duration::from_secs(40);
+const REPLY: Duration = Duration::from_secs(5);
+const M_PER_DEG_LAT: f64 = 111_320.0;
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+fn start_mesh() -> Mesh {
+    let mut mesh = Mesh::start(MeshOptions {
+        solo: true,
+        attitude_hz: 25.0,
+        ..Default::default()
+    })
+    .unwrap();
+    for name in [
+        "vehicle-sim",
+        "autopilot-link",
+        "solo-gateway",
+        "shot-engine",
+    ] {
+        if let Err(e) = mesh.wait_running(name, STARTUP) {
+            panic!("{name} did not start: {e:#}\n{}", mesh.output());
+        }
+    }
+    mesh
+}
+
+/// North/east metres of `p` from `o`.
+fn ne(o: (f64, f64), p: (f64, f64)) -> (f64, f64) {
+    (
+        (p.0 - o.0) * M_PER_DEG_LAT,
+        (p.1 - o.1) * M_PER_DEG_LAT * o.0.to_radians().cos(),
+    )
+}
+
+fn offset(o: (f64, f64), north_m: f64, east_m: f64) -> (f64, f64) {
+    (
+        o.0 + north_m / M_PER_DEG_LAT,
+        o.1 + east_m / (M_PER_DEG_LAT * o.0.to_radians().cos()),
+    )
+}
+
+fn loc(p: (f64, f64), alt_m: f32) -> Location {
+    Location {
+        lat_deg: p.0,
+        lon_deg: p.1,
+        alt_m,
+    }
+}
+
+/// The test's view of the vehicle and its operator controls.
+struct Vehicle {
+    state: Subscriber<VehicleState>,
+    status: Subscriber<VehicleStatus>,
+    payload: Subscriber<PayloadState>,
+    acks: Subscriber<CommandAck>,
+    cmds: skymesh_runtime::ipc::Publisher<VehicleCommand>,
+    next_id: u32,
+}
+
+impl Vehicle {
+    fn new(bus: &Bus) -> Vehicle {
+        Vehicle {
+            state: bus.subscriber(&topics::vehicle_state(1)).unwrap(),
+            status: bus.subscriber(&topics::vehicle_status(1)).unwrap(),
+            payload: bus.subscriber(&topics::vehicle_payload(1)).unwrap(),
+            acks: bus.subscriber(&topics::vehicle_command_ack(1)).unwrap(),
+            cmds: bus.publisher(&topics::vehicle_command(1)).unwrap(),
+            next_id: 7000,
+        }
+    }
+
+    async fn now(&mut self) -> VehicleState {
+        self.state
+            .recv_timeout(REPLY)
+            .await
+            .unwrap()
+            .expect("vehicle state stream stopped")
+    }
+
+    async fn status(&mut self) -> VehicleStatus {
+        if let Some(s) = self.status.latest().unwrap() {
+            return s;
+        }
+        self.status
+            .recv_timeout(REPLY)
+            .await
+            .unwrap()
+            .expect("no vehicle status")
+    }
+
+    async fn wait_ekf(&mut self) {
+        let deadline = Instant::now() + STARTUP;
+        while Instant::now() < deadline {
+            if let Some(s) = self.status.recv_timeout(REPLY).await.unwrap() {
+                if s.ekf_healthy != 0 && s.is_link_up() {
+                    return;
+                }
+            }
+        }
+        panic!("EKF never became healthy");
+    }
+
+    /// An operator command (priority above the shot engine), answered Accepted.
+    async fn operator(&mut self, cmd: Command) {
+        self.next_id += 1;
+        let id = self.next_id;
+        self.cmds
+            .publish(VehicleCommand::new(1, CommandSource::Operator, id, &cmd).unwrap())
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Some(a) = self.acks.recv_timeout(REPLY).await.unwrap() {
+                if a.command_id == id && a.source == CommandSource::Operator.to_wire() {
+                    assert_eq!(a.result(), Some(AckResult::Accepted), "{cmd:?} → {a:?}");
+                    return;
+                }
+            }
+        }
+        panic!("no ack for {cmd:?}");
+    }
+
+    /// GUIDED, armed, hovering at `alt` m; the operator then gives authority back.
+    async fn take_off(&mut self, alt: f32) {
+        self.wait_ekf().await;
+        self.operator(Command::SetMode(FlightMode::Guided)).await;
+        self.operator(Command::Arm { force: false }).await;
+        self.operator(Command::Takeoff { alt_rel_m: alt }).await;
+        self.wait_until(Duration::from_secs(30), "take-off", |s| {
+            s.alt_rel_m > alt - 0.5
+        })
+        .await;
+        self.operator(Command::ReleaseFlightAuthority).await;
+    }
+
+    /// Operator flies to `p` at `alt`, waits to arrive, then releases authority.
+    async fn fly_to(&mut self, p: (f64, f64), alt: f32) {
+        // Leaving a shot hands the vehicle back in LOITER; GoTo needs GUIDED.
+        self.operator(Command::SetMode(FlightMode::Guided)).await;
+        self.operator(Command::GoTo {
+            lat_deg: p.0,
+            lon_deg: p.1,
+            alt_rel_m: alt,
+            yaw_deg: None,
+            speed_mps: Some(6.0),
+        })
+        .await;
+        self.wait_until(Duration::from_secs(30), "arrival", |s| {
+            let (n, e) = ne(p, (s.lat_deg, s.lon_deg));
+            n.hypot(e) < 1.0 && (s.alt_rel_m - alt).abs() < 0.7 && speed(s) < 0.3
+        })
+        .await;
+        self.operator(Command::ReleaseFlightAuthority).await;
+    }
+
+    async fn wait_until(
+        &mut self,
+        timeout: Duration,
+        what: &str,
+        mut f: impl FnMut(&VehicleState) -> bool,
+    ) -> VehicleState {
+        let deadline = Instant::now() + timeout;
+        let mut last = None;
+        while Instant::now() < deadline {
+            let s = self.now().await;
+            if f(&s) {
+                return s;
+            }
+            last = Some(s);
+        }
+        panic!("{what}: not reached within {timeout:?}; last state {last:?}");
+    }
+}
+
+fn speed(s: &VehicleState) -> f32 {
+    s.vel_ned_mps[0].hypot(s.vel_ned_mps[1])
+}
+
+fn pos(s: &VehicleState) -> (f64, f64) {
+    (s.lat_deg, s.lon_deg)
+}
+
+async fn app(mesh: &Mesh) -> AppClient {
+    let mut app = AppClient::connect(([127, 0, 0, 1], mesh.solo_port).into())
+        .await
+        .expect("connect to the solo gateway");
+    // On connect the engine tells the app the current shot and the GoPro state.
+    app.recv_until(REPLY, |m| matches!(m, SoloMessage::GetCurrentShot(_)))
+        .await
+        .expect("no current shot on connect");
+    app
+}
+
+async fn expect(
+    app: &mut AppClient,
+    what: &str,
+    f: impl FnMut(&SoloMessage) -> bool,
+) -> SoloMessage {
+    match app.recv_until(Duration::from_secs(8), f).await {
+        Some(m) => m,
+        None => panic!("the app never received {what}"),
+    }
+}
+
+async fn enter(app: &mut AppClient, shot: i32) {
+    app.send(&SoloMessage::SetCurrentShot(shot)).await.unwrap();
+    expect(app, "GET_CURRENT_SHOT for the shot", |m| {
+        *m == SoloMessage::GetCurrentShot(shot)
+    })
+    .await;
+}
+
+async fn leave(app: &mut AppClient) {
+    app.send(&SoloMessage::SetCurrentShot(shots::NONE))
+        .await
+        .unwrap();
+    expect(app, "GET_CURRENT_SHOT -1", |m| {
+        *m == SoloMessage::GetCurrentShot(shots::NONE)
+    })
+    .await;
+}
+
+fn metric(mesh: &Mesh, series: &str) -> f64 {
+    mesh.metric(series).unwrap().unwrap_or(0.0)
+}
+
+/// Shot refusals, the one-app rule and hostile input through the whole mesh.
+#[test]
+fn app_protocol_edges_through_the_mesh() {
+    let mut mesh = start_mesh();
+    runtime().block_on(async {
+        let bus = mesh.bus("e2e-solo-edges").unwrap();
+        let mut v = Vehicle::new(&bus);
+        v.wait_ekf().await;
+        let mut app = app(&mesh).await;
+
+        // Disarmed on the ground: SOLO_SHOT_ERROR UNARMED (1), the shot is not entered.
+        assert!(!v.status().await.is_armed());
+        app.send(&SoloMessage::SetCurrentShot(shots::ORBIT))
+            .await
+            .unwrap();
+        let m = expect(&mut app, "SOLO_SHOT_ERROR", |m| {
+            matches!(
+                m,
+                SoloMessage::ShotError(_) | SoloMessage::GetCurrentShot(_)
+            )
+        })
+        .await;
+        assert_eq!(m, SoloMessage::ShotError(1), "unarmed entry");
+
+        // A second phone from another address is told and closed; the first keeps working.
+        let mut second = AppClient::connect_from(
+            [127, 0, 0, 2].into(),
+            ([127, 0, 0, 1], mesh.solo_port).into(),
+        )
+        .await
+        .unwrap();
+        assert_eq!(
+            second.recv(REPLY).await,
+            Some(SoloMessage::SecondPhoneNotification)
+        );
+        assert!(second.wait_closed(REPLY).await, "second phone not closed");
+        app.send(&SoloMessage::GetButtonSetting(solo_proto::ButtonSetting {
+            button: 4,
+            event: 0,
+            shot: -1,
+            mode: -1,
+        }))
+        .await
+        .unwrap();
+        expect(
+            &mut app,
+            "the A button setting",
+            |m| matches!(m, SoloMessage::GetButtonSetting(b) if b.button == 4),
+        )
+        .await;
+
+        // Wrong length, unknown type, out-of-range value: each dropped and counted,
+        // and the valid frame behind them in the same write still works.
+        let mut burst = Vec::new();
+        burst.extend_from_slice(&[2, 0, 0, 0, 4, 0, 0, 0, 1, 2, 3, 4]); // LOCATION, 4 bytes
+        burst.extend_from_slice(&[0x39, 0x30, 0, 0, 0, 0, 0, 0]); // type 12345, empty
+        burst.extend_from_slice(&SoloMessage::SetCurrentShot(shots::ORBIT).to_bytes());
+        let mut bad_shot = SoloMessage::SetCurrentShot(0).to_bytes().to_vec();
+        bad_shot[8..12].copy_from_slice(&99i32.to_le_bytes());
+        burst.extend_from_slice(&bad_shot);
+        burst.extend_from_slice(
+            &SoloMessage::GetButtonSetting(solo_proto::ButtonSetting {
+                button: 5,
+                event: 0,
+                shot: -1,
+                mode: -1,
+            })
+            .to_bytes(),
+        );
+        app.send_raw(&burst).await.unwrap();
+        expect(
+            &mut app,
+            "the B button setting after the bad frames",
+            |m| matches!(m, SoloMessage::GetButtonSetting(b) if b.button == 5),
+        )
+        .await;
+        let counted = |mesh: &Mesh, kind: &str| {
+            metric(
+                mesh,
+                &format!(
+                    "skymesh_solo_malformed_total{{kind=\"{kind}\",service=\"solo-gateway\"}}"
+                ),
+            )
+        };
+        mesh.wait_for(Duration::from_secs(5), "malformed counters", |m| {
+            (counted(m, "wrong_length") >= 1.0
+                && counted(m, "unknown_type") >= 1.0
+                && counted(m, "invalid_value") >= 1.0)
+                .then_some(())
+        })
+        .unwrap();
+
+        // A declared length above 64 KiB closes that connection, nothing else.
+        app.send_raw(&[1, 0, 0, 0, 0xff, 0xff, 0xff, 0x7f])
+            .await
+            .unwrap();
+        assert!(
+            app.wait_closed(REPLY).await,
+            "oversized frame did not close"
+        );
+        let mut again = AppClient::connect(([127, 0, 0, 1], mesh.solo_port).into())
+            .await
+            .unwrap();
+        again
+            .recv_until(REPLY, |m| matches!(m, SoloMessage::GetCurrentShot(_)))
+            .await
+            .expect("a new connection works after the oversized frame");
+        assert_eq!(mesh.service("shot-engine").unwrap()["restarts"], 0);
+        assert_eq!(mesh.service("solo-gateway").unwrap()["restarts"], 0);
+    });
+    mesh.stop(Duration::from_secs(10)).unwrap();
+}
+
+/// Orbit holds its radius around the ROI with the camera on it; cable cam flies
+/// between its two recorded points.
+#[test]
+fn orbit_and_cable_cam_fly_vehicle_sim() {
+    let mut mesh = start_mesh();
+    runtime().block_on(async {
+        let bus = mesh.bus("e2e-solo-orbit").unwrap();
+        let mut v = Vehicle::new(&bus);
+        v.take_off(10.0).await;
+        let mut app = app(&mesh).await;
+
+        // ---- Orbit: ROI 20 m north on the ground, 4 m/s.
+        let start = v.now().await;
+        let roi = offset(pos(&start), 20.0, 0.0);
+        enter(&mut app, shots::ORBIT).await;
+        app.send(&SoloMessage::Location(loc(roi, 0.0)))
+            .await
+            .unwrap();
+        let echo = expect(&mut app, "the ROI echoed", |m| {
+            matches!(m, SoloMessage::Location(_))
+        })
+        .await;
+        let SoloMessage::Location(echo) = echo else {
+            unreachable!()
+        };
+        let (en, ee) = ne(roi, (echo.lat_deg, echo.lon_deg));
+        assert!(en.hypot(ee) < 0.5, "ROI echo {echo:?}");
+        app.send(&SoloMessage::ShotOptions { cruise_speed: 4.0 })
+            .await
+            .unwrap();
+
+        let r0 = 20.0;
+        let t0 = Instant::now();
+        let (mut min_r, mut max_r, mut swept, mut last_bearing) = (f64::MAX, 0.0f64, 0.0f64, None);
+        let (mut worst_heading, mut worst_pitch) = (0.0f64, 0.0f64);
+        while t0.elapsed() < Duration::from_secs(25) {
+            let s = v.now().await;
+            let (n, e) = ne(roi, pos(&s));
+            let r = n.hypot(e);
+            let bearing_from_roi = e.atan2(n).to_degrees();
+            if let Some(b) = last_bearing {
+                let mut d: f64 = bearing_from_roi - b;
+                d = (d + 540.0) % 360.0 - 180.0;
+                swept += d.abs();
+            }
+            last_bearing = Some(bearing_from_roi);
+            if t0.elapsed() < Duration::from_secs(4) {
+                continue; // accelerating onto the circle
+            }
+            min_r = min_r.min(r);
+            max_r = max_r.max(r);
+            // Camera on the ROI: the nose faces it and the gimbal looks down at it.
+            let to_roi = (bearing_from_roi + 180.0).rem_euclid(360.0);
+            let heading_err = ((f64::from(s.heading_deg) - to_roi + 540.0) % 360.0 - 180.0).abs();
+            worst_heading = worst_heading.max(heading_err);
+            if let Some(p) = v.payload.latest().unwrap() {
+                if p.is_gimbal_valid() {
+                    let want = -(f64::from(s.alt_rel_m)).atan2(r).to_degrees();
+                    worst_pitch = worst_pitch.max((f64::from(p.gimbal_pitch_deg) - want).abs());
+                }
+            }
+        }
+        assert!(
+            min_r > r0 - 2.0 && max_r < r0 + 2.0,
+            "orbit radius {min_r:.2}..{max_r:.2} m, wanted {r0} ± 2"
+        );
+        assert!(swept > 90.0, "orbit swept only {swept:.0}° in 25 s");
+        assert!(
+            worst_heading < 15.0,
+            "nose off the ROI by {worst_heading:.1}°"
+        );
+        assert!(
+            worst_pitch > 0.0 && worst_pitch < 5.0,
+            "gimbal off the ROI by {worst_pitch:.1}° (0 = no gimbal reports)"
+        );
+        leave(&mut app).await;
+
+        // ---- Cable cam: record A here, fly 25 m east, record B, then fly the cable.
+        let a_state = v.now().await;
+        let a = pos(&a_state);
+        enter(&mut app, shots::CABLECAM).await;
+        app.send(&SoloMessage::RecordPosition).await.unwrap();
+        expect(&mut app, "the first CABLE_CAM_WAYPOINT", |m| {
+            matches!(m, SoloMessage::CableCamWaypoint { .. })
+        })
+        .await;
+        let b = offset(a, 0.0, 25.0);
+        v.fly_to(b, 10.0).await;
+        app.send(&SoloMessage::RecordPosition).await.unwrap();
+        expect(&mut app, "the second CABLE_CAM_WAYPOINT", |m| {
+            matches!(m, SoloMessage::CableCamWaypoint { .. })
+        })
+        .await;
+        expect(&mut app, "CABLE_CAM_OPTIONS after the second point", |m| {
+            matches!(m, SoloMessage::CableCamOptions { .. })
+        })
+        .await;
+        // Toward A (negative cruise speed), then back to B.
+        for (target, speed) in [(a, -4.0f32), (b, 4.0)] {
+            app.send(&SoloMessage::CableCamOptions {
+                cam_interpolation: 1,
+                yaw_direction_cw: 1,
+                cruise_speed: speed,
+            })
+            .await
+            .unwrap();
+            let mut worst_off_line = 0.0f64;
+            v.wait_until(Duration::from_secs(30), "cable end", |s| {
+                let (n, _) = ne(a, pos(s));
+                worst_off_line = worst_off_line.max(n.abs());
+                let (dn, de) = ne(target, pos(s));
+                dn.hypot(de) < 1.5
+            })
+            .await;
+            assert!(
+                worst_off_line < 1.5,
+                "left the cable by {worst_off_line:.2} m"
+            );
+        }
+        leave(&mut app).await;
+    });
+    mesh.stop(Duration::from_secs(10)).unwrap();
+}
+
+/// Selfie flies near → far → near with the camera on the ROI; follow tracks a
+/// moving phone stream.
+#[test]
+fn selfie_and_follow_fly_vehicle_sim() {
+    let mut mesh = start_mesh();
+    runtime().block_on(async {
+        let bus = mesh.bus("e2e-solo-selfie").unwrap();
+        let mut v = Vehicle::new(&bus);
+        v.take_off(10.0).await;
+        let mut app = app(&mesh).await;
+
+        // ---- Selfie: near 5 m north at 10 m, far 30 m north at 16 m, ROI at the start.
+        let here = pos(&v.now().await);
+        let near = offset(here, 5.0, 0.0);
+        let far = offset(here, 30.0, 0.0);
+        enter(&mut app, shots::SELFIE).await;
+        app.send(&SoloMessage::ShotOptions { cruise_speed: 5.0 })
+            .await
+            .unwrap();
+        for l in [loc(near, 10.0), loc(far, 16.0), loc(here, 0.0)] {
+            app.send(&SoloMessage::Location(l)).await.unwrap();
+        }
+        let close = |p: (f64, f64), alt: f32| {
+            move |s: &VehicleState| {
+                let (n, e) = ne(p, pos(s));
+                n.hypot(e) < 1.5 && (s.alt_rel_m - alt).abs() < 1.5
+            }
+        };
+        v.wait_until(
+            Duration::from_secs(30),
+            "selfie near point",
+            close(near, 10.0),
+        )
+        .await;
+        let at_far = v
+            .wait_until(
+                Duration::from_secs(40),
+                "selfie far point",
+                close(far, 16.0),
+            )
+            .await;
+        // Looking back at the ROI (south) from the far point.
+        let heading = f64::from(at_far.heading_deg);
+        assert!(
+            ((heading - 180.0 + 540.0) % 360.0 - 180.0).abs() < 15.0,
+            "selfie camera not on the ROI: heading {heading:.0}°"
+        );
+        v.wait_until(
+            Duration::from_secs(40),
+            "selfie back at near",
+            close(near, 10.0),
+        )
+        .await;
+        leave(&mut app).await;
+
+        // ---- Follow: a phone 15 m south walks north-east at 2 m/s.
+        let start = v.now().await;
+        let phone0 = offset(pos(&start), -15.0, 0.0);
+        enter(&mut app, shots::FOLLOW).await;
+        let streamer = FollowStreamer::new(([127, 0, 0, 1], mesh.follow_port).into())
+            .await
+            .unwrap();
+        let t0 = Instant::now();
+        let mut worst = 0.0f64;
+        let mut last_phone = phone0;
+        while t0.elapsed() < Duration::from_secs(20) {
+            let t = t0.elapsed().as_secs_f64();
+            let d = t * 2.0 * std::f64::consts::FRAC_1_SQRT_2;
+            let phone = offset(phone0, d, d);
+            last_phone = phone;
+            streamer.send(loc(phone, 0.0)).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(40)).await;
+            if let Some(s) = v.state.latest().unwrap() {
+                if t > 6.0 {
+                    let (n, e) = ne(phone, pos(&s));
+                    worst = worst.max((n.hypot(e) - 15.0).abs());
+                }
+            }
+        }
+        let end = v.now().await;
+        let (mn, me) = ne(pos(&start), pos(&end));
+        assert!(
+            mn.hypot(me) > 25.0,
+            "the vehicle did not follow: moved {:.1} m",
+            mn.hypot(me)
+        );
+        let (n, e) = ne(last_phone, pos(&end));
+        assert!(
+            worst < 5.0,
+            "follow distance drifted by {worst:.1} m from 15 m (now {:.1} m)",
+            n.hypot(e)
+        );
+        leave(&mut app).await;
+    });
+    mesh.stop(Duration::from_secs(10)).unwrap();
+}
