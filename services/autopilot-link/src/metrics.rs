@@ -5,13 +5,11 @@
 //! enums. Labelled series are registered on first use, so an idle link does not
 //! spend the stats sample's fixed number of entries on series that stay zero.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use skymesh_ipc_types::{AckResult, CommandKind};
 use skymesh_runtime::stats::LATENCY_BOUNDS_S;
-use skymesh_runtime::{Counter, Gauge, Histogram, Stats};
+use skymesh_runtime::{Counter, CounterFamily, Gauge, Histogram, Stats};
 
 /// Messages from the autopilot that autopilot-link handles (metric label `msg`).
 pub const RECEIVED: &[&str] = &[
@@ -51,38 +49,6 @@ fn label(known: &[&'static str], name: &str) -> &'static str {
         .unwrap_or("other")
 }
 
-/// A counter family with one or two bounded labels, each series registered on first use.
-#[derive(Debug, Clone)]
-struct LazyCounters {
-    stats: Stats,
-    name: &'static str,
-    keys: (&'static str, Option<&'static str>),
-    cache: Arc<Mutex<HashMap<(&'static str, &'static str), Counter>>>,
-}
-
-impl LazyCounters {
-    fn new(stats: &Stats, name: &'static str, keys: (&'static str, Option<&'static str>)) -> Self {
-        LazyCounters {
-            stats: stats.clone(),
-            name,
-            keys,
-            cache: Arc::default(),
-        }
-    }
-
-    /// The series for these label values (the second is ignored for one-label families).
-    fn get(&self, first: &'static str, second: &'static str) -> Counter {
-        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
-        cache
-            .entry((first, second))
-            .or_insert_with(|| match self.keys {
-                (k1, None) => self.stats.counter(self.name, &[(k1, first)]),
-                (k1, Some(k2)) => self.stats.counter(self.name, &[(k1, first), (k2, second)]),
-            })
-            .clone()
-    }
-}
-
 /// Every series autopilot-link exports. Cheap to clone; shared with the link threads.
 #[derive(Debug, Clone)]
 pub struct Metrics {
@@ -97,10 +63,10 @@ pub struct Metrics {
     pub reconnects: Counter,
     /// `skymesh_autopilot_command_latency_seconds`: command sample → COMMAND_ACK.
     pub command_latency: Histogram,
-    received: LazyCounters,
-    sent: LazyCounters,
-    commands: LazyCounters,
-    gopro_responses: LazyCounters,
+    received: CounterFamily,
+    sent: CounterFamily,
+    commands: CounterFamily,
+    gopro_responses: CounterFamily,
 }
 
 impl Metrics {
@@ -115,22 +81,22 @@ impl Metrics {
                 &[],
                 &LATENCY_BOUNDS_S,
             ),
-            received: LazyCounters::new(
+            received: CounterFamily::new(
                 stats,
                 "skymesh_autopilot_mavlink_messages_received_total",
                 ("msg", None),
             ),
-            sent: LazyCounters::new(
+            sent: CounterFamily::new(
                 stats,
                 "skymesh_autopilot_mavlink_messages_sent_total",
                 ("msg", None),
             ),
-            commands: LazyCounters::new(
+            commands: CounterFamily::new(
                 stats,
                 "skymesh_autopilot_commands_total",
                 ("kind", Some("result")),
             ),
-            gopro_responses: LazyCounters::new(
+            gopro_responses: CounterFamily::new(
                 stats,
                 "skymesh_autopilot_gopro_responses_total",
                 ("status", None),

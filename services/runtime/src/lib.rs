@@ -28,5 +28,5 @@ pub mod systemd;
 pub use config::{ConfigError, ServiceConfig};
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};
-pub use stats::{Counter, Gauge, Histogram, Stats};
+pub use stats::{Counter, CounterFamily, Gauge, Histogram, Stats};
 pub use tokio_util::sync::CancellationToken;

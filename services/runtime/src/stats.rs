@@ -93,6 +93,50 @@ struct Entry {
     series: Series,
 }
 
+/// A counter family with one or two bounded labels whose series are registered on
+/// first use (a service exports at most `MAX_STAT_ENTRIES` series, so families whose
+/// label values are known but mostly unused should not register them all up front).
+/// Cheap to clone; clones share the series.
+#[derive(Debug, Clone)]
+pub struct CounterFamily {
+    stats: Stats,
+    name: &'static str,
+    keys: (&'static str, Option<&'static str>),
+    cache: Arc<Mutex<std::collections::HashMap<(&'static str, &'static str), Counter>>>,
+}
+
+impl CounterFamily {
+    /// `name{first_key=…}`, or `name{first_key=…,second_key=…}` with a second key.
+    pub fn new(
+        stats: &Stats,
+        name: &'static str,
+        keys: (&'static str, Option<&'static str>),
+    ) -> Self {
+        CounterFamily {
+            stats: stats.clone(),
+            name,
+            keys,
+            cache: Arc::default(),
+        }
+    }
+
+    /// The series for these label values (`second` is ignored by one-label families).
+    pub fn get(&self, first: &'static str, second: &'static str) -> Counter {
+        lock(&self.cache)
+            .entry((first, second))
+            .or_insert_with(|| match self.keys {
+                (k1, None) => self.stats.counter(self.name, &[(k1, first)]),
+                (k1, Some(k2)) => self.stats.counter(self.name, &[(k1, first), (k2, second)]),
+            })
+            .clone()
+    }
+
+    /// Increments the series of a one-label family.
+    pub fn inc(&self, value: &'static str) {
+        self.get(value, "").inc();
+    }
+}
+
 /// The registry of one service's series.
 #[derive(Debug, Clone, Default)]
 pub struct Stats {

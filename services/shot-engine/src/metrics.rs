@@ -7,53 +7,22 @@
 //! Labelled series are registered on first use so an idle engine does not spend the
 //! stats sample's fixed number of entries on series that stay zero.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError};
-
-use skymesh_runtime::{Counter, Gauge, Stats};
-
-/// A counter family with one label, each series registered on first use.
-#[derive(Debug, Clone)]
-struct Family {
-    stats: Stats,
-    name: &'static str,
-    key: &'static str,
-    cache: Arc<Mutex<HashMap<&'static str, Counter>>>,
-}
-
-impl Family {
-    fn new(stats: &Stats, name: &'static str, key: &'static str) -> Self {
-        Family {
-            stats: stats.clone(),
-            name,
-            key,
-            cache: Arc::default(),
-        }
-    }
-
-    fn inc(&self, value: &'static str) {
-        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
-        cache
-            .entry(value)
-            .or_insert_with(|| self.stats.counter(self.name, &[(self.key, value)]))
-            .inc();
-    }
-}
+use skymesh_runtime::{Counter, CounterFamily, Gauge, Stats};
 
 /// Every series the engine exports.
 #[derive(Debug, Clone)]
 pub struct Metrics {
     /// `skymesh_shot_current`: the Solo shot index being flown or set up, −1 idle.
     pub current_shot: Gauge,
-    entered: Family,
-    exits: Family,
-    refusals: Family,
-    app_in: Family,
-    app_out: Family,
+    entered: CounterFamily,
+    exits: CounterFamily,
+    refusals: CounterFamily,
+    app_in: CounterFamily,
+    app_out: CounterFamily,
     /// `skymesh_shot_unimplemented_requests_total`: requests answered "not implemented".
     pub unimplemented: Counter,
-    commands: Family,
-    refused: Family,
+    commands: CounterFamily,
+    refused: CounterFamily,
     /// `skymesh_shot_loop_overruns_total`: ticks that took longer than the loop period
     /// or came late by more than one period.
     pub overruns: Counter,
@@ -69,14 +38,26 @@ impl Metrics {
         current_shot.set(-1.0);
         Metrics {
             current_shot,
-            entered: Family::new(stats, "skymesh_shot_entered_total", "shot"),
-            exits: Family::new(stats, "skymesh_shot_exits_total", "reason"),
-            refusals: Family::new(stats, "skymesh_shot_entry_refusals_total", "error"),
-            app_in: Family::new(stats, "skymesh_shot_app_messages_in_total", "msg"),
-            app_out: Family::new(stats, "skymesh_shot_app_messages_out_total", "msg"),
+            entered: CounterFamily::new(stats, "skymesh_shot_entered_total", ("shot", None)),
+            exits: CounterFamily::new(stats, "skymesh_shot_exits_total", ("reason", None)),
+            refusals: CounterFamily::new(
+                stats,
+                "skymesh_shot_entry_refusals_total",
+                ("error", None),
+            ),
+            app_in: CounterFamily::new(stats, "skymesh_shot_app_messages_in_total", ("msg", None)),
+            app_out: CounterFamily::new(
+                stats,
+                "skymesh_shot_app_messages_out_total",
+                ("msg", None),
+            ),
             unimplemented: stats.counter("skymesh_shot_unimplemented_requests_total", &[]),
-            commands: Family::new(stats, "skymesh_shot_commands_sent_total", "kind"),
-            refused: Family::new(stats, "skymesh_shot_commands_refused_total", "reason"),
+            commands: CounterFamily::new(stats, "skymesh_shot_commands_sent_total", ("kind", None)),
+            refused: CounterFamily::new(
+                stats,
+                "skymesh_shot_commands_refused_total",
+                ("reason", None),
+            ),
             overruns: stats.counter("skymesh_shot_loop_overruns_total", &[]),
             decode_errors: stats.counter("skymesh_shot_app_decode_errors_total", &[]),
             state_file_errors: stats.counter("skymesh_shot_state_file_errors_total", &[]),

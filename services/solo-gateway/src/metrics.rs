@@ -5,10 +5,7 @@
 //! registered on first use: a service has 128 series in its stats sample, and the
 //! protocol has ~60 types in two directions.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError};
-
-use skymesh_runtime::{Counter, Gauge, Stats};
+use skymesh_runtime::{CounterFamily, Gauge, Stats};
 
 /// Why input from the app was dropped (label `kind` of `skymesh_solo_malformed_total`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -142,66 +139,43 @@ pub fn type_label(msg_type: u32) -> &'static str {
     solo_proto::message_name(msg_type).unwrap_or("unknown")
 }
 
-/// A counter family whose series are registered on first use.
-#[derive(Debug, Clone)]
-struct Lazy {
-    stats: Stats,
-    name: &'static str,
-    keys: (&'static str, Option<&'static str>),
-    cache: Arc<Mutex<HashMap<(&'static str, &'static str), Counter>>>,
-}
-
-impl Lazy {
-    fn new(stats: &Stats, name: &'static str, keys: (&'static str, Option<&'static str>)) -> Self {
-        Lazy {
-            stats: stats.clone(),
-            name,
-            keys,
-            cache: Arc::default(),
-        }
-    }
-
-    fn get(&self, first: &'static str, second: &'static str) -> Counter {
-        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
-        cache
-            .entry((first, second))
-            .or_insert_with(|| match self.keys {
-                (k1, None) => self.stats.counter(self.name, &[(k1, first)]),
-                (k1, Some(k2)) => self.stats.counter(self.name, &[(k1, first), (k2, second)]),
-            })
-            .clone()
-    }
-}
-
 /// Every series solo-gateway exports. Cheap to clone; shared by every task.
 #[derive(Debug, Clone)]
 pub struct Metrics {
     /// `skymesh_solo_clients_connected`: 1 while an app is connected.
     pub clients_connected: Gauge,
-    connections: Lazy,
-    messages: Lazy,
-    malformed: Lazy,
-    follow: Lazy,
-    to_app_dropped: Lazy,
+    connections: CounterFamily,
+    messages: CounterFamily,
+    malformed: CounterFamily,
+    follow: CounterFamily,
+    to_app_dropped: CounterFamily,
 }
 
 impl Metrics {
     pub fn new(stats: &Stats) -> Self {
         Metrics {
             clients_connected: stats.gauge("skymesh_solo_clients_connected", &[]),
-            connections: Lazy::new(stats, "skymesh_solo_connections_total", ("result", None)),
-            messages: Lazy::new(
+            connections: CounterFamily::new(
+                stats,
+                "skymesh_solo_connections_total",
+                ("result", None),
+            ),
+            messages: CounterFamily::new(
                 stats,
                 "skymesh_solo_messages_total",
                 ("direction", Some("type")),
             ),
-            malformed: Lazy::new(stats, "skymesh_solo_malformed_total", ("kind", None)),
-            follow: Lazy::new(
+            malformed: CounterFamily::new(stats, "skymesh_solo_malformed_total", ("kind", None)),
+            follow: CounterFamily::new(
                 stats,
                 "skymesh_solo_follow_datagrams_total",
                 ("result", None),
             ),
-            to_app_dropped: Lazy::new(stats, "skymesh_solo_to_app_dropped_total", ("reason", None)),
+            to_app_dropped: CounterFamily::new(
+                stats,
+                "skymesh_solo_to_app_dropped_total",
+                ("reason", None),
+            ),
         }
     }
 
