@@ -6,10 +6,11 @@
 
 use std::time::{Duration, Instant};
 
-use skymesh_e2e::{Mesh, MeshOptions};
+use nix::sys::signal::Signal;
+use skymesh_e2e::{signal, Mesh, MeshOptions};
 use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, PayloadState,
-    VehicleCommand, VehicleState, VehicleStatus,
+    topics, AckResult, Button, ButtonEvent, ButtonEventKind, Command, CommandAck, CommandSource,
+    FlightMode, PayloadState, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::ipc::{Bus, Subscriber};
 use skymesh_solo_gateway::client::{AppClient, FollowStreamer};
@@ -269,6 +270,42 @@ fn app_protocol_edges_through_the_mesh() {
         })
         .await;
         assert_eq!(m, SoloMessage::ShotError(1), "unarmed entry");
+
+        // A controller button on the bus reaches the engine: A (factory mapping: cable
+        // cam) while disarmed is refused with SOLO_SHOT_ERROR UNARMED too.
+        let mut buttons = bus
+            .publisher::<ButtonEvent>(&topics::input_buttons())
+            .unwrap();
+        buttons
+            .publish(ButtonEvent::new(1, Button::A, ButtonEventKind::Press))
+            .unwrap();
+        assert_eq!(
+            expect(&mut app, "SOLO_SHOT_ERROR after the A button", |m| {
+                matches!(
+                    m,
+                    SoloMessage::ShotError(_) | SoloMessage::GetCurrentShot(_)
+                )
+            })
+            .await,
+            SoloMessage::ShotError(1)
+        );
+
+        // GoPro: the app starts recording; the request goes through autopilot-link to the
+        // simulated GoPro on the gimbal, and the state the app gets back says recording.
+        app.send(&SoloMessage::GoProRecord(1)).await.unwrap();
+        expect(
+            &mut app,
+            "GOPRO_V2_STATE recording",
+            |m| matches!(m, SoloMessage::GoProV2State(g) if g.recording == 1 && g.status == 2),
+        )
+        .await;
+        app.send(&SoloMessage::GoProRecord(0)).await.unwrap();
+        expect(
+            &mut app,
+            "GOPRO_V2_STATE stopped",
+            |m| matches!(m, SoloMessage::GoProV2State(g) if g.recording == 0),
+        )
+        .await;
 
         // A second phone from another address is told and closed; the first keeps working.
         let mut second = AppClient::connect_from(
@@ -563,6 +600,24 @@ fn selfie_and_follow_fly_vehicle_sim() {
             }
         }
         let end = v.now().await;
+        // The engine crashes mid-shot: the arbiter brakes when its setpoints stop, the
+        // supervisor restarts it, and it comes back idle and tells the app.
+        let old_pid = mesh.wait_running("shot-engine", REPLY).unwrap();
+        signal(old_pid, Signal::SIGKILL).unwrap();
+        expect(
+            &mut app,
+            "SHOTMANAGER_ERROR saying the engine restarted",
+            |m| matches!(m, SoloMessage::ShotManagerError(t) if t.contains("restarted")),
+        )
+        .await;
+        expect(&mut app, "GET_CURRENT_SHOT -1 after the restart", |m| {
+            *m == SoloMessage::GetCurrentShot(shots::NONE)
+        })
+        .await;
+        v.wait_until(Duration::from_secs(5), "stale brake after the crash", |s| {
+            speed(s) < 0.3
+        })
+        .await;
         let (mn, me) = ne(pos(&start), pos(&end));
         assert!(
             mn.hypot(me) > 25.0,
@@ -575,7 +630,6 @@ fn selfie_and_follow_fly_vehicle_sim() {
             "follow distance drifted by {worst:.1} m from 15 m (now {:.1} m)",
             n.hypot(e)
         );
-        leave(&mut app).await;
     });
     mesh.stop(Duration::from_secs(10)).unwrap();
 }

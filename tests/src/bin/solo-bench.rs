@@ -33,7 +33,13 @@ use solo_proto::{shots, Location, SoloMessage};
 #[derive(Debug, Clone, Copy)]
 struct Seen {
     at: Instant,
+    /// MAVLink message id: 84/86 setpoints, 11 SET_MODE, 75/76 COMMAND_INT/LONG.
+    msgid: u32,
     vel: [f32; 3],
+}
+
+fn is_setpoint(s: &Seen) -> bool {
+    s.msgid == 84 || s.msgid == 86
 }
 
 fn arg(name: &str, default: u64) -> u64 {
@@ -75,6 +81,13 @@ fn scan_frames(buf: &[u8], now: Instant, out: &mpsc::Sender<Seen>) -> usize {
         if buf.len() - i < header + len {
             break;
         }
+        if matches!(msgid, 11 | 75 | 76) {
+            let _ = out.send(Seen {
+                at: now,
+                msgid,
+                vel: [0.0; 3],
+            });
+        }
         if msgid == 84 || msgid == 86 {
             // Trailing zero bytes may be truncated (MAVLink 2): pad with zeros.
             let mut p = [0u8; 64];
@@ -84,6 +97,7 @@ fn scan_frames(buf: &[u8], now: Instant, out: &mpsc::Sender<Seen>) -> usize {
             let f = |o: usize| f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]);
             let _ = out.send(Seen {
                 at: now,
+                msgid,
                 vel: [f(16), f(20), f(24)],
             });
         }
@@ -328,7 +342,7 @@ fn baseline(rounds: usize) -> Result<Vec<f64>> {
         std::thread::sleep(Duration::from_millis(20));
         let t0 = Instant::now();
         app.write_all(&packet)?;
-        out.push(first_setpoint(&seen_rx, t0, |_| true)?.as_secs_f64() * 1e3);
+        out.push(first_setpoint(&seen_rx, t0, is_setpoint)?.as_secs_f64() * 1e3);
     }
     Ok(out)
 }
@@ -393,7 +407,7 @@ fn main() -> Result<()> {
         alt_m: 0.0,
     };
 
-    let (mut roi_ms, mut speed_ms) = (Vec::new(), Vec::new());
+    let (mut roi_ms, mut speed_ms, mut command_ms) = (Vec::new(), Vec::new(), Vec::new());
     for round in 0..rounds {
         app_w.write_all(&SoloMessage::SetCurrentShot(shots::ORBIT).to_bytes())?;
         expect_app(
@@ -401,14 +415,20 @@ fn main() -> Result<()> {
             "GET_CURRENT_SHOT orbit",
             |m| matches!(m, SoloMessage::GetCurrentShot(s) if *s == shots::ORBIT),
         )?;
-        std::thread::sleep(Duration::from_millis(200));
+        // Spread the packets over the engine's 40 ms loop phase (a fixed pause would
+        // lock onto one phase and hide the spread).
+        let jitter = |k: usize| Duration::from_micros(((round * 7 + k) * 4_999 % 40_000) as u64);
+        std::thread::sleep(Duration::from_millis(200) + jitter(0));
         drain(&seen_rx);
         let t0 = Instant::now();
         app_w.write_all(&SoloMessage::Location(roi).to_bytes())?;
-        roi_ms.push(first_setpoint(&seen_rx, t0, |_| true)?.as_secs_f64() * 1e3);
+        // The engine reacts to the packet at once (GUIDED, ROI: MAVLink commands) and
+        // sends its first setpoint on its next 25 Hz tick.
+        command_ms.push(first_setpoint(&seen_rx, t0, |s| !is_setpoint(s))?.as_secs_f64() * 1e3);
+        roi_ms.push(first_setpoint(&seen_rx, t0, is_setpoint)?.as_secs_f64() * 1e3);
 
         // Orbiting at 0 m/s: change the cruise speed and wait for a moving setpoint.
-        std::thread::sleep(Duration::from_millis(500));
+        std::thread::sleep(Duration::from_millis(500) + jitter(3));
         let speed = if round % 2 == 0 { 3.0 } else { -3.0 };
         drain(&seen_rx);
         let t0 = Instant::now();
@@ -419,7 +439,11 @@ fn main() -> Result<()> {
             .to_bytes(),
         )?;
         speed_ms.push(
-            first_setpoint(&seen_rx, t0, |s| s.vel[0].hypot(s.vel[1]) > 0.05)?.as_secs_f64() * 1e3,
+            first_setpoint(&seen_rx, t0, |s| {
+                is_setpoint(s) && s.vel[0].hypot(s.vel[1]) > 0.05
+            })?
+            .as_secs_f64()
+                * 1e3,
         );
         std::thread::sleep(Duration::from_millis(300));
         app_w.write_all(&SoloMessage::SetCurrentShot(shots::NONE).to_bytes())?;
@@ -437,6 +461,7 @@ fn main() -> Result<()> {
         "solo-bench: {rounds} rounds (app packet in over TCP 5507 → first MAVLink setpoint out)"
     );
     report("baseline", base, base_p50);
+    report("command", command_ms, base_p50);
     report("roi", roi_ms, base_p50);
     report("speed", speed_ms, base_p50);
     mesh.stop(Duration::from_secs(10))?;
