@@ -11,10 +11,14 @@ trap 'kill -KILL "${pid:-0}" 2>/dev/null || true; rm -rf "$work"' EXIT
 
 # The default configs (binaries are found next to `skymesh`), but on a free MAVLink
 # port so CI never collides with a mesh already running on this machine.
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+free() { python3 -c "import socket; s=socket.socket(socket.AF_INET, socket.$1); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])"; }
+port=$(free SOCK_STREAM)
 cp deploy/*.toml "$work/"
 sed -i "s#^endpoint = .*#endpoint = \"tcp:127.0.0.1:$port\"#" "$work/vehicle-sim.toml"
 sed -i "s#^connection = .*#connection = \"tcpout:127.0.0.1:$port\"#" "$work/autopilot-link.toml"
+# The Solo gateway's app and follow-stream ports too.
+sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/solo-gateway.toml"
+sed -i "s#^follow_listen = .*#follow_listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#" "$work/solo-gateway.toml"
 
 SKYMESH_DOMAIN=$domain "$bin/skymesh" up --config "$work/skymesh.toml" --metrics 127.0.0.1:0 \
   --status-file "$work/addr" > "$work/out.log" 2>&1 &
@@ -22,7 +26,9 @@ pid=$!
 for _ in $(seq 1 300); do
   if [ -s "$work/addr" ] && curl -sf "http://$(cat "$work/addr")/metrics" -o "$work/metrics.txt" \
      && grep -q 'skymesh_topic_samples_received_total' "$work/metrics.txt" \
-     && grep -q 'skymesh_service_up{service="autopilot-link"} 1' "$work/metrics.txt"; then
+     && grep -q 'skymesh_service_up{service="autopilot-link"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_solo_clients_connected' "$work/metrics.txt" \
+     && grep -q 'skymesh_shot_current' "$work/metrics.txt"; then
     break
   fi
   sleep 0.2
