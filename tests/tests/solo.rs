@@ -292,6 +292,23 @@ fn app_protocol_edges_through_the_mesh() {
 
         // GoPro: the app starts recording; the request goes through autopilot-link to the
         // simulated GoPro on the gimbal, and the state the app gets back says recording.
+        // The GoPro heartbeat (1 Hz) may not have arrived yet: ask until it is connected.
+        let deadline = Instant::now() + Duration::from_secs(15);
+        loop {
+            app.send(&SoloMessage::GoProRequestState).await.unwrap();
+            let state = app
+                .recv_until(Duration::from_secs(1), |m| {
+                    matches!(m, SoloMessage::GoProV2State(_))
+                })
+                .await;
+            if matches!(state, Some(SoloMessage::GoProV2State(g)) if g.status == 2) {
+                break;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the GoPro never connected: {state:?}"
+            );
+        }
         app.send(&SoloMessage::GoProRecord(1)).await.unwrap();
         expect(
             &mut app,
@@ -458,6 +475,10 @@ fn orbit_and_cable_cam_fly_vehicle_sim() {
                 }
             }
         }
+        println!(
+            "orbit: radius {min_r:.2}..{max_r:.2} m (wanted {r0}), swept {swept:.0}°, \
+             nose off ROI ≤ {worst_heading:.1}°, gimbal off ROI ≤ {worst_pitch:.1}°"
+        );
         assert!(
             min_r > r0 - 2.0 && max_r < r0 + 2.0,
             "orbit radius {min_r:.2}..{max_r:.2} m, wanted {r0} ± 2"
@@ -625,6 +646,10 @@ fn selfie_and_follow_fly_vehicle_sim() {
             mn.hypot(me)
         );
         let (n, e) = ne(last_phone, pos(&end));
+        println!(
+            "follow: moved {:.1} m, distance to the phone within 15 ± {worst:.1} m",
+            mn.hypot(me)
+        );
         assert!(
             worst < 5.0,
             "follow distance drifted by {worst:.1} m from 15 m (now {:.1} m)",
