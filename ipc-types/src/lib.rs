@@ -17,6 +17,7 @@ pub mod header;
 pub mod payload;
 pub mod service;
 pub mod shot;
+pub mod shot_fence;
 pub mod topics;
 pub mod vehicle;
 
@@ -36,6 +37,7 @@ pub use shot::{
     AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus,
     APP_VALUE_CAPACITY,
 };
+pub use shot_fence::{AppFencePolygon, AppGeofence};
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
 

@@ -205,7 +205,9 @@ wire_enum! {
 pub struct ShotStatus {
     pub header: SampleHeader,
     pub vehicle_id: u8,
-    /// Solo shot index (−1 none, 0 selfie, 1 orbit, 2 cable cam, 5 follow, …).
+    /// Solo shot index (−1 none, 0 selfie, 1 orbit, 2 cable cam, 5 follow, …); the
+    /// Site Scan shots, which have none in the protocol, are 100 inspect, 101 scan,
+    /// 102 survey.
     pub shot: i8,
     /// [`ShotPhase`] as stored on the wire.
     pub phase: u8,

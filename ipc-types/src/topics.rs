@@ -49,6 +49,16 @@ impl TopicQos {
         history: 1,
         buffer: 4,
     };
+    /// Large requests (kilobytes each) from one writer to one reader that must see
+    /// each one: few subscribers and a short buffer, because shared memory is
+    /// reserved for subscribers × buffer samples per publisher.
+    pub const BULK_EVENTS: TopicQos = TopicQos {
+        max_publishers: 2,
+        max_subscribers: 4,
+        max_nodes: 8,
+        history: 0,
+        buffer: 8,
+    };
     /// Per-service health and stats: one writer (two while a restart overlaps), the supervisor and tools read.
     pub const SERVICE: TopicQos = TopicQos {
         max_publishers: 2,
@@ -146,6 +156,13 @@ pub fn shot_from_app() -> Topic {
 /// [`crate::AppMessage`]s to the Solo app (shot engine → gateway).
 pub fn shot_to_app() -> Topic {
     Topic::new("skymesh/shot/to_app".into(), TopicQos::EVENTS)
+}
+
+/// [`crate::AppGeofence`]s: the Solo app's geofence polygons (gateway → shot engine).
+/// 8 KiB a sample: [`TopicQos::BULK_EVENTS`] (with `EVENTS` each publisher would
+/// reserve about 17 MB of shared memory).
+pub fn shot_app_geofence() -> Topic {
+    Topic::new("skymesh/shot/app_geofence".into(), TopicQos::BULK_EVENTS)
 }
 
 /// [`crate::AppSession`]: whether a Solo app is connected (gateway → shot engine).

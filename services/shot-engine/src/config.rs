@@ -35,6 +35,13 @@ pub struct Settings {
     pub orbit_initial_speed: f32,
     pub cable_initial_speed: f32,
     pub follow_cruise_speed: f32,
+    /// Multipoint cable cam: speed along the path until SPLINE_PATH_SETTINGS gives a
+    /// desired time, m/s.
+    pub multipoint_cruise_speed: f32,
+    /// Multipoint cable cam: keypoints closer than this (3-D) are "too close", m.
+    pub keypoint_min_spacing_m: f64,
+    /// Rewind: speed back along the breadcrumbs, m/s.
+    pub rewind_speed_mps: f32,
     /// No follow target for this long → hover and tell the app.
     pub follow_lost: Duration,
     /// Entry is refused at or below this battery percentage; 0 = never.
@@ -43,6 +50,34 @@ pub struct Settings {
     pub app_session_timeout: Duration,
     /// The JSON state file.
     pub state_file: PathBuf,
+    /// Geofence: the deceleration the predictive check assumes, m/s².
+    pub geofence_deceleration_mps2: f32,
+    /// Geofence: reaction time added to the stopping distance, s.
+    pub geofence_latency_s: f32,
+    /// Geofence: ceiling and floor of the `GeofenceSet` given to the arbiter, m above home.
+    pub geofence_ceiling_m: f32,
+    pub geofence_floor_m: f32,
+    /// Site Scan: inspect, structure scan and survey.
+    pub site_scan: SiteScanSettings,
+}
+
+/// Site Scan settings (`inspect_*`, `scan_*`, `survey_*`, `camera_*` keys).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SiteScanSettings {
+    /// Highest takeoff altitude or waypoint the app may ask for, m above home.
+    pub max_alt_m: f32,
+    /// Structure scan geometry (radius, levels, overlap, camera).
+    pub scan: crate::shots::ScanConfig,
+    /// Structure scan speed around the circle, m/s (positive counter-clockwise).
+    pub scan_speed_mps: f32,
+    /// The structure to scan when no shot has an ROI; `None` = where the camera looks.
+    pub scan_center: Option<crate::shots::GeoPoint>,
+    /// Survey geometry (altitude, overlaps, camera, lane heading).
+    pub survey: crate::shots::SurveyConfig,
+    /// Survey speed along the lanes, m/s.
+    pub survey_speed_mps: f32,
+    /// The area to survey when no keep-in geofence is set (empty = none).
+    pub survey_area: Vec<crate::shots::GeoPoint>,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -60,11 +95,37 @@ pub struct RawConfig {
     pub orbit_initial_speed: f64,
     pub cable_initial_speed: f64,
     pub follow_cruise_speed: f64,
+    pub multipoint_cruise_speed: f64,
+    pub keypoint_min_spacing_m: f64,
+    pub rewind_speed_mps: f64,
     pub follow_lost_s: f64,
     pub battery_critical_pct: i64,
     pub app_session_timeout_s: f64,
     /// Empty → [`default_state_file`].
     pub state_file: String,
+    pub geofence_deceleration_mps2: f64,
+    pub geofence_latency_s: f64,
+    pub geofence_ceiling_m: f64,
+    pub geofence_floor_m: f64,
+    pub site_scan_max_alt_m: f64,
+    pub camera_hfov_deg: f64,
+    pub camera_vfov_deg: f64,
+    /// 0 → the vehicle's distance from the structure when the scan starts.
+    pub scan_radius_m: f64,
+    pub scan_altitude_step_m: f64,
+    pub scan_min_altitude_m: f64,
+    pub scan_overlap: f64,
+    pub scan_speed_mps: f64,
+    /// `[lat, lon]`, or empty.
+    pub scan_center: Vec<f64>,
+    pub survey_altitude_m: f64,
+    pub survey_overlap: f64,
+    pub survey_sidelap: f64,
+    pub survey_speed_mps: f64,
+    /// Absent → along the area's longest edge.
+    pub survey_heading_deg: Option<f64>,
+    /// `[[lat, lon], ...]`, or empty.
+    pub survey_area: Vec<[f64; 2]>,
 }
 
 impl Default for RawConfig {
@@ -81,10 +142,32 @@ impl Default for RawConfig {
             orbit_initial_speed: 0.0,
             cable_initial_speed: 0.0,
             follow_cruise_speed: 0.0,
+            multipoint_cruise_speed: 3.0,
+            keypoint_min_spacing_m: crate::shots::KEYPOINT_MIN_SPACING_M,
+            rewind_speed_mps: 3.5,
             follow_lost_s: 3.0,
             battery_critical_pct: 10,
             app_session_timeout_s: 3.0,
             state_file: String::new(),
+            geofence_deceleration_mps2: 1.5,
+            geofence_latency_s: 0.5,
+            geofence_ceiling_m: 10_000.0,
+            geofence_floor_m: -1_000.0,
+            site_scan_max_alt_m: 120.0,
+            camera_hfov_deg: 122.6,
+            camera_vfov_deg: 94.4,
+            scan_radius_m: 0.0,
+            scan_altitude_step_m: 5.0,
+            scan_min_altitude_m: 5.0,
+            scan_overlap: 0.7,
+            scan_speed_mps: 2.0,
+            scan_center: Vec::new(),
+            survey_altitude_m: 30.0,
+            survey_overlap: 0.75,
+            survey_sidelap: 0.65,
+            survey_speed_mps: 4.0,
+            survey_heading_deg: None,
+            survey_area: Vec::new(),
         }
     }
 }
@@ -184,6 +267,18 @@ impl RawConfig {
                 self.follow_cruise_speed,
                 -max_speed,
             )?,
+            multipoint_cruise_speed: speed(
+                "multipoint_cruise_speed",
+                self.multipoint_cruise_speed,
+                0.1,
+            )?,
+            keypoint_min_spacing_m: range_f(
+                "keypoint_min_spacing_m",
+                self.keypoint_min_spacing_m,
+                0.1,
+                50.0,
+            )?,
+            rewind_speed_mps: speed("rewind_speed_mps", self.rewind_speed_mps, 0.1)?,
             follow_lost: seconds("follow_lost_s", self.follow_lost_s, 0.5, 60.0)?,
             battery_critical_pct: in_range(
                 "battery_critical_pct",
@@ -198,6 +293,130 @@ impl RawConfig {
                 60.0,
             )?,
             state_file,
+            geofence_deceleration_mps2: range_f(
+                "geofence_deceleration_mps2",
+                self.geofence_deceleration_mps2,
+                0.1,
+                10.0,
+            )? as f32,
+            geofence_latency_s: range_f("geofence_latency_s", self.geofence_latency_s, 0.0, 5.0)?
+                as f32,
+            geofence_ceiling_m: range_f(
+                "geofence_ceiling_m",
+                self.geofence_ceiling_m,
+                1.0,
+                10_000.0,
+            )? as f32,
+            geofence_floor_m: range_f(
+                "geofence_floor_m",
+                self.geofence_floor_m,
+                -1_000.0,
+                self.geofence_ceiling_m - 1.0,
+            )? as f32,
+            site_scan: self.site_scan(max_speed)?,
+        })
+    }
+
+    fn site_scan(&self, max_speed: f64) -> Result<SiteScanSettings, ConfigError> {
+        let point = |field: &str, p: [f64; 2]| -> Result<crate::shots::GeoPoint, ConfigError> {
+            Ok(crate::shots::GeoPoint {
+                lat_deg: range_f(field, p[0], -90.0, 90.0)?,
+                lon_deg: range_f(field, p[1], -180.0, 180.0)?,
+                alt_rel_m: 0.0,
+            })
+        };
+        let hfov = range_f("camera_hfov_deg", self.camera_hfov_deg, 1.0, 170.0)? as f32;
+        let vfov = range_f("camera_vfov_deg", self.camera_vfov_deg, 1.0, 170.0)? as f32;
+        let radius = range_f("scan_radius_m", self.scan_radius_m, 0.0, 1_000.0)?;
+        if radius > 0.0 && radius < f64::from(crate::shots::sitescan::MIN_SCAN_RADIUS_M) {
+            return Err(ConfigError::invalid(
+                "scan_radius_m",
+                format!(
+                    "{radius} m: 0 (the vehicle's distance) or at least {} m",
+                    crate::shots::sitescan::MIN_SCAN_RADIUS_M
+                ),
+            ));
+        }
+        let scan_center = match self.scan_center[..] {
+            [] => None,
+            [lat, lon] => Some(point("scan_center", [lat, lon])?),
+            _ => {
+                return Err(ConfigError::invalid(
+                    "scan_center",
+                    "expected [] or [lat, lon]".to_string(),
+                ))
+            }
+        };
+        let survey_area = self
+            .survey_area
+            .iter()
+            .map(|p| point("survey_area", *p))
+            .collect::<Result<Vec<_>, _>>()?;
+        if !survey_area.is_empty() {
+            crate::shots::Survey::new(
+                &survey_area,
+                &crate::shots::SurveyConfig {
+                    altitude_m: 10.0,
+                    overlap: 0.0,
+                    sidelap: 0.0,
+                    hfov_deg: 90.0,
+                    vfov_deg: 90.0,
+                    heading_deg: None,
+                },
+            )
+            .map_err(|e| ConfigError::invalid("survey_area", e.to_string()))?;
+        }
+        let max_alt_m = range_f(
+            "site_scan_max_alt_m",
+            self.site_scan_max_alt_m,
+            2.0,
+            1_000.0,
+        )?;
+        let scan_speed = range_f("scan_speed_mps", self.scan_speed_mps, -max_speed, max_speed)?;
+        if scan_speed.abs() < 0.1 {
+            return Err(ConfigError::invalid(
+                "scan_speed_mps",
+                format!("{scan_speed} m/s: a scan needs a speed (at least 0.1 m/s either way)"),
+            ));
+        }
+        let heading_deg = self
+            .survey_heading_deg
+            .map(|h| range_f("survey_heading_deg", h, -360.0, 360.0))
+            .transpose()?
+            .map(|h| h as f32);
+        Ok(SiteScanSettings {
+            max_alt_m: max_alt_m as f32,
+            scan: crate::shots::ScanConfig {
+                radius_m: (radius > 0.0).then_some(radius as f32),
+                altitude_step_m: range_f(
+                    "scan_altitude_step_m",
+                    self.scan_altitude_step_m,
+                    0.5,
+                    100.0,
+                )? as f32,
+                min_altitude_m: range_f(
+                    "scan_min_altitude_m",
+                    self.scan_min_altitude_m,
+                    1.0,
+                    max_alt_m,
+                )? as f32,
+                overlap: range_f("scan_overlap", self.scan_overlap, 0.0, 0.95)? as f32,
+                hfov_deg: hfov,
+            },
+            scan_speed_mps: scan_speed as f32,
+            scan_center,
+            survey: crate::shots::SurveyConfig {
+                altitude_m: range_f("survey_altitude_m", self.survey_altitude_m, 2.0, max_alt_m)?
+                    as f32,
+                overlap: range_f("survey_overlap", self.survey_overlap, 0.0, 0.95)? as f32,
+                sidelap: range_f("survey_sidelap", self.survey_sidelap, 0.0, 0.95)? as f32,
+                hfov_deg: hfov,
+                vfov_deg: vfov,
+                heading_deg,
+            },
+            survey_speed_mps: range_f("survey_speed_mps", self.survey_speed_mps, 0.1, max_speed)?
+                as f32,
+            survey_area,
         })
     }
 }
@@ -265,13 +484,52 @@ mod tests {
             ("selfie_cruise_speed = 7", "selfie_cruise_speed"),
             ("orbit_initial_speed = -7", "orbit_initial_speed"),
             ("follow_lost_s = 0", "follow_lost_s"),
+            ("multipoint_cruise_speed = 0", "multipoint_cruise_speed"),
+            ("keypoint_min_spacing_m = 0", "keypoint_min_spacing_m"),
+            ("rewind_speed_mps = 7", "rewind_speed_mps"),
             ("battery_critical_pct = 101", "battery_critical_pct"),
             ("app_session_timeout_s = 0.1", "app_session_timeout_s"),
             ("state_file = \"/\"", "state_file"),
+            ("geofence_latency_s = -1", "geofence_latency_s"),
+            ("geofence_floor_m = 20000", "geofence_floor_m"),
+            ("scan_radius_m = 2", "scan_radius_m"),
+            ("scan_center = [1.0]", "scan_center"),
+            ("scan_center = [95.0, 0.0]", "scan_center"),
+            ("survey_area = [[0.0, 0.0], [0.0, 0.001]]", "survey_area"),
+            ("survey_speed_mps = 0", "survey_speed_mps"),
+            ("survey_altitude_m = 500", "survey_altitude_m"),
+            ("camera_hfov_deg = 180", "camera_hfov_deg"),
+            ("scan_speed_mps = 0", "scan_speed_mps"),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn site_scan_areas_and_centres_parse() {
+        let s = parse(
+            "scan_center = [-35.36, 149.16]\nscan_radius_m = 12\nsurvey_heading_deg = 45\n\
+             survey_area = [[-35.36, 149.16], [-35.36, 149.17], [-35.37, 149.165]]\n\
+             geofence_ceiling_m = 60\ngeofence_floor_m = -5",
+        )
+        .unwrap();
+        let ss = &s.site_scan;
+        assert_eq!(
+            ss.scan_center.map(|c| (c.lat_deg, c.lon_deg)),
+            Some((-35.36, 149.16))
+        );
+        assert_eq!(ss.scan.radius_m, Some(12.0));
+        assert_eq!(ss.survey.heading_deg, Some(45.0));
+        assert_eq!(ss.survey_area.len(), 3);
+        assert_eq!((s.geofence_ceiling_m, s.geofence_floor_m), (60.0, -5.0));
+        let d = parse("").unwrap();
+        assert_eq!(
+            d.site_scan.scan.radius_m, None,
+            "0 = the vehicle's distance"
+        );
+        assert!(d.site_scan.scan_center.is_none() && d.site_scan.survey_area.is_empty());
+        assert_eq!(d.site_scan.survey.heading_deg, None);
     }
 
     #[test]

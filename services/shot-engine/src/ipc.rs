@@ -5,8 +5,8 @@ use anyhow::Context as _;
 use bytes::BytesMut;
 use skymesh_ipc_types::shot::ValueTooLong;
 use skymesh_ipc_types::{
-    topics, AppMessage, AppSession, ArbiterEvent, AuthorityState, ButtonEvent, CommandAck,
-    PayloadState, ShotStatus, VehicleCommand, VehicleState, VehicleStatus,
+    topics, AppGeofence, AppMessage, AppSession, ArbiterEvent, AuthorityState, ButtonEvent,
+    CommandAck, GeofenceSet, PayloadState, ShotStatus, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, Publisher, Subscriber};
 use solo_proto::SoloMessage;
@@ -15,6 +15,8 @@ use solo_proto::SoloMessage;
 pub struct Ports {
     /// Decoded, validated app messages from solo-gateway (TCP and follow stream).
     pub from_app: Subscriber<AppMessage>,
+    /// The app's geofence (GEOFENCE_SET_DATA), translated by solo-gateway.
+    pub app_geofence: Subscriber<AppGeofence>,
     /// Whether an app is connected (solo-gateway, on change and every second).
     pub app_session: Subscriber<AppSession>,
     /// Controller buttons (IMC gateway, tools).
@@ -29,6 +31,8 @@ pub struct Ports {
     pub acks: Subscriber<CommandAck>,
     /// To autopilot-link's arbiter (source `ShotEngine`).
     pub commands: Publisher<VehicleCommand>,
+    /// The app's geofence for autopilot-link's arbiter (source `ShotEngine`).
+    pub geofence: Publisher<GeofenceSet>,
     /// To solo-gateway, which writes them to the app.
     pub to_app: Publisher<AppMessage>,
     /// What the engine is doing (latest value).
@@ -48,6 +52,9 @@ impl Ports {
             from_app: bus
                 .subscriber(&topics::shot_from_app())
                 .context("opening the from-app topic")?,
+            app_geofence: bus
+                .subscriber(&topics::shot_app_geofence())
+                .context("opening the app geofence topic")?,
             app_session: bus
                 .subscriber(&topics::shot_app_session())
                 .context("opening the app session topic")?,
@@ -75,6 +82,9 @@ impl Ports {
             commands: bus
                 .publisher(&topics::vehicle_command(id))
                 .context("opening the vehicle command topic")?,
+            geofence: bus
+                .publisher(&topics::vehicle_geofence(id))
+                .context("opening the vehicle geofence topic")?,
             to_app: bus
                 .publisher(&topics::shot_to_app())
                 .context("opening the to-app topic")?,

@@ -42,10 +42,11 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 /// Runs the engine on `bus` until `shutdown` is cancelled; `ready` is called once
 /// every port is open.
 ///
-/// Subscribes to `skymesh/shot/{from_app,app_session}`, `skymesh/input/buttons` and
+/// Subscribes to `skymesh/shot/{from_app,app_geofence,app_session}`,
+/// `skymesh/input/buttons` and
 /// `skymesh/vehicle/{vehicle_id}/{state,status,payload,authority,arbiter_events,command_ack}`;
-/// publishes `skymesh/vehicle/{vehicle_id}/command`, `skymesh/shot/to_app` and
-/// `skymesh/shot/status`.
+/// publishes `skymesh/vehicle/{vehicle_id}/{command,geofence}`, `skymesh/shot/to_app`
+/// and `skymesh/shot/status`.
 pub async fn run_with(
     settings: Settings,
     bus: Bus,

@@ -30,6 +30,11 @@ pub struct Metrics {
     pub decode_errors: Counter,
     /// `skymesh_shot_state_file_errors_total`: failed writes of the state file.
     pub state_file_errors: Counter,
+    /// `skymesh_shot_geofence_polygons`: polygons of the app's geofence now (0 = none).
+    pub geofence_polygons: Gauge,
+    /// `skymesh_shot_geofence_activations_total`: times the predictive check held the
+    /// vehicle at the fence.
+    pub geofence_activations: Counter,
 }
 
 impl Metrics {
@@ -61,6 +66,8 @@ impl Metrics {
             overruns: stats.counter("skymesh_shot_loop_overruns_total", &[]),
             decode_errors: stats.counter("skymesh_shot_app_decode_errors_total", &[]),
             state_file_errors: stats.counter("skymesh_shot_state_file_errors_total", &[]),
+            geofence_polygons: stats.gauge("skymesh_shot_geofence_polygons", &[]),
+            geofence_activations: stats.counter("skymesh_shot_geofence_activations_total", &[]),
         }
     }
 

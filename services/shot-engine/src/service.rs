@@ -1,8 +1,11 @@
 //! The event loop: one task owns the engine and every port (no locks).
 //!
-//! App messages, the app session and buttons wake the loop as they arrive (the
-//! engine's answers go out at once, decided on the newest vehicle samples: the
-//! vehicle topics are drained first); the interval (`loop_hz`) drains the vehicle's
+//! App messages, the app's geofence, the app session and buttons wake the loop as
+//! they arrive (the engine's answers go out at once, decided on the newest vehicle
+//! samples: the vehicle topics are drained first). App messages and geofences come
+//! on two topics from the same gateway task: whatever is pending on both is handled
+//! in the order of their publish stamps, so a CLEAR sent after a SET_DATA is not
+//! undone by it; the interval (`loop_hz`) drains the vehicle's
 //! state, status, payload, authority, arbiter events and acks, steps the flying
 //! shot and publishes what the engine asks for. A tick that takes longer than the
 //! period, or starts more than a period late, counts as an overrun.
@@ -14,6 +17,8 @@ use skymesh_runtime::{Counter, IpcError};
 use tokio::time::MissedTickBehavior;
 use tokio_util::sync::CancellationToken;
 
+use skymesh_ipc_types::{AppGeofence, AppMessage};
+
 use crate::engine::{Engine, Outputs};
 use crate::ipc::{app_message, Ports};
 
@@ -21,6 +26,7 @@ use crate::ipc::{app_message, Ports};
 enum Wake {
     Tick,
     App(Result<skymesh_ipc_types::AppMessage, IpcError>),
+    Fence(Result<Box<AppGeofence>, IpcError>),
     Session(Result<skymesh_ipc_types::AppSession, IpcError>),
     Button(Result<skymesh_ipc_types::ButtonEvent, IpcError>),
 }
@@ -43,6 +49,7 @@ pub(crate) async fn run_loop(
             _ = shutdown.cancelled() => break Ok(()),
             _ = interval.tick() => Wake::Tick,
             m = ports.from_app.recv() => Wake::App(m),
+            g = ports.app_geofence.recv() => Wake::Fence(g.map(Box::new)),
             s = ports.app_session.recv() => Wake::Session(s),
             b = ports.buttons.recv() => Wake::Button(b),
         };
@@ -62,7 +69,12 @@ pub(crate) async fn run_loop(
             }
             Wake::App(m) => m.and_then(|m| {
                 drain_vehicle(&mut engine, &ports, now)?;
-                engine.handle_app(&m, now);
+                handle_inbound(&mut engine, &ports, Inbound::Message(Box::new(m)), now)?;
+                publish(&mut ports, engine.drain(now))
+            }),
+            Wake::Fence(g) => g.and_then(|g| {
+                drain_vehicle(&mut engine, &ports, now)?;
+                handle_inbound(&mut engine, &ports, Inbound::Fence(g), now)?;
                 publish(&mut ports, engine.drain(now))
             }),
             Wake::Session(s) => s.and_then(|s| {
@@ -109,6 +121,46 @@ fn drain_vehicle(engine: &mut Engine, ports: &Ports, now: u64) -> Result<(), Ipc
     Ok(())
 }
 
+/// An app request from either app topic.
+enum Inbound {
+    Message(Box<AppMessage>),
+    Fence(Box<AppGeofence>),
+}
+
+impl Inbound {
+    fn stamp_ns(&self) -> u64 {
+        match self {
+            Inbound::Message(m) => m.header.stamp_ns,
+            Inbound::Fence(g) => g.header.stamp_ns,
+        }
+    }
+}
+
+/// Handles `first` and everything pending on both app topics, oldest first.
+fn handle_inbound(
+    engine: &mut Engine,
+    ports: &Ports,
+    first: Inbound,
+    now: u64,
+) -> Result<(), IpcError> {
+    let mut batch = vec![first];
+    while let Some(m) = ports.from_app.try_recv()? {
+        batch.push(Inbound::Message(Box::new(m)));
+    }
+    while let Some(g) = ports.app_geofence.try_recv()? {
+        batch.push(Inbound::Fence(Box::new(g)));
+    }
+    // Stable: equal stamps keep their order.
+    batch.sort_by_key(Inbound::stamp_ns);
+    for request in batch {
+        match request {
+            Inbound::Message(m) => engine.handle_app(&m, now),
+            Inbound::Fence(g) => engine.handle_app_geofence(&g, now),
+        }
+    }
+    Ok(())
+}
+
 fn publish(ports: &mut Ports, out: Outputs) -> Result<(), IpcError> {
     for c in out.commands {
         ports.commands.publish(c)?;
@@ -125,6 +177,9 @@ fn publish(ports: &mut Ports, out: Outputs) -> Result<(), IpcError> {
     }
     if let Some(s) = out.status {
         ports.shot_status.publish(s)?;
+    }
+    if let Some(g) = out.geofence {
+        ports.geofence.publish(g)?;
     }
     Ok(())
 }

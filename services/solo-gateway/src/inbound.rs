@@ -2,12 +2,20 @@
 //!
 //! A frame goes on the bus only if its value decodes cleanly as its type, the type
 //! is one the app may send, and the value fits in an `AppMessage`. Everything else is
-//! dropped with a [`Malformed`] kind, except a valid value too long for the bus
-//! (GEOFENCE_SET_DATA JSON), which the gateway answers itself.
+//! dropped with a [`Malformed`] kind, except a valid value too long for the bus,
+//! which the gateway answers itself.
+//!
+//! GEOFENCE_SET_DATA (JSON, up to 64 KiB) never fits an `AppMessage`: its polygons
+//! are translated into one `AppGeofence` sample, whatever its length. What that
+//! sample cannot carry (more than 8 polygons, or more than 32 vertices in a polygon
+//! or sub-polygon) is answered here with GEOFENCE_SET_ACK {0, false} and a
+//! SHOTMANAGER_ERROR naming the limit, and counted `too_large_for_bus`. Whether the
+//! polygons make a usable fence is the shot engine's decision (gateways translate,
+//! engines decide): it answers everything that is forwarded.
 
 use bytes::{Bytes, BytesMut};
-use skymesh_ipc_types::APP_VALUE_CAPACITY;
-use solo_proto::{ids, Direction, RawFrame, SoloMessage};
+use skymesh_ipc_types::{AppGeofence, APP_VALUE_CAPACITY};
+use solo_proto::{Direction, GeofenceData, RawFrame, SoloMessage};
 
 use crate::metrics::Malformed;
 
@@ -16,6 +24,9 @@ use crate::metrics::Malformed;
 pub enum Verdict {
     /// Publish the frame's value as received.
     Forward(SoloMessage),
+    /// GEOFENCE_SET_DATA: publish its polygons (the session is filled in by the
+    /// publisher).
+    Geofence(Box<AppGeofence>),
     /// Drop it: count `kind`, log `reason`.
     Drop { kind: Malformed, reason: String },
     /// Valid, but longer than the bus carries: count `too_large_for_bus` and write
@@ -48,10 +59,38 @@ pub fn check(frame: &RawFrame) -> Verdict {
             ),
         };
     }
+    if let SoloMessage::GeofenceSetData(data) = &message {
+        return geofence(data, &message);
+    }
     if frame.value.len() > APP_VALUE_CAPACITY {
         return too_large(message, frame.value.len());
     }
     Verdict::Forward(message)
+}
+
+/// GEOFENCE_SET_DATA → one `AppGeofence`, or the answer when it cannot be carried.
+fn geofence(data: &GeofenceData, message: &SoloMessage) -> Verdict {
+    let polygons = data
+        .kinds
+        .iter()
+        .zip(data.coord.iter().zip(&data.sub_coord))
+        .map(|(kind, (coord, sub))| (*kind, coord.as_slice(), sub.as_slice()));
+    match AppGeofence::new(0, polygons) {
+        Ok(fence) => Verdict::Geofence(Box::new(fence)),
+        Err(e) => Verdict::Answer {
+            message: message.clone(),
+            reason: format!("geofence_set_data: {e}"),
+            replies: vec![
+                SoloMessage::GeofenceSetAck {
+                    count: 0,
+                    valid: false,
+                },
+                SoloMessage::ShotManagerError(format!(
+                    "skymesh: geofence not set: {e}. No geofence was set."
+                )),
+            ],
+        },
+    }
 }
 
 fn too_large(message: SoloMessage, len: usize) -> Verdict {
@@ -60,23 +99,10 @@ fn too_large(message: SoloMessage, len: usize) -> Verdict {
         message.name(),
         message.msg_type()
     );
-    let replies = if message.msg_type() == ids::GEOFENCE_SET_DATA {
-        vec![
-            SoloMessage::GeofenceSetAck {
-                count: 0,
-                valid: false,
-            },
-            SoloMessage::ShotManagerError(format!(
-                "skymesh: geofence polygon data (GEOFENCE_SET_DATA, {len} bytes) is not implemented yet: \
-                 the shot engine's geofence is a later milestone. No geofence was set."
-            )),
-        ]
-    } else {
-        vec![SoloMessage::ShotManagerError(format!(
-            "skymesh: {} message of {len} bytes is larger than skymesh carries ({APP_VALUE_CAPACITY}); ignored.",
-            message.name()
-        ))]
-    };
+    let replies = vec![SoloMessage::ShotManagerError(format!(
+        "skymesh: {} message of {len} bytes is larger than skymesh carries ({APP_VALUE_CAPACITY}); ignored.",
+        message.name()
+    ))];
     Verdict::Answer {
         message,
         reason,
@@ -96,7 +122,7 @@ pub fn frame_bytes(msg_type: u32, value: &[u8]) -> Bytes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use solo_proto::GeofenceData;
+    use solo_proto::ids;
 
     fn raw(msg_type: u32, value: &[u8]) -> RawFrame {
         RawFrame {
@@ -157,36 +183,73 @@ mod tests {
         );
     }
 
-    #[test]
-    fn a_long_geofence_is_answered_not_forwarded() {
-        let square = vec![
-            [37.0, -122.0],
-            [37.001, -122.0],
-            [37.001, -122.001],
-            [37.0, -122.001],
-        ];
+    fn square(n: usize) -> Vec<[f64; 2]> {
+        (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                [37.0 + 0.001 * a.sin(), -122.0 + 0.001 * a.cos()]
+            })
+            .collect()
+    }
+
+    fn fence_frame(coord: Vec<Vec<[f64; 2]>>, kinds: Vec<u8>) -> RawFrame {
         let fence = SoloMessage::GeofenceSetData(GeofenceData {
-            coord: vec![square.clone(), square.clone()],
-            sub_coord: vec![square.clone(), square],
-            kinds: vec![0, 1],
+            sub_coord: coord.clone(),
+            coord,
+            kinds,
         });
-        let value = value_of(&fence);
-        assert!(value.len() > APP_VALUE_CAPACITY, "{}", value.len());
-        match check(&raw(ids::GEOFENCE_SET_DATA, &value)) {
-            Verdict::Answer { replies, .. } => {
-                assert_eq!(
-                    replies[0],
-                    SoloMessage::GeofenceSetAck {
-                        count: 0,
-                        valid: false
-                    }
-                );
-                assert!(
-                    matches!(&replies[1], SoloMessage::ShotManagerError(t) if t.contains("not implemented")),
-                    "{replies:?}"
-                );
+        raw(ids::GEOFENCE_SET_DATA, &value_of(&fence))
+    }
+
+    #[test]
+    fn a_geofence_of_any_length_is_translated_for_the_engine() {
+        // Longer than an AppMessage, eight polygons of 32 vertices: carried whole.
+        let frame = fence_frame(vec![square(32); 8], vec![0, 1, 1, 1, 1, 1, 1, 1]);
+        assert!(
+            frame.value.len() > APP_VALUE_CAPACITY,
+            "{}",
+            frame.value.len()
+        );
+        let Verdict::Geofence(g) = check(&frame) else {
+            panic!("not translated");
+        };
+        assert_eq!(g.polygons().len(), 8);
+        assert_eq!(g.polygons()[0].kind, 0);
+        assert_eq!(g.polygons()[7].kind, 1);
+        assert_eq!(g.polygons()[3].vertices(), square(32).as_slice());
+        assert_eq!(g.polygons()[3].sub_vertices(), square(32).as_slice());
+        // Short, and geometrically useless (2 vertices): still the engine's to judge.
+        let Verdict::Geofence(g) = check(&fence_frame(vec![square(2)], vec![0])) else {
+            panic!("not translated");
+        };
+        assert_eq!(g.polygons()[0].vertices().len(), 2);
+    }
+
+    #[test]
+    fn a_geofence_the_bus_cannot_carry_is_answered_not_forwarded() {
+        for (frame, limit) in [
+            (fence_frame(vec![square(4); 9], vec![1; 9]), "9 polygons"),
+            (
+                fence_frame(vec![square(4), square(33)], vec![0, 1]),
+                "33 vertices",
+            ),
+        ] {
+            match check(&frame) {
+                Verdict::Answer { replies, .. } => {
+                    assert_eq!(
+                        replies[0],
+                        SoloMessage::GeofenceSetAck {
+                            count: 0,
+                            valid: false
+                        }
+                    );
+                    assert!(
+                        matches!(&replies[1], SoloMessage::ShotManagerError(t) if t.contains(limit)),
+                        "{replies:?}"
+                    );
+                }
+                other => panic!("{other:?}"),
             }
-            other => panic!("{other:?}"),
         }
     }
 

@@ -3,6 +3,7 @@
 //! | topic | direction | type |
 //! |---|---|---|
 //! | `skymesh/shot/from_app` | publish (sessions, follow stream) | `AppMessage` |
+//! | `skymesh/shot/app_geofence` | publish (sessions: GEOFENCE_SET_DATA) | `AppGeofence` |
 //! | `skymesh/shot/app_session` | publish (hub) | `AppSession` |
 //! | `skymesh/shot/to_app` | subscribe (hub) | `AppMessage` |
 
@@ -11,7 +12,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use anyhow::Context as _;
 use skymesh_ipc_types::shot::{app_flags, ValueTooLong};
-use skymesh_ipc_types::{topics, AppMessage, AppSession, FixedStr};
+use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, FixedStr};
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 
 /// Why a message could not be published.
@@ -25,12 +26,17 @@ pub enum PublishError {
     Bus(#[from] IpcError),
 }
 
-/// The `from_app` publisher, shared by every session and the follow stream.
+/// The `from_app` and `app_geofence` publishers, shared by every session and the
+/// follow stream.
 ///
-/// One publisher per gateway (the topic allows two, for a restart overlap), so the
-/// tasks share it behind a mutex held only for the copy into shared memory.
+/// One publisher per topic per gateway (the topics allow two, for a restart
+/// overlap), so the tasks share them behind mutexes held only for the copy into
+/// shared memory.
 #[derive(Debug, Clone)]
-pub struct FromApp(Arc<Mutex<Publisher<AppMessage>>>);
+pub struct FromApp {
+    messages: Arc<Mutex<Publisher<AppMessage>>>,
+    geofence: Arc<Mutex<Publisher<AppGeofence>>>,
+}
 
 impl FromApp {
     /// Publishes one validated app message.
@@ -45,10 +51,20 @@ impl FromApp {
         if follow_stream {
             m.flags |= app_flags::FOLLOW_STREAM;
         }
-        self.0
+        self.messages
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .publish(m)?;
+        Ok(())
+    }
+
+    /// Publishes the app's geofence polygons (GEOFENCE_SET_DATA) of `session`.
+    pub fn publish_geofence(&self, session: u32, fence: &AppGeofence) -> Result<(), IpcError> {
+        let sample = AppGeofence { session, ..*fence };
+        self.geofence
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .publish(sample)?;
         Ok(())
     }
 }
@@ -65,10 +81,16 @@ pub struct Ports {
 impl Ports {
     pub fn open(bus: &Bus) -> anyhow::Result<Ports> {
         Ok(Ports {
-            from_app: FromApp(Arc::new(Mutex::new(
-                bus.publisher::<AppMessage>(&topics::shot_from_app())
-                    .context("opening the from_app topic")?,
-            ))),
+            from_app: FromApp {
+                messages: Arc::new(Mutex::new(
+                    bus.publisher::<AppMessage>(&topics::shot_from_app())
+                        .context("opening the from_app topic")?,
+                )),
+                geofence: Arc::new(Mutex::new(
+                    bus.publisher::<AppGeofence>(&topics::shot_app_geofence())
+                        .context("opening the app_geofence topic")?,
+                )),
+            },
             session: bus
                 .publisher::<AppSession>(&topics::shot_app_session())
                 .context("opening the app_session topic")?,

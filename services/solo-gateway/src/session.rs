@@ -118,6 +118,12 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
                     return End::Bus(e);
                 }
             }
+            Verdict::Geofence(fence) => {
+                metrics.message(Direction::In, frame.msg_type);
+                if let Err(e) = ctx.from_app.publish_geofence(ctx.session, &fence) {
+                    return End::Bus(e.into());
+                }
+            }
             Verdict::Drop { kind, reason } => ctx.drops.record(kind, ctx.peer, &reason),
             Verdict::Answer {
                 message,

@@ -9,7 +9,7 @@ use skymesh_ipc_types::{topics, AppSession, ServiceId};
 use skymesh_runtime::{Bus, Stats};
 use skymesh_solo_gateway::client::AppClient;
 use skymesh_solo_gateway::Settings;
-use solo_proto::{Location, SoloMessage};
+use solo_proto::{ids, GeofenceData, Location, SoloMessage};
 
 #[tokio::test]
 async fn app_messages_reach_the_bus_exactly() {
@@ -56,6 +56,57 @@ async fn app_messages_reach_the_bus_exactly() {
         1.0,
     )
     .await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn a_geofence_is_translated_for_the_engine() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    // The spec's example: one keep-in polygon and its sub-polygon (JSON > 240 bytes).
+    let coord = vec![
+        [37.873_391_778_802, -122.301_244_403_242],
+        [37.873_425_469_262, -122.300_884_203_791],
+        [37.872_895_782_932, -122.300_712_401_129],
+        [37.872_942_621_198, -122.301_244_403_242],
+    ];
+    let sub = vec![
+        [37.873_405_777_181, -122.300_901_311_238],
+        [37.872_916_521_332, -122.300_742_618_658],
+        [37.872_958_695_064, -122.301_221_642_913],
+        [37.873_375_815_652, -122.301_221_642_913],
+    ];
+    let fence = SoloMessage::GeofenceSetData(GeofenceData {
+        coord: vec![coord.clone(), coord[..3].to_vec()],
+        sub_coord: vec![sub.clone(), sub[..3].to_vec()],
+        kinds: vec![0, 1],
+    });
+    app.send(&fence).await.expect("send");
+    app.send(&SoloMessage::GeofenceClear).await.expect("send");
+    let g = gw.next_geofence().await;
+    assert_eq!(g.session, 1);
+    assert_eq!(g.header.service_id(), Ok(ServiceId::SoloGateway));
+    assert_eq!(g.polygons().len(), 2);
+    assert_eq!(g.polygons()[0].kind, 0);
+    assert_eq!(g.polygons()[0].vertices(), coord.as_slice());
+    assert_eq!(g.polygons()[0].sub_vertices(), sub.as_slice());
+    assert_eq!(g.polygons()[1].kind, 1);
+    assert_eq!(g.polygons()[1].vertices(), &coord[..3]);
+    // The CLEAR after it goes the usual way, stamped later (the engine keeps order).
+    let clear = gw.next_from_app().await;
+    assert_eq!(clear.msg_type, ids::GEOFENCE_CLEAR);
+    assert!(clear.header.stamp_ns > g.header.stamp_ns);
+    gw.wait_metric(
+        "skymesh_solo_messages_total",
+        "direction=in,type=geofence_set_data",
+        1.0,
+    )
+    .await;
+    assert_eq!(
+        gw.metric("skymesh_solo_malformed_total", "kind=too_large_for_bus"),
+        None
+    );
     gw.stop().await;
 }
 

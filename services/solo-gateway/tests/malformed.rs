@@ -6,7 +6,6 @@ mod common;
 use std::time::Duration;
 
 use common::{value_of, Gateway, PATIENCE};
-use skymesh_ipc_types::APP_VALUE_CAPACITY;
 use skymesh_solo_gateway::client::AppClient;
 use skymesh_solo_gateway::Settings;
 use solo_proto::{ids, GeofenceData, Location, SoloMessage};
@@ -146,12 +145,12 @@ async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
         [37.872_895_782_9, -122.300_712_401_1],
         [37.872_942_621_2, -122.301_244_403_2],
     ];
+    // Nine polygons: one more than an AppGeofence carries.
     let fence = SoloMessage::GeofenceSetData(GeofenceData {
-        coord: vec![square.clone()],
-        sub_coord: vec![square],
-        kinds: vec![0],
+        coord: vec![square.clone(); 9],
+        sub_coord: vec![square; 9],
+        kinds: vec![1; 9],
     });
-    assert!(value_of(&fence).len() > APP_VALUE_CAPACITY);
     app.send(&fence).await.expect("send");
     assert_eq!(
         app.recv(PATIENCE).await,
@@ -162,7 +161,8 @@ async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
     );
     match app.recv(PATIENCE).await {
         Some(SoloMessage::ShotManagerError(text)) => {
-            assert!(text.contains("not implemented"), "{text}")
+            assert!(text.contains("9 polygons"), "{text}");
+            assert!(text.contains("at most 8"), "{text}");
         }
         other => panic!("expected SHOTMANAGER_ERROR, got {other:?}"),
     }
@@ -172,5 +172,6 @@ async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
         .await
         .expect("send");
     assert_eq!(gw.next_from_app().await.msg_type, ids::SET_CURRENT_SHOT);
+    assert!(gw.geofence.try_recv().expect("app_geofence").is_none());
     gw.stop().await;
 }

@@ -2,18 +2,18 @@
 //! honest answers to what this version does not implement.
 //!
 //! Not in this milestone (each answered with SHOTMANAGER_ERROR "`<what>` is not
-//! implemented in this skymesh version" and counted): SET_CURRENT_SHOT zipline,
-//! multipoint, pano, rewind, transect, RTL (plus GET_CURRENT_SHOT of the current
-//! shot, so the app leaves the shot screen when idle); INSPECT_*, SCAN_START,
-//! SURVEY_START; SPLINE_* (SPLINE_POINT also gets one SPLINE_POINT back with status
-//! −4, the spec's one-reply rule); ZIPLINE_*, PANO_*, REWIND_OPTIONS, HOME_LOCATION;
-//! GEOFENCE_* (SET_DATA, UPDATE_POLY and CLEAR also get GEOFENCE_SET_ACK {0, false},
-//! the spec's ack for each).
+//! implemented in this skymesh version" and counted): SET_CURRENT_SHOT transect,
+//! RTL (plus GET_CURRENT_SHOT of the current shot, so the app leaves the shot screen
+//! when idle); HOME_LOCATION from the app ("setting home from the app is not
+//! supported", `rewind.rs`). GEOFENCE_* are `geofence.rs`'s; INSPECT_*, SCAN_START
+//! and SURVEY_START `sitescan.rs`'s.
 //!
 //! Buttons (Press only, "we only use Press"): FLY ends the shot (and with no shot,
 //! switches an armed vehicle to LOITER, the Solo's FLY mode); Pause toggles pause
 //! (and tells the app with SOLO_PAUSE); A/B go to the shot when in one (orbit: A
-//! locks the ROI; cable cam: A records a point; otherwise ignored), and when idle do
+//! locks the ROI; cable cam: A records a point; multipoint: A records, B records and
+//! plays; zipline: A lays a new line, B toggles the spot lock; pano: A starts or
+//! cancels, B changes the type; otherwise ignored), and when idle do
 //! what they are mapped to: enter a shot (follow is refused: the spec says it is not
 //! enterable from the controller), or set an ArduCopter mode.
 
@@ -87,33 +87,77 @@ impl Engine {
             M::GoProSetExtendedRequest { command, value } => self.gopro_set(command, value),
             M::GoProRecord(what) => self.gopro_record(what),
             M::GoProRequestState => self.gopro_send_state(),
-            M::SplinePoint(p) => {
-                self.not_implemented("multipoint cable cam");
-                self.out
-                    .app(M::SplinePoint(solo_proto::SplinePoint { status: -4, ..p }));
-            }
-            M::GeofenceSetData(_) | M::GeofenceUpdatePoly { .. } | M::GeofenceClear => {
-                self.not_implemented("geofence");
-                self.out.app(M::GeofenceSetAck {
-                    count: 0,
-                    valid: false,
-                });
-            }
-            M::SplineRecord
-            | M::SplinePlay
-            | M::SplineSeek { .. }
-            | M::SplinePathSettings { .. }
-            | M::SplineAttach(_) => self.not_implemented("multipoint cable cam"),
-            M::ZiplineOptions { .. } | M::ZiplineLock => self.not_implemented("zipline"),
-            M::PanoOptions { .. } => self.not_implemented("pano"),
-            M::RewindOptions { .. } => self.not_implemented("rewind"),
-            M::HomeLocation(_) => self.not_implemented("home location"),
-            M::InspectStart { .. }
-            | M::InspectSetWaypoint { .. }
-            | M::InspectMoveGimbal { .. }
-            | M::InspectMoveVehicle { .. } => self.not_implemented("site scan inspect"),
-            M::ScanStart => self.not_implemented("site scan scan"),
-            M::SurveyStart => self.not_implemented("site scan survey"),
+            M::SplinePoint(p) => self.spline_point(p),
+            M::GeofenceSetData(d) => self.geofence_set_data(&d),
+            M::GeofenceUpdatePoly {
+                action,
+                polygon_index,
+                vertex_index,
+                lat_deg,
+                lon_deg,
+                sub_lat_deg,
+                sub_lon_deg,
+            } => self.geofence_update(
+                action,
+                polygon_index,
+                vertex_index,
+                lat_deg,
+                lon_deg,
+                sub_lat_deg,
+                sub_lon_deg,
+            ),
+            M::GeofenceClear => self.geofence_clear_from_app(),
+            M::SplineRecord => self.spline_record(),
+            M::SplinePlay => self.spline_play(false),
+            M::SplineSeek {
+                u_position,
+                cruise_state,
+            } => self.spline_seek(u_position, cruise_state, now_ns),
+            M::SplinePathSettings {
+                camera_control,
+                desired_time_s,
+            } => self.spline_path_settings(camera_control, desired_time_s),
+            M::SplineAttach(index) => self.spline_attach(index, now_ns),
+            M::ZiplineOptions {
+                cruise_speed,
+                is_3d,
+                cam_pointing,
+            } => self.zipline_options(cruise_speed, is_3d, cam_pointing, now_ns),
+            M::ZiplineLock => self.zipline_toggle_lock(now_ns),
+            M::PanoOptions {
+                pano_type,
+                run_state,
+                cylinder_fov,
+                deg_second_yaw,
+                lens_fov,
+            } => self.pano_options(
+                pano_type,
+                run_state,
+                cylinder_fov,
+                deg_second_yaw,
+                lens_fov,
+                now_ns,
+            ),
+            M::RewindOptions {
+                enabled,
+                hover,
+                rewind_distance,
+            } => self.rewind_options(enabled, hover, rewind_distance),
+            M::HomeLocation(loc) => self.home_location_from_app(&loc),
+            M::InspectStart { takeoff_alt_m } => self.inspect_start(takeoff_alt_m, now_ns),
+            M::InspectSetWaypoint {
+                lat_deg,
+                lon_deg,
+                alt_m,
+            } => self.inspect_waypoint(lat_deg, lon_deg, alt_m, now_ns),
+            M::InspectMoveGimbal {
+                pitch_deg,
+                roll_deg,
+                yaw_deg,
+            } => self.inspect_gimbal(pitch_deg, roll_deg, yaw_deg, now_ns),
+            M::InspectMoveVehicle { vx, vy, vz } => self.inspect_move(vx, vy, vz, now_ns),
+            M::ScanStart => self.scan_start(now_ns),
+            M::SurveyStart => self.survey_start(now_ns),
             // ShotManager → app only: an app has no reason to send these.
             other @ (M::GetCurrentShot(_)
             | M::ShotError(_)
@@ -157,15 +201,22 @@ impl Engine {
                     self.out.current_shot(shots::NONE);
                 }
             }
-            shots::SELFIE | shots::ORBIT | shots::CABLECAM | shots::FOLLOW => {
-                self.enter(shot, via, now_ns)
+            shots::REWIND if !self.rewind_enabled() && self.current_shot() != shot => {
+                self.out.metrics.refused_entry("rewind_disabled");
+                tracing::info!(?via, "rewind is disabled in the rewind options");
+                self.out
+                    .error("rewind is disabled (SOLO_REWIND_OPTIONS enabled = 0)");
+                self.out.current_shot(self.current_shot());
             }
-            shots::ZIPLINE
+            shots::SELFIE
+            | shots::ORBIT
+            | shots::CABLECAM
+            | shots::FOLLOW
+            | shots::ZIPLINE
             | shots::MULTIPOINT
             | shots::PANO
-            | shots::REWIND
-            | shots::TRANSECT
-            | shots::RTL => {
+            | shots::REWIND => self.enter(shot, via, now_ns),
+            shots::TRANSECT | shots::RTL => {
                 self.not_implemented(shot_title(shot));
                 self.out.current_shot(self.current_shot());
             }
@@ -217,6 +268,12 @@ impl Engine {
             Some(ShotKind::Cable { .. })
         ) {
             self.send_options();
+        }
+        match shot {
+            shots::ZIPLINE => self.zipline_start(now_ns),
+            shots::PANO => self.pano_start(now_ns),
+            shots::REWIND => self.rewind_start(now_ns),
+            _ => {}
         }
     }
 
@@ -282,11 +339,13 @@ impl Engine {
 
     /// The app went away: end the shots that need it.
     pub(crate) fn app_lost(&mut self, _now_ns: u64) {
+        self.geofence_app_lost();
         let Some(a) = &self.active else {
             return;
         };
-        let needs_app =
-            matches!(a.kind, ShotKind::Selfie { .. } | ShotKind::Follow(_)) || a.flight.is_none();
+        let needs_app = matches!(a.kind, ShotKind::Selfie { .. } | ShotKind::Follow(_))
+            || matches!(&a.kind, ShotKind::SiteScan(s) if s.needs_app())
+            || a.flight.is_none();
         if needs_app {
             self.exit_shot(ExitReason::AppDisconnected);
         } else {

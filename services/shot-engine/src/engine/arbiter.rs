@@ -106,6 +106,7 @@ impl Engine {
         if self.gopro_ack(ack, accepted) {
             return;
         }
+        self.geofence_ack(ack, accepted);
         if accepted {
             return;
         }

@@ -55,6 +55,16 @@ impl Engine {
             }
             ShotKind::Follow(_) => self.follow_fix(loc, now_ns),
             ShotKind::Cable { .. } => tracing::debug!("cable cam: LOCATION ignored"),
+            ShotKind::Zipline(_) => self.zipline_location(loc),
+            ShotKind::Multipoint(_)
+            | ShotKind::Pano(_)
+            | ShotKind::Rewind(_)
+            | ShotKind::SiteScan(_) => {
+                tracing::debug!(
+                    shot = shot_title(active.shot),
+                    "LOCATION does nothing in this shot"
+                )
+            }
         }
     }
 
@@ -108,6 +118,9 @@ impl Engine {
                     .error("orbit: no vehicle position; the ROI was not set"),
             },
             ShotKind::Cable { .. } => self.cable_record(view, now_ns),
+            ShotKind::Multipoint(_) => {
+                self.multipoint_record(true, now_ns);
+            }
             _ => tracing::info!(
                 shot = shot_title(active.shot),
                 "record position does nothing in this shot"
@@ -270,6 +283,11 @@ impl Engine {
             (ShotKind::Orbit { .. } | ShotKind::Cable { .. }, Button::A) => {
                 self.record_position(now_ns)
             }
+            (ShotKind::Multipoint(_), Button::A | Button::B) => {
+                self.multipoint_button(button, now_ns)
+            }
+            (ShotKind::Zipline(_), Button::A | Button::B) => self.zipline_button(button, now_ns),
+            (ShotKind::Pano(_), Button::A | Button::B) => self.pano_button(button, now_ns),
             _ => tracing::info!(
                 shot = shot_title(active.shot),
                 %button,

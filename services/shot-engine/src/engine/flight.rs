@@ -48,6 +48,13 @@ pub enum ExitReason {
     /// GUIDED was refused or not reached in time.
     GuidedRefused,
     Shutdown,
+    /// The shot completed (a photo pano, a rewind that hovers): brake, LOITER.
+    Finished,
+    /// A rewind completed and sent the vehicle home (RTL): authority released.
+    FinishedRtl,
+    /// The vehicle would cross the geofence: the engine holds it at the fence
+    /// (`geofence.rs`); ROI cleared and authority released before the hold takes it.
+    Geofence,
 }
 
 /// What an exit does with the vehicle (see the engine docs).
@@ -76,6 +83,9 @@ impl ExitReason {
             ExitReason::Replaced => "replaced",
             ExitReason::GuidedRefused => "guided_refused",
             ExitReason::Shutdown => "shutdown",
+            ExitReason::Finished => "finished",
+            ExitReason::FinishedRtl => "finished_rtl",
+            ExitReason::Geofence => "geofence",
         }
     }
 
@@ -85,8 +95,12 @@ impl ExitReason {
             | ExitReason::FlyButton
             | ExitReason::AppDisconnected
             | ExitReason::Replaced
-            | ExitReason::Shutdown => Handover::Loiter,
-            ExitReason::ModeChange | ExitReason::GuidedRefused => Handover::Release,
+            | ExitReason::Shutdown
+            | ExitReason::Finished => Handover::Loiter,
+            ExitReason::ModeChange
+            | ExitReason::GuidedRefused
+            | ExitReason::FinishedRtl
+            | ExitReason::Geofence => Handover::Release,
             ExitReason::Preempted
             | ExitReason::NoAuthority
             | ExitReason::AuthorityLost
@@ -247,6 +261,9 @@ impl Engine {
     pub(crate) fn step(&mut self, now_ns: u64) {
         self.check_guided_timeout(now_ns);
         self.follow_prepare(now_ns);
+        if self.sitescan_step(now_ns) {
+            return;
+        }
         let view = self.inputs.view(now_ns);
         let lim = self.settings.limits;
         let period = self.settings.loop_period.as_secs_f32();
@@ -323,6 +340,7 @@ impl Engine {
             return;
         }
         self.inputs.status = Some(*status);
+        self.home_update();
         if self.active.is_none() {
             return;
         }

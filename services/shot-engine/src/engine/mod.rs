@@ -28,6 +28,16 @@
 //! buttons and not-implemented answers in `app.rs`; the arbiter's answers in
 //! `arbiter.rs`; the GoPro model in `gopro.rs`; outputs in `out.rs` and `status.rs`.
 //!
+//! Site Scan (inspect, structure scan, survey: `sitescan.rs`) and the app's
+//! geofence (validation, the arbiter's `GeofenceSet`, the predictive check and the
+//! hold at the fence: `geofence.rs`) document theirs the same way.
+//!
+//! Multipoint cable cam (`multipoint.rs`), zipline (`zipline.rs`), pano (`pano.rs`)
+//! and rewind with its breadcrumbs and the app's home location (`rewind.rs`) each
+//! document their messages at the top of their file. Zipline, pano and rewind fly
+//! from entry; multipoint from SPLINE_ATTACH. A photo pano and a rewind end by
+//! themselves (exit `finished`, or `finished_rtl` for a rewind that returns home).
+//!
 //! # Where the spec is silent, what this engine does
 //!
 //! - Entering the shot that is already active only re-announces it
@@ -68,12 +78,18 @@ mod arbiter;
 mod camera;
 mod controls;
 mod flight;
+mod geofence;
 mod gopro;
+mod multipoint;
 mod out;
+mod pano;
+mod rewind;
 mod shot;
+mod sitescan;
 mod status;
 #[cfg(test)]
 mod tests;
+mod zipline;
 
 use skymesh_ipc_types::{
     AppSession, ButtonEvent, FlightMode, PayloadState, ShotStatus, VehicleCommand, VehicleState,
@@ -107,6 +123,8 @@ pub struct Outputs {
     pub to_app: Vec<SoloMessage>,
     /// A `ShotStatus` when it changed or is due (5 Hz).
     pub status: Option<ShotStatus>,
+    /// For `skymesh/vehicle/{id}/geofence`: the app's fence changed (`geofence.rs`).
+    pub geofence: Option<skymesh_ipc_types::GeofenceSet>,
 }
 
 /// The latest vehicle inputs, with the time each was received.
@@ -173,6 +191,10 @@ pub struct Engine {
     last_status: Option<(StatusKey, u64)>,
     /// We sent payload commands (gimbal, GoPro) and may hold payload authority.
     payload_used: bool,
+    /// The app's geofence, the predictive check and the hold (`geofence.rs`).
+    fence: geofence::FenceState,
+    /// Breadcrumbs, rewind options, the home told to the app (`rewind.rs`).
+    rewind: rewind::RewindState,
 }
 
 impl Engine {
@@ -217,6 +239,8 @@ impl Engine {
             last_exit,
             last_status: None,
             payload_used: false,
+            fence: geofence::FenceState::default(),
+            rewind: rewind::RewindState::default(),
         }
     }
 
@@ -312,7 +336,10 @@ impl Engine {
             self.out.app_connected = false;
             self.app_lost(now_ns);
         }
+        self.geofence_tick(now_ns);
         self.step(now_ns);
+        self.pano_after_step();
+        self.rewind_after_step(now_ns);
         self.drain(now_ns)
     }
 
@@ -323,6 +350,7 @@ impl Engine {
             commands: std::mem::take(&mut self.out.commands),
             to_app: std::mem::take(&mut self.out.to_app),
             status: self.status_due(now_ns),
+            geofence: self.fence.take_pending(),
         }
     }
 
@@ -330,6 +358,7 @@ impl Engine {
     /// LOITER) and returns the last outputs.
     pub fn shutdown(&mut self, now_ns: u64) -> Outputs {
         self.exit_shot(ExitReason::Shutdown);
+        self.geofence_shutdown();
         let mut out = self.drain(now_ns);
         out.status = Some(self.status());
         out
@@ -343,6 +372,8 @@ impl Engine {
         }
         self.out.current_shot(self.current_shot());
         self.gopro_send_state();
+        self.geofence_app_connected();
+        self.rewind_app_connected();
     }
 
     /// An app message arrived: the gateway is alive and an app is connected.
@@ -382,11 +413,19 @@ pub fn shot_title(shot: i32) -> &'static str {
         solo_proto::shots::REWIND => "rewind",
         solo_proto::shots::TRANSECT => "transect",
         solo_proto::shots::RTL => "return home shot",
+        sitescan::INSPECT => "site scan inspect",
+        sitescan::SCAN => "site scan scan",
+        sitescan::SURVEY => "site scan survey",
         _ => "shot",
     }
 }
 
 /// The metric label of a shot index.
 pub fn shot_label(shot: i32) -> &'static str {
-    solo_proto::shots::name(shot).unwrap_or("unknown")
+    match shot {
+        sitescan::INSPECT => "inspect",
+        sitescan::SCAN => "scan",
+        sitescan::SURVEY => "survey",
+        _ => solo_proto::shots::name(shot).unwrap_or("unknown"),
+    }
 }

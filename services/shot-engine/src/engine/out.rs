@@ -56,7 +56,12 @@ impl Out {
         self.to_app.push(msg);
     }
 
+    /// GET_CURRENT_SHOT; not sent for shots without a Solo index (Site Scan).
     pub fn current_shot(&mut self, shot: i32) {
+        if !(solo_proto::shots::MIN..=solo_proto::shots::MAX).contains(&shot) {
+            tracing::debug!(shot, "no Solo shot index; GET_CURRENT_SHOT not sent");
+            return;
+        }
         self.app(SoloMessage::GetCurrentShot(shot));
     }
 

@@ -7,6 +7,10 @@
 //! | orbit | ROI: LOCATION, RECORD_POSITION or A (projected ROI of the camera) | first ROI (echoed as LOCATION); a new one starts a new orbit (echoed) | SOLO_SHOT_OPTIONS |
 //! | cable cam | RECORD_POSITION or A records position, heading, camera pitch → CABLE_CAM_WAYPOINT; a second point closer than `CABLE_MIN_LENGTH_M` replaces the first (GET_CURRENT_SHOT −1, 2, WAYPOINT) | after the second point (CABLE_CAM_OPTIONS first) | SOLO_CABLE_CAM_OPTIONS |
 //! | follow | the phone's positions (follow stream, newest per tick) | first position | SOLO_FOLLOW_OPTIONS then _V2 |
+//! | multipoint | keypoints (`engine/multipoint.rs`), then SPLINE_PLAY | SPLINE_ATTACH | SPLINE_* (no options message) |
+//! | zipline | — (a line from the camera pose) | at entry (cruise 0) | SOLO_ZIPLINE_OPTIONS |
+//! | pano | — (holds; options and A start the run) | at entry | SOLO_PANO_OPTIONS (cruise = the video pan rate, °/s) |
+//! | rewind | — (the breadcrumbs) | at entry | — (SOLO_REWIND_OPTIONS are the engine's) |
 
 use solo_proto::{shots, Location, SoloMessage};
 
@@ -61,6 +65,16 @@ pub(crate) enum ShotKind {
         yaw_clockwise: bool,
     },
     Follow(Box<FollowShot>),
+    /// Multipoint cable cam (`engine/multipoint.rs`).
+    Multipoint(Box<super::multipoint::MultipointShot>),
+    /// Zipline (`engine/zipline.rs`).
+    Zipline(Box<super::zipline::ZiplineShot>),
+    /// Pano (`engine/pano.rs`).
+    Pano(Box<super::pano::PanoShot>),
+    /// Rewind (`engine/rewind.rs`).
+    Rewind(Box<super::rewind::RewindShot>),
+    /// Site Scan inspect, structure scan or survey (`engine/sitescan.rs`).
+    SiteScan(Box<super::sitescan::SiteScan>),
 }
 
 /// The shot being set up or flown.
@@ -122,6 +136,19 @@ impl Active {
                 })),
                 s.follow_cruise_speed,
             ),
+            shots::MULTIPOINT => (
+                ShotKind::Multipoint(Box::default()),
+                s.multipoint_cruise_speed,
+            ),
+            shots::ZIPLINE => (
+                ShotKind::Zipline(Box::new(super::zipline::ZiplineShot::new(view))),
+                0.0,
+            ),
+            shots::PANO => (
+                ShotKind::Pano(Box::new(super::pano::PanoShot::new(view))),
+                super::pano::DEFAULT_VIDEO_RATE_DPS,
+            ),
+            shots::REWIND => (ShotKind::Rewind(Box::default()), s.rewind_speed_mps),
             _ => return None,
         };
         Some(Active {
@@ -161,6 +188,13 @@ impl Active {
                     follow_preference: f.preference,
                 },
             ],
+            // The Site Scan messages have no options message.
+            ShotKind::SiteScan(_) => Vec::new(),
+            ShotKind::Zipline(z) => vec![z.options(self.cruise)],
+            ShotKind::Pano(p) => vec![p.options(self.cruise)],
+            // Multipoint reports through SPLINE_PLAYBACK_STATUS; rewind's options
+            // are the engine's, not the shot's.
+            ShotKind::Multipoint(_) | ShotKind::Rewind(_) => Vec::new(),
         }
     }
 
@@ -201,10 +235,15 @@ impl Active {
             ShotKind::Orbit { orbit } => orbit.as_ref().map(Orbit::roi),
             ShotKind::Follow(f) => f.follow.target(),
             ShotKind::Cable { .. } => None,
+            ShotKind::SiteScan(s) => s.roi(),
+            ShotKind::Zipline(z) => z.line.spot_lock(),
+            ShotKind::Multipoint(_) | ShotKind::Pano(_) | ShotKind::Rewind(_) => None,
         }
     }
 
-    /// Orbit radius, or the selfie / cable parameter 0..1.
+    /// Orbit radius, or the selfie / cable parameter 0..1; multipoint: u on the
+    /// path; zipline: metres along the line; pano: share of the photos taken;
+    /// rewind: share of the path flown back.
     pub fn progress(&self) -> f32 {
         match &self.kind {
             ShotKind::Selfie {
@@ -212,6 +251,11 @@ impl Active {
             } => s.parameter(),
             ShotKind::Orbit { orbit: Some(o) } => o.radius_m(),
             ShotKind::Cable { cable: Some(c), .. } => c.parameter(),
+            ShotKind::SiteScan(s) => s.progress(),
+            ShotKind::Multipoint(m) => m.progress(),
+            ShotKind::Zipline(z) => z.line.along_m(),
+            ShotKind::Pano(p) => p.progress(),
+            ShotKind::Rewind(r) => r.progress(),
             _ => 0.0,
         }
     }
@@ -262,6 +306,10 @@ impl Active {
                 }
                 f.follow.step(v, now_s, dt, cruise, lim)
             }
+            ShotKind::Multipoint(m) => m.guidance(v, now_ns, dt, cruise, lim, out),
+            ShotKind::Zipline(z) => z.line.step(v, dt, cruise, lim),
+            ShotKind::Pano(p) => p.guidance(v, now_ns, dt, cruise, lim),
+            ShotKind::Rewind(r) => r.guidance(v, dt, cruise, lim),
             // Flying without its geometry cannot happen (flight starts with it): hold.
             _ => Guidance::HOVER,
         }

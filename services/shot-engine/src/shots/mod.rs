@@ -22,18 +22,37 @@
 //! telemetry.
 
 pub mod cable;
+pub mod fence;
 pub mod follow;
 pub mod geo;
 mod line;
 mod motion;
+pub mod multipoint;
 pub mod orbit;
+pub mod pano;
+pub mod rewind;
 pub mod selfie;
+pub mod sitescan;
+pub mod spline;
+pub mod zipline;
 
 pub use cable::{CableCam, CablePoint, CABLE_MIN_LENGTH_M};
+pub use fence::{
+    stopping_distance, validate_zone, Fence, FenceError, FenceVerdict, FenceZone, FenceZoneError,
+};
 pub use follow::{Follow, FollowMode, DEFAULT_STALE_AFTER_S, MIN_FOLLOW_DISTANCE_M};
 pub use geo::{bearing_deg, distance_m, ground_distance_m, offset, GeoPoint, LocalFrame};
+pub use multipoint::{Multipoint, MultipointError, PlaybackEvent};
 pub use orbit::{Orbit, MIN_ORBIT_RADIUS_M};
+pub use pano::{Pano, PanoKind, PanoOptions, PanoPhase, PanoStation, PanoStep};
+pub use rewind::{Breadcrumbs, Rewind, BREADCRUMB_CAPACITY, BREADCRUMB_SPACING_M};
 pub use selfie::{Selfie, SelfiePhase};
+pub use sitescan::{
+    body_to_ned, photo_spacing_m, ScanConfig, SiteScanError, SiteStep, StructureScan, Survey,
+    SurveyConfig, SurveyLane,
+};
+pub use spline::{Durations, Keypoint, SplineError, SplinePath, KEYPOINT_MIN_SPACING_M};
+pub use zipline::Zipline;
 
 /// Camera pitch above this (shallower than 60° down) cannot find the ground in a
 /// useful distance: the projected ROI is then [`FAILED_ROI_DISTANCE_M`] ahead

@@ -7,7 +7,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use skymesh_ipc_types::{topics, AppMessage, AppSession, ServiceId, ServiceStats};
+use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, ServiceId, ServiceStats};
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use skymesh_solo_gateway::{run, Settings, Sockets};
 use solo_proto::SoloMessage;
@@ -50,6 +50,8 @@ pub struct Gateway {
     pub tcp: SocketAddr,
     pub udp: SocketAddr,
     pub from_app: Subscriber<AppMessage>,
+    /// GEOFENCE_SET_DATA, translated.
+    pub geofence: Subscriber<AppGeofence>,
     pub sessions: Subscriber<AppSession>,
     pub to_app: Publisher<AppMessage>,
     shutdown: CancellationToken,
@@ -85,6 +87,9 @@ impl Gateway {
         let from_app = tool
             .subscriber::<AppMessage>(&topics::shot_from_app())
             .expect("from_app subscriber");
+        let geofence = tool
+            .subscriber::<AppGeofence>(&topics::shot_app_geofence())
+            .expect("app_geofence subscriber");
         let sessions = tool
             .subscriber::<AppSession>(&topics::shot_app_session())
             .expect("app_session subscriber");
@@ -102,6 +107,7 @@ impl Gateway {
             tcp,
             udp,
             from_app,
+            geofence,
             sessions,
             to_app,
             shutdown,
@@ -116,11 +122,12 @@ impl Gateway {
         let Gateway {
             domain,
             from_app,
+            geofence,
             sessions,
             to_app,
             ..
         } = self;
-        drop((from_app, sessions, to_app));
+        drop((from_app, geofence, sessions, to_app));
         domain.remove_leftover_files();
     }
 
@@ -143,6 +150,15 @@ impl Gateway {
             .await
             .expect("from_app")
             .unwrap_or_else(|| panic!("no AppMessage within {PATIENCE:?}"))
+    }
+
+    /// The next geofence the gateway publishes for the engine.
+    pub async fn next_geofence(&mut self) -> AppGeofence {
+        self.geofence
+            .recv_timeout(PATIENCE)
+            .await
+            .expect("app_geofence")
+            .unwrap_or_else(|| panic!("no AppGeofence within {PATIENCE:?}"))
     }
 
     /// Waits for an `AppSession` sample matching `pred`.

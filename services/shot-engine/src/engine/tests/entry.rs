@@ -62,6 +62,7 @@ fn no_vehicle_state_yet_is_refused_as_rtl() {
     // Status alone is not enough either.
     h.vehicle_ok();
     h.engine.inputs.state = None;
+    h.drain(); // the home location the first status gave the app
     refused_with(&mut h, 2);
 }
 

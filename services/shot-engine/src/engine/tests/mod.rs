@@ -4,10 +4,16 @@
 mod entry;
 mod exits;
 mod follow;
+mod geofence;
 mod gopro;
+mod multipoint;
+mod pano;
 mod persistence;
+mod rewind;
 mod shots;
+mod sitescan;
 mod unimplemented;
+mod zipline;
 
 use std::path::{Path, PathBuf};
 

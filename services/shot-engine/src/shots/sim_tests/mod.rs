@@ -4,9 +4,15 @@
 //! the vehicle 100 ms late, as telemetry would show it.
 
 mod cable;
+mod fence;
 mod follow;
+mod multipoint;
 mod orbit;
+mod pano;
+mod rewind;
 mod selfie;
+mod sitescan;
+mod zipline;
 
 use std::collections::VecDeque;
 

@@ -1,0 +1,242 @@
+//! Rewind (shot 8), the breadcrumbs it flies back along, its options, and the home
+//! location the app shows ([`crate::shots::rewind`]).
+//!
+//! | from | does |
+//! |---|---|
+//! | every tick, armed with a fresh position, not rewinding | a breadcrumb every [`BREADCRUMB_SPACING_M`] of path, the newest [`BREADCRUMB_CAPACITY`] kept; disarming forgets them (a new flight, a new path) |
+//! | SET_CURRENT_SHOT 8 (or a mapped button) | entry gate (and refused while rewind is disabled); flies back along the breadcrumbs at `rewind_speed_mps`, at most `rewindDistance` of path |
+//! | the end of the path | hover: brake and LOITER (exit `finished`); else RTL (exit `finished_rtl`); the breadcrumbs are forgotten |
+//! | SOLO_REWIND_OPTIONS | enabled, hover, rewindDistance (clamped to 10..=60 m as the reference does); answered with the options in use |
+//! | Pause | stops on the path ↔ goes on |
+//! | app connects | SOLO_HOME_LOCATION (if home is known) and SOLO_REWIND_OPTIONS |
+//! | `VehicleStatus` home changes | SOLO_HOME_LOCATION (altitude above MSL, as the reference sends the autopilot's home) |
+//! | SOLO_HOME_LOCATION from the app | SHOTMANAGER_ERROR "setting home from the app is not supported": skymesh has no set-home command (`MAV_CMD_DO_SET_HOME` is not a `Command`) |
+//!
+//! The reference's rewind flies its breadcrumb spline the same way but falls back to
+//! RTL when there are none; here an empty path ends at once the same way as a full
+//! one (hover or RTL), with a SHOTMANAGER_ERROR saying there was nothing to rewind.
+
+use skymesh_ipc_types::{Command, VehicleStatus};
+use solo_proto::{Location, SoloMessage};
+
+use super::shot::{Active, ShotKind};
+use super::{Engine, ExitReason};
+use crate::shots::rewind::{BREADCRUMB_CAPACITY, BREADCRUMB_SPACING_M};
+use crate::shots::{Breadcrumbs, Guidance, Limits, Rewind, VehicleView};
+
+/// Default rewind distance, metres (the Solo's).
+pub const DEFAULT_REWIND_DISTANCE_M: f32 = 20.0;
+/// rewindDistance is clamped to this range, metres (the reference's).
+pub const REWIND_DISTANCE_RANGE_M: (f32, f32) = (10.0, 60.0);
+
+/// SOLO_REWIND_OPTIONS.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RewindOptions {
+    /// Rewind may be entered.
+    pub enabled: bool,
+    /// At the end: hover (LOITER) instead of RTL.
+    pub hover: bool,
+    /// How much of the flown path to fly back, metres.
+    pub distance_m: f32,
+}
+
+impl Default for RewindOptions {
+    fn default() -> Self {
+        RewindOptions {
+            enabled: true,
+            hover: false,
+            distance_m: DEFAULT_REWIND_DISTANCE_M,
+        }
+    }
+}
+
+impl RewindOptions {
+    fn message(&self) -> SoloMessage {
+        SoloMessage::RewindOptions {
+            enabled: self.enabled.into(),
+            hover: self.hover.into(),
+            rewind_distance: self.distance_m,
+        }
+    }
+}
+
+/// What the engine keeps for rewind whether or not it is the shot.
+#[derive(Debug)]
+pub(crate) struct RewindState {
+    pub crumbs: Breadcrumbs,
+    pub options: RewindOptions,
+    /// The home position last told to the app (or to be told on connect).
+    home: Option<Location>,
+}
+
+impl Default for RewindState {
+    fn default() -> Self {
+        RewindState {
+            crumbs: Breadcrumbs::new(BREADCRUMB_SPACING_M, BREADCRUMB_CAPACITY),
+            options: RewindOptions::default(),
+            home: None,
+        }
+    }
+}
+
+/// The rewind shot's own state.
+#[derive(Debug, Default)]
+pub(crate) struct RewindShot {
+    /// The path back, laid when the shot starts flying.
+    pub rewind: Option<Rewind>,
+}
+
+impl RewindShot {
+    pub fn guidance(&mut self, v: &VehicleView, dt: f32, speed: f32, lim: &Limits) -> Guidance {
+        match self.rewind.as_mut() {
+            Some(r) => r.step(v, dt, speed, lim),
+            None => Guidance::HOVER,
+        }
+    }
+
+    pub fn progress(&self) -> f32 {
+        self.rewind.as_ref().map_or(0.0, Rewind::progress)
+    }
+}
+
+fn home_of(s: &VehicleStatus) -> Option<Location> {
+    let home = Location {
+        lat_deg: s.home_lat_deg,
+        lon_deg: s.home_lon_deg,
+        alt_m: s.home_alt_msl_m,
+    };
+    (s.home_valid != 0
+        && home.lat_deg.is_finite()
+        && home.lon_deg.is_finite()
+        && home.alt_m.is_finite())
+    .then_some(home)
+}
+
+impl Engine {
+    /// Rewind may be entered (SOLO_REWIND_OPTIONS enabled).
+    pub(crate) fn rewind_enabled(&self) -> bool {
+        self.rewind.options.enabled
+    }
+
+    /// Just entered: lay the path back from here and fly it.
+    pub(crate) fn rewind_start(&mut self, now_ns: u64) {
+        let Some(v) = self.inputs.view(now_ns) else {
+            return;
+        };
+        let distance = self.rewind.options.distance_m;
+        let crumbs = self.rewind.crumbs.len();
+        let Some(Active {
+            kind: ShotKind::Rewind(r),
+            ..
+        }) = self.active.as_mut()
+        else {
+            return;
+        };
+        let path = Rewind::new(&self.rewind.crumbs, distance, &v);
+        let length = path.length_m();
+        r.rewind = Some(path);
+        tracing::info!(
+            length_m = length,
+            crumbs,
+            max_m = distance,
+            "rewind: flying back along the path"
+        );
+        if length <= 0.0 {
+            self.out
+                .error("rewind: no flown path recorded; nothing to fly back along");
+        }
+        self.begin_flight(None, now_ns);
+    }
+
+    /// SOLO_REWIND_OPTIONS from the app: kept, answered with what is in use.
+    pub(crate) fn rewind_options(&mut self, enabled: u8, hover: u8, distance_m: f32) {
+        let (lo, hi) = REWIND_DISTANCE_RANGE_M;
+        let distance_m = if distance_m.is_finite() {
+            distance_m.clamp(lo, hi)
+        } else {
+            DEFAULT_REWIND_DISTANCE_M
+        };
+        self.rewind.options = RewindOptions {
+            enabled: enabled != 0,
+            hover: hover != 0,
+            distance_m,
+        };
+        tracing::info!(enabled, hover, distance_m, "rewind: options");
+        self.out.app(self.rewind.options.message());
+    }
+
+    /// SOLO_HOME_LOCATION from the app.
+    pub(crate) fn home_location_from_app(&mut self, loc: &Location) {
+        self.out.metrics.unimplemented.inc();
+        tracing::info!(
+            lat = loc.lat_deg,
+            lon = loc.lon_deg,
+            "the app asked to set home; not supported"
+        );
+        self.out.error("setting home from the app is not supported");
+    }
+
+    /// The app connected: tell it home and the rewind options.
+    pub(crate) fn rewind_app_connected(&mut self) {
+        if let Some(home) = self.inputs.status.as_ref().and_then(home_of) {
+            self.rewind.home = Some(home);
+            self.out.app(SoloMessage::HomeLocation(home));
+        }
+        self.out.app(self.rewind.options.message());
+    }
+
+    /// A new `VehicleStatus`: tell the app when home moved.
+    pub(crate) fn home_update(&mut self) {
+        let home = self.inputs.status.as_ref().and_then(home_of);
+        if home.is_some() && home != self.rewind.home {
+            self.rewind.home = home;
+            if let Some(h) = home {
+                tracing::info!(lat = h.lat_deg, lon = h.lon_deg, alt_msl = h.alt_m, "home");
+                self.out.app(SoloMessage::HomeLocation(h));
+            }
+        }
+    }
+
+    /// After a tick: drop a breadcrumb while flying (not while rewinding), and end
+    /// the rewind at the end of its path.
+    pub(crate) fn rewind_after_step(&mut self, now_ns: u64) {
+        let armed = self
+            .inputs
+            .status
+            .as_ref()
+            .is_some_and(VehicleStatus::is_armed);
+        if !armed && !self.rewind.crumbs.is_empty() {
+            tracing::debug!("disarmed: breadcrumbs forgotten");
+            self.rewind.crumbs.clear();
+        }
+        let rewinding = matches!(
+            self.active.as_ref().map(|a| &a.kind),
+            Some(ShotKind::Rewind(_))
+        );
+        if armed && !rewinding {
+            if let Some(v) = self.inputs.view(now_ns) {
+                self.rewind.crumbs.record(&v.position);
+            }
+        }
+        let done = matches!(
+            self.active.as_ref(),
+            Some(Active {
+                kind: ShotKind::Rewind(r),
+                flight: Some(_),
+                ..
+            }) if r.rewind.as_ref().is_some_and(Rewind::done)
+        );
+        if !done {
+            return;
+        }
+        self.rewind.crumbs.clear();
+        if self.rewind.options.hover {
+            tracing::info!("rewind: at the end of the path; hovering");
+            self.exit_shot(ExitReason::Finished);
+        } else {
+            tracing::info!("rewind: at the end of the path; RTL");
+            self.out.command(Command::ReturnToLaunch);
+            self.exit_shot(ExitReason::FinishedRtl);
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! Rewind: breadcrumbs, flying back, hover or RTL at the end, options both ways, the
+//! home location both ways.
+
+use skymesh_ipc_types::{Command, CommandKind, FlightMode};
+use solo_proto::shots::{NONE, REWIND};
+use solo_proto::{Location, SoloMessage};
+
+use super::*;
+
+const HOME: Location = Location {
+    lat_deg: -35.363,
+    lon_deg: 149.165,
+    alt_m: 584.0,
+};
+
+fn rewind_options(enabled: u8, hover: u8, distance: f32) -> SoloMessage {
+    SoloMessage::RewindOptions {
+        enabled,
+        hover,
+        rewind_distance: distance,
+    }
+}
+
+fn with_home(h: &mut Harness, home: Location) {
+    h.status.home_lat_deg = home.lat_deg;
+    h.status.home_lon_deg = home.lon_deg;
+    h.status.home_alt_msl_m = home.alt_m;
+    h.push_status();
+}
+
+/// Ready, having flown 40 m north (a tick per metre).
+fn flown() -> Harness {
+    let mut h = Harness::ready();
+    for _ in 0..40 {
+        h.move_north(1.0);
+        h.tick();
+    }
+    h
+}
+
+fn last_velocity(out: &Outputs) -> [f32; 3] {
+    cmds(out)
+        .into_iter()
+        .rev()
+        .find_map(|c| match c {
+            Command::VelocityNed { vel_ned_mps, .. } => Some(vel_ned_mps),
+            _ => None,
+        })
+        .expect("a setpoint")
+}
+
+#[test]
+fn home_and_the_rewind_options_are_sent_on_connect_and_home_when_it_moves() {
+    let mut h = Harness::new();
+    h.vehicle_ok();
+    with_home(&mut h, HOME);
+    let out = h.connect_app(1);
+    let n = out.to_app.len();
+    assert_eq!(
+        out.to_app[n - 2..],
+        [SoloMessage::HomeLocation(HOME), rewind_options(1, 0, 20.0)]
+    );
+    // Unchanged: nothing; moved: told.
+    h.push_status();
+    assert!(h.drain().to_app.is_empty());
+    let moved = Location {
+        lat_deg: HOME.lat_deg + 0.001,
+        ..HOME
+    };
+    with_home(&mut h, moved);
+    assert_eq!(h.drain().to_app, [SoloMessage::HomeLocation(moved)]);
+    // No home known: none sent on connect.
+    let mut h = Harness::new();
+    h.vehicle_ok();
+    h.status.home_valid = 0;
+    h.push_status();
+    let out = h.connect_app(1);
+    assert!(!out
+        .to_app
+        .iter()
+        .any(|m| matches!(m, SoloMessage::HomeLocation(_))));
+}
+
+#[test]
+fn setting_home_from_the_app_is_refused_honestly() {
+    let mut h = Harness::ready();
+    let out = h.app(SoloMessage::HomeLocation(HOME));
+    assert_eq!(
+        out.to_app,
+        [SoloMessage::ShotManagerError(
+            "setting home from the app is not supported".into()
+        )]
+    );
+    assert!(out.commands.is_empty());
+    assert_eq!(
+        h.counter("skymesh_shot_unimplemented_requests_total", &[]),
+        1
+    );
+}
+
+#[test]
+fn rewind_options_are_clamped_and_answered_and_disabled_refuses_the_shot() {
+    let mut h = flown();
+    let out = h.app(rewind_options(1, 1, 100.0));
+    assert_eq!(out.to_app, [rewind_options(1, 1, 60.0)]);
+    let out = h.app(rewind_options(0, 0, 5.0));
+    assert_eq!(out.to_app, [rewind_options(0, 0, 10.0)]);
+    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    assert!(matches!(&out.to_app[0], SoloMessage::ShotManagerError(t) if t.contains("disabled")));
+    assert_eq!(out.to_app[1], SoloMessage::GetCurrentShot(NONE));
+    assert!(out.commands.is_empty());
+    assert_eq!(
+        h.counter(
+            "skymesh_shot_entry_refusals_total",
+            &[("error", "rewind_disabled")]
+        ),
+        1
+    );
+}
+
+#[test]
+fn rewind_flies_back_along_the_path_then_returns_home() {
+    let mut h = flown();
+    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(REWIND)]);
+    assert_eq!(
+        cmds(&out),
+        [
+            Command::GrabFlightAuthority,
+            Command::SetMode(FlightMode::Guided)
+        ]
+    );
+    h.set_mode(FlightMode::Guided);
+    let v = last_velocity(&h.run(2_000));
+    assert!(v[0] < -1.0 && v[1].abs() < 0.1, "back south: {v:?}");
+    assert!(
+        h.engine.status().progress < 0.1,
+        "the vehicle has not moved"
+    );
+    // Rewinding does not lay crumbs: arrive at the end, 20 m back (the default).
+    h.state.lat_deg = LAT + 20.0 * M_LAT;
+    h.state.vel_ned_mps = [0.0; 3];
+    let out = h.run(1_000);
+    let c = cmds(&out);
+    let rtl = c
+        .iter()
+        .position(|c| *c == Command::ReturnToLaunch)
+        .expect("RTL");
+    assert_eq!(c[rtl + 1], Command::ReleaseFlightAuthority);
+    assert!(!c.contains(&Command::SetMode(FlightMode::Loiter)));
+    assert!(out.to_app.contains(&SoloMessage::GetCurrentShot(NONE)));
+    assert_eq!(h.engine.last_exit(), "finished_rtl");
+}
+
+#[test]
+fn rewind_with_hover_ends_in_loiter_and_respects_the_distance() {
+    let mut h = flown();
+    h.app(rewind_options(1, 1, 10.0));
+    h.app(SoloMessage::SetCurrentShot(REWIND));
+    h.set_mode(FlightMode::Guided);
+    h.run(400);
+    // 10 m back, not 20: the end is at 30 m north.
+    h.state.lat_deg = LAT + 30.0 * M_LAT;
+    let out = h.run(1_000);
+    let c = cmds(&out);
+    assert!(c.contains(&Command::Brake));
+    assert!(c.contains(&Command::SetMode(FlightMode::Loiter)));
+    assert!(!c.contains(&Command::ReturnToLaunch));
+    assert_eq!(h.engine.last_exit(), "finished");
+}
+
+#[test]
+fn rewind_without_a_flown_path_says_so_and_ends() {
+    let mut h = Harness::ready();
+    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    assert!(out
+        .to_app
+        .iter()
+        .any(|m| matches!(m, SoloMessage::ShotManagerError(t) if t.contains("no flown path"))));
+    h.set_mode(FlightMode::Guided);
+    let out = h.run(400);
+    assert!(cmds(&out).contains(&Command::ReturnToLaunch));
+    assert_eq!(h.engine.current_shot(), NONE);
+}
+
+#[test]
+fn disarming_forgets_the_breadcrumbs() {
+    let mut h = flown();
+    h.status.armed = 0;
+    h.push_status();
+    h.tick();
+    h.status.armed = 1;
+    h.push_status();
+    h.tick();
+    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    assert!(out
+        .to_app
+        .iter()
+        .any(|m| matches!(m, SoloMessage::ShotManagerError(t) if t.contains("no flown path"))));
+    assert!(kinds(&out).contains(&CommandKind::GrabFlightAuthority));
+}
