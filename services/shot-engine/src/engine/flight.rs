@@ -142,6 +142,11 @@ pub(crate) struct Flight {
     pub last_step_ns: Option<u64>,
     /// A stale vehicle state has been logged (once per episode).
     pub stale_logged: bool,
+    /// The velocity the shot asked for on its last step (NED, m/s): the geofence
+    /// check predicts with the shot's intent, not only with what the arbiter let
+    /// through (its envelope slows a vehicle near the fence, which would otherwise
+    /// hide a shot that keeps pushing at it).
+    pub commanded_vel: Option<[f32; 3]>,
 }
 
 impl Engine {
@@ -197,6 +202,7 @@ impl Engine {
             camera: Camera::default(),
             last_step_ns: None,
             stale_logged: false,
+            commanded_vel: None,
         };
         self.out.command(Command::GrabFlightAuthority);
         flight.guided_command_id = self.out.command(Command::SetMode(FlightMode::Guided));
@@ -306,6 +312,7 @@ impl Engine {
             tracing::warn!(?vel, "shot asked for a non-finite velocity; holding");
             vel = [0.0; 3];
         }
+        flight.commanded_vel = Some(vel);
         let camera = flight.camera.commands(&guidance, now_ns);
         self.out.command(Command::VelocityNed {
             vel_ned_mps: vel,

@@ -308,7 +308,22 @@ impl Engine {
         if !self.fence_watched(&v) {
             return;
         }
-        let speed = f64::from(v.vel_ned_mps[0]).hypot(f64::from(v.vel_ned_mps[1]));
+        // Predict with the faster of the measured velocity and what the flying shot
+        // asks for: the arbiter's envelope slows a vehicle that a shot keeps pushing
+        // at the fence, and that push is what must end the shot.
+        let mut v = v;
+        let horizontal = |vel: &[f32; 3]| f64::from(vel[0]).hypot(f64::from(vel[1]));
+        if let Some(cmd) = self
+            .active
+            .as_ref()
+            .and_then(|a| a.flight.as_ref())
+            .and_then(|f| f.commanded_vel)
+        {
+            if horizontal(&cmd) > horizontal(&v.vel_ned_mps) {
+                v.vel_ned_mps = cmd;
+            }
+        }
+        let speed = horizontal(&v.vel_ned_mps);
         let stop = stopping_distance(speed, self.settings.geofence_deceleration_mps2.into());
         let verdict = self
             .fence
