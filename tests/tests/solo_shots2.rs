@@ -8,7 +8,8 @@ mod solo_common;
 use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{
-    topics, AckResult, CommandAck, CommandKind, CommandSource, FlightMode, VehicleState,
+    topics, AckResult, Button, ButtonEvent, ButtonEventKind, CommandAck, CommandKind,
+    CommandSource, FlightMode, VehicleState,
 };
 use skymesh_runtime::ipc::Subscriber;
 use skymesh_shot_engine::shots::{GeoPoint, Keypoint, Limits, SplinePath};
@@ -198,6 +199,24 @@ fn multipoint_and_zipline_fly_vehicle_sim() {
             worst_cross < 1.5,
             "zipline left its line by {worst_cross:.2} m"
         );
+        // The controller's camera button during the zipline: the GoPro (video mode)
+        // starts recording, and the app is told.
+        let mut buttons = bus
+            .publisher::<ButtonEvent>(&topics::input_buttons())
+            .unwrap();
+        buttons
+            .publish(ButtonEvent::new(
+                1,
+                Button::CameraClick,
+                ButtonEventKind::Press,
+            ))
+            .unwrap();
+        expect(
+            &mut app,
+            "GOPRO_V2_STATE recording after the camera button",
+            |m| matches!(m, SoloMessage::GoProV2State(g) if g.recording == 1),
+        )
+        .await;
         leave(&mut app).await;
     });
     mesh.stop(Duration::from_secs(10)).unwrap();

@@ -357,6 +357,9 @@ impl Engine {
     }
 }
 
+/// GoPro status "connected" (GOPRO_HEARTBEAT_STATUS_CONNECTED, the app's STATUS_GOPRO_CONNECTED).
+const GOPRO_CONNECTED: u8 = 2;
+
 /// A controller button event.
 pub(crate) fn button(engine: &mut Engine, ev: &ButtonEvent, now_ns: u64) {
     if ev.vehicle_id != engine.settings.vehicle_id {
@@ -379,7 +382,22 @@ pub(crate) fn button(engine: &mut Engine, ev: &ButtonEvent, now_ns: u64) {
         Button::Pause => engine.pause(true),
         Button::A | Button::B if engine.active.is_some() => engine.shot_button(button, now_ns),
         Button::A | Button::B => idle_mapped(engine, button, now_ns),
+        Button::CameraClick => camera_click(engine),
         other => tracing::debug!(button = %other, "button not handled by the shot engine"),
+    }
+}
+
+/// The controller's camera button, in or out of a shot: with a GoPro connected (and
+/// enabled) it is GOPRO_RECORD toggle (a photo in a photo mode, start/stop in
+/// video), as on the Solo; without one, a photo through the MAVLink camera protocol.
+fn camera_click(engine: &mut Engine) {
+    let gopro = engine.gopro_state();
+    if gopro.status == GOPRO_CONNECTED {
+        engine.gopro_record(2);
+    } else {
+        tracing::info!("camera button: photo (no GoPro connected)");
+        engine.payload_used = true;
+        engine.out.command(Command::CameraCapture);
     }
 }
 

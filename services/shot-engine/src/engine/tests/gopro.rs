@@ -210,3 +210,20 @@ fn disabled_gopro_refuses_requests_reports_status_0_and_persists() {
     let out = again.app(SoloMessage::GoProSetEnabled(1));
     assert_eq!(states(&out)[1].status, 2);
 }
+
+#[test]
+fn the_camera_button_records_with_a_gopro_and_takes_a_photo_without() {
+    let mut h = Harness::ready();
+    // No GoPro heard: a photo through the MAVLink camera protocol.
+    let out = h.button(Button::CameraClick);
+    assert!(cmds(&out).contains(&Command::CameraCapture));
+    // A GoPro in video mode, not recording: the button starts recording (SHUTTER 1).
+    h.payload(gopro(0, 0));
+    let out = h.button(Button::CameraClick);
+    let sent = cmds(&out);
+    assert!(sent.contains(&Command::GoProSet {
+        command: 2,
+        value: [1, 0, 0, 0]
+    }));
+    assert!(!sent.contains(&Command::CameraCapture));
+}
