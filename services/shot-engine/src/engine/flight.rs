@@ -20,7 +20,7 @@
 use skymesh_ipc_types::{AuthorityDomain, Command, FlightMode, VehicleStatus};
 
 use super::camera::Camera;
-use super::{shot_label, Engine};
+use super::{shot_label, Engine, Out};
 use crate::shots::{GeoPoint, Guidance, VehicleView};
 
 /// GUIDED must be reached this soon after it was asked for, ns.
@@ -147,6 +147,35 @@ pub(crate) struct Flight {
     /// through (its envelope slows a vehicle near the fence, which would otherwise
     /// hide a shot that keeps pushing at it).
     pub commanded_vel: Option<[f32; 3]>,
+}
+
+/// Sends one step's guidance: the velocity setpoint (a non-finite one becomes a
+/// hover) and the camera commands that changed; remembers the commanded velocity
+/// for the geofence check. Every flying shot goes through here.
+pub(crate) fn send_guidance(
+    flight: &mut Flight,
+    guidance: &Guidance,
+    out: &mut Out,
+    payload_used: &mut bool,
+    now_ns: u64,
+) {
+    let mut vel = guidance.velocity_ned_mps;
+    if vel.iter().any(|v| !v.is_finite()) {
+        tracing::warn!(?vel, "shot asked for a non-finite velocity; holding");
+        vel = [0.0; 3];
+    }
+    flight.commanded_vel = Some(vel);
+    let camera = flight.camera.commands(guidance, now_ns);
+    out.command(Command::VelocityNed {
+        vel_ned_mps: vel,
+        yaw_rate_dps: None,
+    });
+    for cmd in camera {
+        if cmd.kind().authority() == Some(AuthorityDomain::Payload) {
+            *payload_used = true;
+        }
+        out.command(cmd);
+    }
 }
 
 impl Engine {
@@ -307,23 +336,13 @@ impl Engine {
         let Some(flight) = active.flight.as_mut() else {
             return;
         };
-        let mut vel = guidance.velocity_ned_mps;
-        if vel.iter().any(|v| !v.is_finite()) {
-            tracing::warn!(?vel, "shot asked for a non-finite velocity; holding");
-            vel = [0.0; 3];
-        }
-        flight.commanded_vel = Some(vel);
-        let camera = flight.camera.commands(&guidance, now_ns);
-        self.out.command(Command::VelocityNed {
-            vel_ned_mps: vel,
-            yaw_rate_dps: None,
-        });
-        for cmd in camera {
-            if cmd.kind().authority() == Some(AuthorityDomain::Payload) {
-                self.payload_used = true;
-            }
-            self.out.command(cmd);
-        }
+        send_guidance(
+            flight,
+            &guidance,
+            &mut self.out,
+            &mut self.payload_used,
+            now_ns,
+        );
     }
 
     fn check_guided_timeout(&mut self, now_ns: u64) {

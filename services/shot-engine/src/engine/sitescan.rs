@@ -512,21 +512,13 @@ impl Engine {
                 (s.guidance, s.trigger, s.done)
             }
         };
-        let mut vel = guidance.velocity_ned_mps;
-        if vel.iter().any(|x| !x.is_finite()) {
-            vel = [0.0; 3];
-        }
-        let camera = flight.camera.commands(&guidance, now_ns);
-        self.out.command(Command::VelocityNed {
-            vel_ned_mps: vel,
-            yaw_rate_dps: None,
-        });
-        for cmd in camera {
-            if cmd.kind().authority() == Some(AuthorityDomain::Payload) {
-                self.payload_used = true;
-            }
-            self.out.command(cmd);
-        }
+        super::flight::send_guidance(
+            flight,
+            &guidance,
+            &mut self.out,
+            &mut self.payload_used,
+            now_ns,
+        );
         if trigger {
             self.payload_used = true;
             self.out.command(Command::CameraCapture);
