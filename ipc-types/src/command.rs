@@ -59,6 +59,7 @@ wire_enum! {
         ReleasePayloadAuthority = 22 => "release_payload_authority",
         MotorKill = 23 => "motor_kill",
         GoProSet = 24 => "gopro_set",
+        SetHome = 25 => "set_home",
     }
 }
 
@@ -283,6 +284,14 @@ pub enum Command {
         command: u8,
         value: [u8; 4],
     },
+    /// Move home (where RTL returns and what relative altitudes are measured from)
+    /// to this point; the altitude is above mean sea level. A flight command: it
+    /// changes where the vehicle goes on RTL.
+    SetHome {
+        lat_deg: f64,
+        lon_deg: f64,
+        alt_msl_m: f32,
+    },
 }
 
 /// Why a command could not be converted.
@@ -365,6 +374,7 @@ impl Command {
             Command::ReleasePayloadAuthority => CommandKind::ReleasePayloadAuthority,
             Command::MotorKill { .. } => CommandKind::MotorKill,
             Command::GoProSet { .. } => CommandKind::GoProSet,
+            Command::SetHome { .. } => CommandKind::SetHome,
         }
     }
 
@@ -427,6 +437,20 @@ impl Command {
                 lon_deg,
                 alt_rel_m,
             } => check_position(lat_deg, lon_deg, alt_rel_m)?,
+            Command::SetHome {
+                lat_deg,
+                lon_deg,
+                alt_msl_m,
+            } => {
+                check("lat_deg", lat_deg, -90.0, 90.0)?;
+                check("lon_deg", lon_deg, -180.0, 180.0)?;
+                check(
+                    "alt_msl_m",
+                    alt_msl_m.into(),
+                    MIN_ALT_M.into(),
+                    MAX_ALT_M.into(),
+                )?;
+            }
             Command::Gimbal { pitch_deg, yaw_deg } => {
                 check("pitch_deg", pitch_deg.into(), -180.0, 180.0)?;
                 check(
@@ -482,7 +506,8 @@ impl Command {
 /// `f[2]` speed; `VelocityNed`: `f[0..3]` vn/ve/vd, `f[3]` yaw rate; `Takeoff`: `f[0]`;
 /// `SetYaw`: `f[0]` yaw, `f[1]` rate; `Gimbal`: `f[0]` pitch, `f[1]` yaw; `SetMode`:
 /// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm; `GoProSet`: `i[0]`
-/// command, `i[1]` the four value bytes little-endian.
+/// command, `i[1]` the four value bytes little-endian; `SetHome`: lat/lon, `f[0]`
+/// altitude above mean sea level.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
@@ -580,6 +605,15 @@ impl VehicleCommand {
                 c.lat_deg = lat_deg;
                 c.lon_deg = lon_deg;
                 c.f[0] = alt_rel_m;
+            }
+            Command::SetHome {
+                lat_deg,
+                lon_deg,
+                alt_msl_m,
+            } => {
+                c.lat_deg = lat_deg;
+                c.lon_deg = lon_deg;
+                c.f[0] = alt_msl_m;
             }
             Command::Gimbal { pitch_deg, yaw_deg } => {
                 c.f[0] = pitch_deg;
@@ -699,6 +733,11 @@ impl VehicleCommand {
                 command: int_param(0, "gopro_command", limits::MAX_GOPRO_COMMAND.into())? as u8,
                 value: self.i[1].to_le_bytes(),
             },
+            CommandKind::SetHome => Command::SetHome {
+                lat_deg: self.lat_deg,
+                lon_deg: self.lon_deg,
+                alt_msl_m: self.f[0],
+            },
         };
         cmd.validate()?;
         Ok(cmd)
@@ -811,6 +850,11 @@ mod tests {
             Command::GrabPayloadAuthority,
             Command::ReleasePayloadAuthority,
             Command::MotorKill { emergency: true },
+            Command::SetHome {
+                lat_deg: -35.3632,
+                lon_deg: 149.1652,
+                alt_msl_m: 584.0,
+            },
         ]
     }
 
@@ -924,6 +968,41 @@ mod tests {
             wire.command(),
             Err(CommandError::OutOfRange { .. })
         ));
+    }
+
+    #[test]
+    fn set_home_is_a_flight_command_with_checked_position_and_msl_altitude() {
+        assert_eq!(
+            CommandKind::SetHome.authority(),
+            Some(AuthorityDomain::Flight)
+        );
+        assert!(!CommandKind::SetHome.is_setpoint());
+        let home = |lat_deg, lon_deg, alt_msl_m| Command::SetHome {
+            lat_deg,
+            lon_deg,
+            alt_msl_m,
+        };
+        let wire =
+            VehicleCommand::new(1, CommandSource::ShotEngine, 4, &home(1.5, -2.5, -20.0)).unwrap();
+        assert_eq!((wire.lat_deg, wire.lon_deg, wire.f[0]), (1.5, -2.5, -20.0));
+        assert_eq!(wire.kind, 25);
+        for (bad, name) in [
+            (home(90.5, 0.0, 0.0), "lat_deg"),
+            (home(0.0, -180.5, 0.0), "lon_deg"),
+            (home(0.0, 0.0, 10_001.0), "alt_msl_m"),
+            (home(0.0, 0.0, -1_001.0), "alt_msl_m"),
+        ] {
+            match VehicleCommand::new(1, CommandSource::ShotEngine, 1, &bad) {
+                Err(CommandError::OutOfRange { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{bad:?}: {other:?}"),
+            }
+        }
+        let mut wire = wire;
+        wire.f[0] = f32::NAN;
+        assert_eq!(
+            wire.command(),
+            Err(CommandError::NotFinite { name: "alt_msl_m" })
+        );
     }
 
     proptest::proptest! {

@@ -18,6 +18,7 @@
 //! | `SetYaw` | COMMAND_LONG `CONDITION_YAW` p1 = angle, p2 = rate, p3 = direction, p4 = relative | COMMAND_ACK |
 //! | `SetRoi` | COMMAND_INT `DO_SET_ROI_LOCATION`, frame `GLOBAL_RELATIVE_ALT` | COMMAND_ACK |
 //! | `ClearRoi` | COMMAND_LONG `DO_SET_ROI_NONE` | COMMAND_ACK |
+//! | `SetHome { lat, lon, alt_msl }` | COMMAND_INT `DO_SET_HOME`, frame `GLOBAL` (altitude above MSL), p1 = 0 (use the given location), x/y = lat/lon × 1e7, z = alt; lat = lon = 0 is refused `unsupported` (ArduPilot reads it as "here") | COMMAND_ACK; the autopilot then announces the new home (HOME_POSITION → `VehicleStatus` home) |
 //! | `Gimbal` | COMMAND_LONG `DO_GIMBAL_MANAGER_PITCHYAW` p1 = pitch, p2 = yaw (vehicle frame), rates NaN | COMMAND_ACK |
 //! | `CameraCapture` | COMMAND_LONG `IMAGE_START_CAPTURE` p3 = 1 image, p4 = capture sequence | COMMAND_ACK |
 //! | `RecordStart` / `RecordStop` | COMMAND_LONG `VIDEO_START_CAPTURE` / `VIDEO_STOP_CAPTURE` | COMMAND_ACK |
@@ -32,6 +33,12 @@
 //!
 //! `Gimbal` has no `DO_MOUNT_CONTROL` fallback: a gimbal without gimbal protocol v2
 //! answers UNSUPPORTED, which is reported as a refusal.
+//!
+//! `SetHome` needs flight authority (it changes where RTL flies) but has no envelope
+//! check: the arbiter neither refuses a home outside a keep-in fence nor limits it,
+//! and it does not end a velocity stream (the vehicle does not move). The fence
+//! still governs every position target, RTL's flight included where the autopilot's
+//! own fence applies; a home outside the fence only means RTL ends there.
 //!
 //! Answers are tracked in [`crate::acks`].
 
@@ -354,6 +361,29 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
             ..Default::default()
         })),
         Command::ClearRoi => only(long(t, MavCmd::MAV_CMD_DO_SET_ROI_NONE, [0.0; 7])),
+        Command::SetHome {
+            lat_deg,
+            lon_deg,
+            alt_msl_m,
+        } => {
+            // ArduPilot takes x = y = 0 as "use the current location"; that is not
+            // what was asked for.
+            if deg_e7(lat_deg) == 0 && deg_e7(lon_deg) == 0 {
+                return Err("lat = lon = 0 is 'here' to ArduPilot");
+            }
+            only(MavCommand::Int(COMMAND_INT_DATA {
+                // param1 = 0: use the given location, not the current one.
+                param1: 0.0,
+                x: deg_e7(lat_deg),
+                y: deg_e7(lon_deg),
+                z: alt_msl_m,
+                command: MavCmd::MAV_CMD_DO_SET_HOME,
+                target_system: t.system,
+                target_component: t.component,
+                frame: MavFrame::MAV_FRAME_GLOBAL,
+                ..Default::default()
+            }))
+        }
         Command::Gimbal { pitch_deg, yaw_deg } => {
             // GIMBAL_MANAGER_FLAGS_YAW_IN_VEHICLE_FRAME: yaw relative to the nose.
             let flags = 32.0;
@@ -652,6 +682,42 @@ mod tests {
         let s = long_of(&s);
         assert_eq!(s.command, MavCmd::MAV_CMD_DO_SET_SERVO);
         assert_eq!((s.param1, s.param2), (9.0, 1900.0));
+    }
+
+    #[test]
+    fn set_home_is_a_command_int_in_the_global_frame_with_msl_altitude() {
+        let p = plan_of(Command::SetHome {
+            lat_deg: -35.363261,
+            lon_deg: 149.16523,
+            alt_msl_m: 584.5,
+        });
+        assert!(p.setpoint.is_none());
+        let Some(MavCommand::Int(c)) = &p.command else {
+            panic!("{p:?}")
+        };
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_HOME);
+        assert_eq!(c.frame, MavFrame::MAV_FRAME_GLOBAL);
+        assert_eq!(c.param1, 0.0, "the given location, not the current one");
+        assert_eq!((c.x, c.y, c.z), (-353_632_610, 1_491_652_300, 584.5));
+        assert_eq!((c.target_system, c.target_component), (1, 1));
+        let cmd = p.command.unwrap();
+        assert_eq!(
+            cmd.key(),
+            AnswerKey::CommandAck(MavCmd::MAV_CMD_DO_SET_HOME as u32)
+        );
+        assert!(cmd.retransmits());
+        assert!(matches!(cmd.message(), MavMessage::COMMAND_INT(_)));
+        // (0, 0) would set home to wherever the vehicle is.
+        let err = plan(
+            &Command::SetHome {
+                lat_deg: 0.0,
+                lon_deg: 0.0,
+                alt_msl_m: 10.0,
+            },
+            &ctx(FlightMode::Loiter),
+        )
+        .unwrap_err();
+        assert!(err.contains("'here'"), "{err}");
     }
 
     #[test]

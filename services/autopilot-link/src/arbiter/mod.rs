@@ -209,7 +209,8 @@ fn domain_name(d: AuthorityDomain) -> &'static str {
     }
 }
 
-/// Flight commands that replace whatever a velocity stream was doing.
+/// Flight commands that replace whatever a velocity stream was doing (`SetHome`
+/// moves nothing, so a stream goes on and is still braked if it stops).
 fn ends_stream(kind: CommandKind) -> bool {
     kind.authority() == Some(AuthorityDomain::Flight)
         && !matches!(
@@ -218,6 +219,7 @@ fn ends_stream(kind: CommandKind) -> bool {
                 | CommandKind::SetYaw
                 | CommandKind::SetRoi
                 | CommandKind::ClearRoi
+                | CommandKind::SetHome
         )
 }
 

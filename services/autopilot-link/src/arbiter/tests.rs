@@ -558,3 +558,34 @@ fn link_loss_clears_authority_but_not_an_emergency() {
     assert!(authority_changes(&fx).is_empty());
     assert_eq!(a.authority().state(1).flight(), Some(Safety));
 }
+
+#[test]
+fn set_home_needs_flight_authority_but_no_envelope_and_keeps_the_stream() {
+    let mut a = Arbiter::new(settings());
+    a.set_geofence(&fence_set(Operator, 50.0, None), 1);
+    let v = flying(0.0, 0.0, [0.0; 3]);
+    // 1 km north: far outside the 50 m keep-in, and still executed as sent.
+    let home = Command::SetHome {
+        lat_deg: HOME.0 + 0.009,
+        lon_deg: HOME.1,
+        alt_msl_m: 600.0,
+    };
+    a.decide(S, &sample(ShotEngine, vel(2.0, 0.0, 0.0), S), &v);
+    let d = a.decide(S + 100 * MS, &sample(ShotEngine, home, S + 100 * MS), &v);
+    assert_eq!(executed(&d), home);
+    assert_eq!(d.result(), AckResult::Accepted);
+    // The velocity stream goes on: its stale brake is still due.
+    assert_eq!(
+        a.poll(S + 500 * MS),
+        [Effect::StaleBrake { source: ShotEngine }]
+    );
+    // Flight authority: a lower source is refused, naming the holder.
+    let d = a.decide(2 * S, &sample(Vision, home, 2 * S), &v);
+    assert_eq!(
+        refusal(&d),
+        (
+            RefusalReason::NoAuthority,
+            "flight authority held by shot_engine"
+        )
+    );
+}

@@ -4,9 +4,9 @@
 //! Not in this milestone (each answered with SHOTMANAGER_ERROR "`<what>` is not
 //! implemented in this skymesh version" and counted): SET_CURRENT_SHOT transect,
 //! RTL (plus GET_CURRENT_SHOT of the current shot, so the app leaves the shot screen
-//! when idle); HOME_LOCATION from the app ("setting home from the app is not
-//! supported", `rewind.rs`). GEOFENCE_* are `geofence.rs`'s; INSPECT_*, SCAN_START
-//! and SURVEY_START `sitescan.rs`'s.
+//! when idle). HOME_LOCATION from the app sets the vehicle's home (`rewind.rs`).
+//! GEOFENCE_* are `geofence.rs`'s; INSPECT_*, SCAN_START and SURVEY_START
+//! `sitescan.rs`'s.
 //!
 //! Buttons (Press only, "we only use Press"): FLY ends the shot (and with no shot,
 //! switches an armed vehicle to LOITER, the Solo's FLY mode); Pause toggles pause
@@ -143,7 +143,7 @@ impl Engine {
                 hover,
                 rewind_distance,
             } => self.rewind_options(enabled, hover, rewind_distance),
-            M::HomeLocation(loc) => self.home_location_from_app(&loc),
+            M::HomeLocation(loc) => self.home_location_from_app(&loc, now_ns),
             M::InspectStart { takeoff_alt_m } => self.inspect_start(takeoff_alt_m, now_ns),
             M::InspectSetWaypoint {
                 lat_deg,

@@ -1,6 +1,7 @@
 //! The arbiter's answers: who holds authority, what it did on its own, and the ack
 //! of every command we sent (refusals are counted; some end the flying shot, see
-//! [`super::flight`]; GoPro acks update the GoPro model).
+//! [`super::flight`]; GoPro acks update the GoPro model; the app's home request is
+//! answered in [`super::rewind`]).
 
 use skymesh_ipc_types::{
     ArbiterEvent, ArbiterEventKind, AuthorityChange, AuthorityDomain, AuthorityState, CommandAck,
@@ -85,7 +86,7 @@ impl Engine {
         }
     }
 
-    pub fn handle_ack(&mut self, ack: &CommandAck, _now_ns: u64) {
+    pub fn handle_ack(&mut self, ack: &CommandAck, now_ns: u64) {
         if ack.vehicle_id != self.settings.vehicle_id
             || ack.source != CommandSource::ShotEngine.to_wire()
         {
@@ -103,7 +104,7 @@ impl Engine {
                 tracing::warn!(command_id = ack.command_id, kind = kind_name, %reason, detail = ack.detail.as_str(), "command refused");
             }
         }
-        if self.gopro_ack(ack, accepted) {
+        if self.gopro_ack(ack, accepted) || self.home_ack(ack, accepted, now_ns) {
             return;
         }
         self.geofence_ack(ack, accepted);

@@ -121,7 +121,6 @@ impl FenceState {
     }
 
     /// True while the engine holds the vehicle at the fence.
-    #[cfg(test)]
     pub fn holding(&self) -> bool {
         self.hold.is_some()
     }

@@ -10,13 +10,24 @@
 //! | Pause | stops on the path ↔ goes on |
 //! | app connects | SOLO_HOME_LOCATION (if home is known) and SOLO_REWIND_OPTIONS |
 //! | `VehicleStatus` home changes | SOLO_HOME_LOCATION (altitude above MSL, as the reference sends the autopilot's home) |
-//! | SOLO_HOME_LOCATION from the app | SHOTMANAGER_ERROR "setting home from the app is not supported": skymesh has no set-home command (`MAV_CMD_DO_SET_HOME` is not a `Command`) |
+//! | SOLO_HOME_LOCATION from the app ("return to me") | `Command::SetHome` at the app's lat/lon, keeping home's altitude (a phone's GPS altitude is too poor to move the reference of every relative altitude; the reference ShotManager does the same); refused while the vehicle has no home; once the vehicle reports the new home the row above tells the app. A location the command refuses (alt outside −1000..=10000 m), lat = lon = 0 (no position: the autopilot would read it as "here"), and a refused ack are answered with SHOTMANAGER_ERROR and the reason. The home already in effect is answered with SOLO_HOME_LOCATION at once, without a command |
+//!
+//! Setting home needs flight authority (it moves where RTL goes): outside a flying
+//! shot or a geofence hold the engine takes it implicitly with the command and gives
+//! it back right after (`ReleaseFlightAuthority`), as it does for a mapped mode
+//! button; a higher-ranked holder refuses it (`no_authority`, told to the app). One
+//! request is in flight at a time: a newer location that arrives meanwhile replaces
+//! any other waiting one and is sent when the first is answered (autopilot-link would
+//! otherwise cancel the older `DO_SET_HOME`), so an app streaming "return to me"
+//! updates never floods the autopilot. The reference ShotManager only stored the
+//! app's lat/lon (keeping home's altitude) for its own RTL, and only in flight; here
+//! the autopilot's home moves, so its RTL and every relative altitude follow it.
 //!
 //! The reference's rewind flies its breadcrumb spline the same way but falls back to
 //! RTL when there are none; here an empty path ends at once the same way as a full
 //! one (hover or RTL), with a SHOTMANAGER_ERROR saying there was nothing to rewind.
 
-use skymesh_ipc_types::{Command, VehicleStatus};
+use skymesh_ipc_types::{AckResult, Command, CommandAck, VehicleStatus};
 use solo_proto::{Location, SoloMessage};
 
 use super::shot::{Active, ShotKind};
@@ -28,6 +39,13 @@ use crate::shots::{Breadcrumbs, Guidance, Limits, Rewind, VehicleView};
 pub const DEFAULT_REWIND_DISTANCE_M: f32 = 20.0;
 /// rewindDistance is clamped to this range, metres (the reference's).
 pub const REWIND_DISTANCE_RANGE_M: (f32, f32) = (10.0, 60.0);
+/// A home request unanswered this long is taken as lost: the next one is sent
+/// instead of waiting (autopilot-link answers every command well within this).
+pub const HOME_ANSWER_WAIT_NS: u64 = 15_000_000_000;
+/// The app's home counts as the one in effect within this, degrees (about 1 cm) …
+const SAME_HOME_DEG: f64 = 1e-7;
+/// … and this, metres (HOME_POSITION carries millimetres).
+const SAME_HOME_ALT_M: f32 = 0.01;
 
 /// SOLO_REWIND_OPTIONS.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,6 +85,10 @@ pub(crate) struct RewindState {
     pub options: RewindOptions,
     /// The home position last told to the app (or to be told on connect).
     home: Option<Location>,
+    /// The app's home request in flight: its command id and when it was sent.
+    home_request: Option<(u32, u64)>,
+    /// The newest app home that arrived while one was in flight.
+    home_next: Option<Location>,
 }
 
 impl Default for RewindState {
@@ -75,6 +97,8 @@ impl Default for RewindState {
             crumbs: Breadcrumbs::new(BREADCRUMB_SPACING_M, BREADCRUMB_CAPACITY),
             options: RewindOptions::default(),
             home: None,
+            home_request: None,
+            home_next: None,
         }
     }
 }
@@ -97,6 +121,20 @@ impl RewindShot {
     pub fn progress(&self) -> f32 {
         self.rewind.as_ref().map_or(0.0, Rewind::progress)
     }
+}
+
+fn set_home(loc: &Location) -> Command {
+    Command::SetHome {
+        lat_deg: loc.lat_deg,
+        lon_deg: loc.lon_deg,
+        alt_msl_m: loc.alt_m,
+    }
+}
+
+fn same_home(a: &Location, b: &Location) -> bool {
+    (a.lat_deg - b.lat_deg).abs() < SAME_HOME_DEG
+        && (a.lon_deg - b.lon_deg).abs() < SAME_HOME_DEG
+        && (a.alt_m - b.alt_m).abs() < SAME_HOME_ALT_M
 }
 
 fn home_of(s: &VehicleStatus) -> Option<Location> {
@@ -165,15 +203,89 @@ impl Engine {
         self.out.app(self.rewind.options.message());
     }
 
-    /// SOLO_HOME_LOCATION from the app.
-    pub(crate) fn home_location_from_app(&mut self, loc: &Location) {
-        self.out.metrics.unimplemented.inc();
+    /// SOLO_HOME_LOCATION from the app: move the vehicle's home there.
+    pub(crate) fn home_location_from_app(&mut self, loc: &Location, now_ns: u64) {
         tracing::info!(
             lat = loc.lat_deg,
             lon = loc.lon_deg,
-            "the app asked to set home; not supported"
+            alt_msl = loc.alt_m,
+            "the app asks to set home"
         );
-        self.out.error("setting home from the app is not supported");
+        if loc.lat_deg == 0.0 && loc.lon_deg == 0.0 {
+            self.out
+                .error("home location refused: (0, 0) is no position");
+            return;
+        }
+        let current = self.inputs.status.as_ref().and_then(home_of);
+        // Only the horizontal position moves, as the reference ShotManager does: home's
+        // altitude is what every relative altitude (and RTL's climb) is measured from,
+        // and a phone's GPS altitude is far too poor to move it.
+        let Some(home_alt) = current.map(|h| h.alt_m) else {
+            self.out
+                .error("home location refused: the vehicle has no home yet");
+            return;
+        };
+        let loc = &Location {
+            alt_m: home_alt,
+            ..*loc
+        };
+        if let Err(e) = set_home(loc).validate() {
+            self.out.error(&format!("home location refused: {e}"));
+            return;
+        }
+        if let Some(home) = current.filter(|h| same_home(h, loc)) {
+            if self.rewind.home_request.is_none() {
+                tracing::debug!("the app's home is already in effect");
+                self.rewind.home = Some(home);
+                self.out.app(SoloMessage::HomeLocation(home));
+                return;
+            }
+        }
+        match self.rewind.home_request {
+            Some((id, sent_ns)) if now_ns.saturating_sub(sent_ns) < HOME_ANSWER_WAIT_NS => {
+                tracing::debug!(
+                    waiting_for = id,
+                    "home request in flight; sending the newest when it is answered"
+                );
+                self.rewind.home_next = Some(*loc);
+            }
+            _ => self.send_home(loc, now_ns),
+        }
+    }
+
+    /// Sends `SetHome`; outside a flying shot or a fence hold, flight authority is
+    /// given back right after (the command grabbed it implicitly).
+    fn send_home(&mut self, loc: &Location, now_ns: u64) {
+        let keep_authority = self.is_flying() || self.fence.holding();
+        self.rewind.home_request = self.out.command(set_home(loc)).map(|id| (id, now_ns));
+        if self.rewind.home_request.is_some() && !keep_authority {
+            self.out.command(Command::ReleaseFlightAuthority);
+        }
+    }
+
+    /// An ack for the app's home request: true if it was one. A refusal is told to
+    /// the app; an acceptance shows up as the vehicle's new home (`home_update`).
+    pub(crate) fn home_ack(&mut self, ack: &CommandAck, accepted: bool, now_ns: u64) -> bool {
+        if self.rewind.home_request.map(|(id, _)| id) != Some(ack.command_id) {
+            return false;
+        }
+        if ack.result() == Some(AckResult::InProgress) {
+            return true;
+        }
+        self.rewind.home_request = None;
+        if accepted {
+            tracing::info!("home set; the app hears it once the vehicle reports it");
+        } else {
+            let reason = ack.reason().map_or("refused", |r| r.as_str());
+            self.out.error(&format!(
+                "home location refused ({reason}: {})",
+                ack.detail.as_str()
+            ));
+        }
+        if let Some(next) = self.rewind.home_next.take() {
+            self.send_home(&next, now_ns);
+        }
+        true
     }
 
     /// The app connected: tell it home and the rewind options.

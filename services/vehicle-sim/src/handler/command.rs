@@ -200,20 +200,7 @@ fn run(
             }
         }
         MavCmd::MAV_CMD_DO_REPOSITION => reposition(v, cmd),
-        MavCmd::MAV_CMD_DO_SET_HOME => {
-            let home = if p1 == 1.0 {
-                Some(v.position_ned())
-            } else {
-                cmd.target_ned(v, MavFrame::MAV_FRAME_GLOBAL)
-            };
-            match home {
-                Some(h) if v.ekf_ready() => {
-                    v.set_home(h);
-                    MAV_RESULT_ACCEPTED
-                }
-                _ => MAV_RESULT_FAILED,
-            }
-        }
+        MavCmd::MAV_CMD_DO_SET_HOME => set_home(v, cmd),
         MavCmd::MAV_CMD_DO_MOUNT_CONTROL => gimbal::mount_control(v, cmd),
         MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => gimbal::manager_pitchyaw(v, cmd),
         MavCmd::MAV_CMD_IMAGE_START_CAPTURE => {
@@ -301,6 +288,46 @@ fn mode_result<E>(r: Result<(), E>) -> MavResult {
     match r {
         Ok(()) => MavResult::MAV_RESULT_ACCEPTED,
         Err(_) => MavResult::MAV_RESULT_FAILED,
+    }
+}
+
+/// MAV_CMD_DO_SET_HOME (COMMAND_INT or COMMAND_LONG), as ArduPilot's
+/// `handle_command_do_set_home`: param1 = 1, or latitude and longitude both 0, is
+/// "here" (the current position, altitude included); otherwise the location, in
+/// COMMAND_INT's frame (COMMAND_LONG: `GLOBAL`, altitude above MSL). An impossible
+/// location or a non-global frame is DENIED; far from the EKF origin FAILED. Without
+/// an EKF position the simulator answers TEMPORARILY_REJECTED (ArduCopter says
+/// FAILED; the simulator tells "retry later" apart, as for arming). Accepted: home
+/// moves and is locked, and HOME_POSITION goes to every link at once (the engine
+/// broadcasts the model's `HomeChanged`).
+fn set_home(v: &mut Vehicle, cmd: &Cmd) -> MavResult {
+    use MavResult::*;
+    let (lat, lon, _, _) = cmd.location(MavFrame::MAV_FRAME_GLOBAL);
+    let home = if cmd.p[0] == 1.0 || (lat == 0.0 && lon == 0.0) {
+        v.position_ned()
+    } else {
+        match cmd.target_ned(v, MavFrame::MAV_FRAME_GLOBAL) {
+            Some(ned) => ned,
+            None => return MAV_RESULT_DENIED,
+        }
+    };
+    match v.set_home(home) {
+        Ok(()) => {
+            if let Some(h) = v.home_geo() {
+                info!(
+                    lat = h.lat_deg,
+                    lon = h.lon_deg,
+                    alt_msl = h.alt_msl_m,
+                    "home set"
+                );
+            }
+            MAV_RESULT_ACCEPTED
+        }
+        Err(why) if why.is_temporary() => MAV_RESULT_TEMPORARILY_REJECTED,
+        Err(why) => {
+            info!(?why, "home refused");
+            MAV_RESULT_FAILED
+        }
     }
 }
 

@@ -56,6 +56,26 @@ impl ArmRefusal {
     }
 }
 
+/// Farther than this from the EKF origin, home is refused: the simulator's flat-earth
+/// frame is only meant for the few kilometres a flight covers.
+pub const HOME_MAX_FROM_ORIGIN_M: f64 = 50_000.0;
+
+/// Why DO_SET_HOME was refused.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HomeRefusal {
+    /// The EKF has no position yet: nothing to place home against (retry later).
+    NoPosition,
+    /// Farther than [`HOME_MAX_FROM_ORIGIN_M`] from the EKF origin, metres.
+    FarFromOrigin(f64),
+}
+
+impl HomeRefusal {
+    /// A retry later may succeed without anyone doing anything.
+    pub fn is_temporary(&self) -> bool {
+        matches!(self, HomeRefusal::NoPosition)
+    }
+}
+
 /// Why disarming was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DisarmRefusal {
@@ -146,8 +166,10 @@ impl Vehicle {
         }
         self.armed = true;
         self.landed_armed_s = 0.0;
-        // ArduCopter moves home to where it arms.
-        self.set_home_here();
+        // ArduCopter moves home to where it arms, unless DO_SET_HOME locked it.
+        if !self.home_locked {
+            self.set_home_here();
+        }
         self.guidance = if self.landed {
             Guidance::Hold(self.pos)
         } else {
@@ -397,10 +419,26 @@ impl Vehicle {
         }))
     }
 
-    /// DO_SET_HOME: move home (RTL's destination) to a local NED point.
-    pub fn set_home(&mut self, ned: Vector3<f64>) {
+    /// DO_SET_HOME: move home (RTL's destination, and what the relative altitude is
+    /// measured from) to a local NED point, and lock it there: arming no longer moves
+    /// it, as on ArduCopter. Needs an EKF position. Queues [`Event::HomeChanged`], so
+    /// HOME_POSITION goes out at once.
+    ///
+    /// Home's altitude may differ from the ground's: the relative altitude then
+    /// shifts by the difference (ArduPilot's is also relative to home), while the
+    /// land detector still finds the flat ground.
+    pub fn set_home(&mut self, ned: Vector3<f64>) -> Result<(), HomeRefusal> {
+        if !self.ekf_ready {
+            return Err(HomeRefusal::NoPosition);
+        }
+        let from_origin = ned.xy().norm();
+        if !(from_origin <= HOME_MAX_FROM_ORIGIN_M && ned.z.is_finite()) {
+            return Err(HomeRefusal::FarFromOrigin(from_origin));
+        }
         self.home = Some(ned);
-        self.events.push(super::Event::HomeChanged);
+        self.home_locked = true;
+        self.events.push(Event::HomeChanged);
+        Ok(())
     }
 
     /// DO_REPOSITION: fly to `target` in GUIDED (caller switched mode if asked).

@@ -23,7 +23,8 @@ use nalgebra::Vector3;
 
 pub use battery::Battery;
 pub use commands::{
-    ArmRefusal, DisarmRefusal, GuidedTarget, ModeRefusal, NotGuided, SpeedKind, TakeoffRefusal,
+    ArmRefusal, DisarmRefusal, GuidedTarget, HomeRefusal, ModeRefusal, NotGuided, SpeedKind,
+    TakeoffRefusal, HOME_MAX_FROM_ORIGIN_M,
 };
 pub use control::Attitude;
 pub use geo::{GeoPoint, LocalFrame};
@@ -98,6 +99,8 @@ pub struct Vehicle {
     mode: FlightMode,
     landed: bool,
     home: Option<Vector3<f64>>,
+    /// Set by DO_SET_HOME: arming leaves home where it is.
+    home_locked: bool,
     ekf_ready: bool,
     gps_override: Option<bool>,
     guidance: Guidance,
@@ -138,6 +141,7 @@ impl Vehicle {
             mode: FlightMode::Stabilize,
             landed: true,
             home: None,
+            home_locked: false,
             ekf_ready: false,
             gps_override: None,
             guidance: Guidance::Manual { z: 0.0 },
@@ -369,7 +373,8 @@ impl Vehicle {
     pub fn home_geo(&self) -> Option<GeoPoint> {
         self.home.map(|h| self.frame.to_geo(&h))
     }
-    /// Altitude above home (or the origin before home is set), metres.
+    /// Altitude above home (or the origin before home is set), metres. Moving home
+    /// up or down (DO_SET_HOME) shifts it by as much.
     pub fn relative_alt(&self) -> f64 {
         self.home.map_or(0.0, |h| h.z) - self.pos.z
     }

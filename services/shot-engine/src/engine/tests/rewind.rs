@@ -1,7 +1,7 @@
 //! Rewind: breadcrumbs, flying back, hover or RTL at the end, options both ways, the
 //! home location both ways.
 
-use skymesh_ipc_types::{Command, CommandKind, FlightMode};
+use skymesh_ipc_types::{AckResult, Command, CommandKind, FlightMode, RefusalReason};
 use solo_proto::shots::{NONE, REWIND};
 use solo_proto::{Location, SoloMessage};
 
@@ -81,21 +81,155 @@ fn home_and_the_rewind_options_are_sent_on_connect_and_home_when_it_moves() {
         .any(|m| matches!(m, SoloMessage::HomeLocation(_))));
 }
 
-#[test]
-fn setting_home_from_the_app_is_refused_honestly() {
+/// `north_m` north of [`HOME`], `up_m` above it.
+fn near_home(north_m: f64, up_m: f32) -> Location {
+    Location {
+        lat_deg: HOME.lat_deg + north_m * M_LAT,
+        alt_m: HOME.alt_m + up_m,
+        ..HOME
+    }
+}
+
+fn set_home(loc: Location) -> Command {
+    Command::SetHome {
+        lat_deg: loc.lat_deg,
+        lon_deg: loc.lon_deg,
+        alt_msl_m: loc.alt_m,
+    }
+}
+
+fn app_error(out: &Outputs) -> &str {
+    match out.to_app.as_slice() {
+        [SoloMessage::ShotManagerError(t)] => t,
+        other => panic!("expected one SHOTMANAGER_ERROR, got {other:?}"),
+    }
+}
+
+/// Ready, home at [`HOME`] (already told to the app).
+fn ready_at_home() -> Harness {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::HomeLocation(HOME));
+    with_home(&mut h, HOME);
+    h.drain();
+    h
+}
+
+#[test]
+fn the_apps_home_is_set_on_the_vehicle_and_the_new_home_is_told_back() {
+    let mut h = ready_at_home();
+    // The phone says 6 m higher: only the horizontal position moves home.
+    let asked = near_home(50.0, 6.0);
+    let there = near_home(50.0, 0.0);
+    let out = h.app(SoloMessage::HomeLocation(asked));
+    // Idle: the implicit grab is given back at once.
     assert_eq!(
-        out.to_app,
-        [SoloMessage::ShotManagerError(
-            "setting home from the app is not supported".into()
-        )]
+        cmds(&out),
+        [set_home(there), Command::ReleaseFlightAuthority]
     );
-    assert!(out.commands.is_empty());
+    assert!(all_ours(&out));
+    assert!(out.to_app.is_empty(), "told once the vehicle reports it");
+    let sent = find(&out, CommandKind::SetHome).unwrap();
+    assert_eq!(sent.f[0], HOME.alt_m, "home keeps its altitude (MSL)");
+    let out = h.ack(&sent, AckResult::Accepted, RefusalReason::None);
+    assert!(out.to_app.is_empty() && out.commands.is_empty());
+    with_home(&mut h, there);
+    assert_eq!(h.drain().to_app, [SoloMessage::HomeLocation(there)]);
     assert_eq!(
         h.counter("skymesh_shot_unimplemented_requests_total", &[]),
-        1
+        0
     );
+}
+
+#[test]
+fn a_refused_home_is_told_to_the_app_with_the_reason() {
+    let mut h = ready_at_home();
+    let out = h.app(SoloMessage::HomeLocation(near_home(50.0, 0.0)));
+    let sent = find(&out, CommandKind::SetHome).unwrap();
+    // In progress is not an answer yet.
+    let out = h.ack(&sent, AckResult::InProgress, RefusalReason::None);
+    assert!(out.to_app.is_empty());
+    let out = h.ack(
+        &sent,
+        AckResult::Refused,
+        RefusalReason::TemporarilyRejected,
+    );
+    assert_eq!(
+        app_error(&out),
+        "home location refused (temporarily_rejected: test)"
+    );
+    assert!(out.commands.is_empty());
+    // Answered: the next request goes out at once.
+    let out = h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0)));
+    assert_eq!(kinds(&out)[0], CommandKind::SetHome);
+}
+
+#[test]
+fn impossible_app_homes_are_refused_without_a_command() {
+    let mut h = ready_at_home();
+    let out = h.app(SoloMessage::HomeLocation(Location {
+        lat_deg: 0.0,
+        lon_deg: 0.0,
+        alt_m: 10.0,
+    }));
+    assert!(app_error(&out).contains("no position"), "{out:?}");
+    assert!(out.commands.is_empty());
+    // (An out-of-range latitude never gets here: the codec refuses it at the gateway.)
+    // No home yet: nothing to keep the altitude of.
+    let mut h = Harness::ready();
+    h.status.home_valid = 0;
+    h.push_status();
+    h.drain();
+    let out = h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0)));
+    assert!(app_error(&out).contains("no home yet"), "{out:?}");
+    assert!(out.commands.is_empty());
+}
+
+#[test]
+fn the_home_in_effect_is_answered_at_once_without_a_command() {
+    let mut h = ready_at_home();
+    let out = h.app(SoloMessage::HomeLocation(HOME));
+    assert_eq!(out.to_app, [SoloMessage::HomeLocation(HOME)]);
+    assert!(out.commands.is_empty());
+}
+
+#[test]
+fn one_home_request_at_a_time_and_only_the_newest_waiting_one_is_sent() {
+    let mut h = ready_at_home();
+    let first = find(
+        &h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0))),
+        CommandKind::SetHome,
+    )
+    .unwrap();
+    // While it is unanswered, newer locations wait; the newest wins.
+    for north in [20.0, 30.0] {
+        let out = h.app(SoloMessage::HomeLocation(near_home(north, 0.0)));
+        assert!(out.commands.is_empty() && out.to_app.is_empty());
+    }
+    let out = h.ack(&first, AckResult::Accepted, RefusalReason::None);
+    assert_eq!(
+        cmds(&out),
+        [
+            set_home(near_home(30.0, 0.0)),
+            Command::ReleaseFlightAuthority
+        ]
+    );
+    // An answer that never comes does not block the app for good.
+    h.now += super::super::rewind::HOME_ANSWER_WAIT_NS;
+    let out = h.app(SoloMessage::HomeLocation(near_home(40.0, 0.0)));
+    assert_eq!(cmds(&out)[0], set_home(near_home(40.0, 0.0)));
+}
+
+#[test]
+fn setting_home_in_a_flying_shot_keeps_authority_and_a_refusal_keeps_the_shot() {
+    let mut h = ready_at_home();
+    h.orbiting();
+    h.drain();
+    let out = h.app(SoloMessage::HomeLocation(near_home(50.0, 0.0)));
+    assert_eq!(kinds(&out), [CommandKind::SetHome]);
+    let sent = find(&out, CommandKind::SetHome).unwrap();
+    let out = h.ack(&sent, AckResult::Refused, RefusalReason::Denied);
+    assert_eq!(app_error(&out), "home location refused (denied: test)");
+    assert!(h.engine.is_flying());
+    assert!(!kinds(&h.tick()).contains(&CommandKind::ReleaseFlightAuthority));
 }
 
 #[test]
