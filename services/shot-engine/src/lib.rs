@@ -3,8 +3,10 @@
 //! The `solo-gateway` owns the app's sockets and hands every decoded app message to
 //! this engine as an `AppMessage`; the engine answers with `AppMessage`s, reads the
 //! vehicle from `autopilot-link`, and flies the smart shots (selfie, orbit, follow,
-//! cable cam) only through `VehicleCommand`s from source `ShotEngine`, which the
-//! arbiter admits or refuses (authority, setpoint freshness, geofence envelope).
+//! cable cam, multipoint spline cable cam, zipline, pano, rewind, site scan) only
+//! through `VehicleCommand`s from source `ShotEngine`, which the arbiter admits or
+//! refuses (authority, setpoint freshness, geofence envelope). The app's geofence is
+//! validated here, handed to the arbiter, and checked predictively every tick.
 //!
 //! | module | role |
 //! |---|---|
