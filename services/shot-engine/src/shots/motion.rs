@@ -3,6 +3,7 @@
 
 use nalgebra::{Vector2, Vector3};
 
+use super::geo::LocalFrame;
 use super::{Limits, VehicleView};
 
 /// How long the vehicle takes to follow a velocity setpoint (first-order time
@@ -382,5 +383,42 @@ mod tests {
         let diag = Vector3::new(1.0, 0.0, -1.0).normalize();
         assert!((lim.speed_along(&diag) - 2.0 * 2f64.sqrt()).abs() < 1e-9);
         assert_eq!(lim.speed_along(&Vector3::zeros()), 0.0);
+    }
+}
+
+/// Closer to a centre than this the bearing from it is noise: the outward direction
+/// latched when the circling began is used instead, metres.
+pub(crate) const DIRECTION_MIN_M: f64 = 0.5;
+
+/// Where a vehicle stands around a centre (circling shots: orbit, structure scan).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Radial {
+    /// NED position in the centre's frame.
+    pub p: Vector3<f64>,
+    /// Horizontal distance from the centre.
+    pub r: f64,
+    /// Unit vector from the centre out to the vehicle (`fallback_out` when on it).
+    pub out: Vector2<f64>,
+    /// Counter-clockwise tangent seen from above (from north towards west).
+    pub ccw: Vector2<f64>,
+    /// Angle of `out`, radians (clockwise from north).
+    pub angle: f64,
+}
+
+pub(crate) fn radial(frame: &LocalFrame, v: &VehicleView, fallback_out: Vector2<f64>) -> Radial {
+    let p = frame.to_ned(&v.position);
+    let h = Vector2::new(p.x, p.y);
+    let r = h.norm();
+    let out = if r > DIRECTION_MIN_M {
+        h / r
+    } else {
+        fallback_out
+    };
+    Radial {
+        p,
+        r,
+        out,
+        ccw: Vector2::new(out.y, -out.x),
+        angle: out.y.atan2(out.x),
     }
 }

@@ -4,16 +4,15 @@
 use nalgebra::{Vector2, Vector3};
 
 use super::geo::{GeoPoint, LocalFrame};
-use super::motion::{dt64, sqrt_controller, to_f32, Hold1, Lim, Shaper, VELOCITY_LAG_S};
+use super::motion::{
+    dt64, radial, sqrt_controller, to_f32, Hold1, Lim, Radial, Shaper, DIRECTION_MIN_M,
+    VELOCITY_LAG_S,
+};
 use super::{Guidance, Limits, VehicleView};
 
 /// The smallest orbit: a vehicle closer to the ROI than this (or right above it)
 /// first moves out to this radius, metres. Independent of [`Limits`].
 pub const MIN_ORBIT_RADIUS_M: f32 = 2.0;
-
-/// Closer to the ROI than this the bearing from it is noise: the outward direction
-/// latched when the orbit began is used instead, metres.
-const DIRECTION_MIN_M: f64 = 0.5;
 
 /// Circle a point of interest.
 #[derive(Debug, Clone)]
@@ -92,17 +91,13 @@ impl Orbit {
     ) -> Guidance {
         let lim = Lim::new(lim);
         let dt = dt64(dt_s);
-        let p = self.frame.to_ned(&v.position);
-        let h = Vector2::new(p.x, p.y);
-        let r = h.norm();
-        let out = if r > DIRECTION_MIN_M {
-            h / r
-        } else {
-            self.fallback_out
-        };
-        // Counter-clockwise seen from above: from north towards west.
-        let ccw = Vector2::new(out.y, -out.x);
-        let angle_now = out.y.atan2(out.x);
+        let Radial {
+            p,
+            r,
+            out,
+            ccw,
+            angle: angle_now,
+        } = radial(&self.frame, v, self.fallback_out);
         let angle = match self.angle {
             Some(prev) => prev + wrap_pi(angle_now - prev),
             None => angle_now,

@@ -5,16 +5,16 @@ use nalgebra::{Vector2, Vector3};
 
 use super::{check, photo_spacing_m, SiteScanError, SiteStep, ON_STATION_M};
 use crate::shots::geo::{GeoPoint, LocalFrame};
-use crate::shots::motion::{dt64, sqrt_controller, to_f32, Hold1, Lim, Shaper, VELOCITY_LAG_S};
+use crate::shots::motion::{
+    dt64, radial, sqrt_controller, to_f32, Hold1, Lim, Radial, Shaper, DIRECTION_MIN_M,
+    VELOCITY_LAG_S,
+};
 use crate::shots::{Guidance, Limits, VehicleView};
 
 /// The smallest structure-scan radius, metres.
 pub const MIN_SCAN_RADIUS_M: f32 = 5.0;
 /// Most scan levels.
 pub const MAX_SCAN_LEVELS: usize = 200;
-/// Closer to the centre than this the bearing from it is noise, metres.
-const DIRECTION_MIN_M: f64 = 0.5;
-
 /// Structure scan settings (from config).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScanConfig {
@@ -172,16 +172,13 @@ impl StructureScan {
         use std::f64::consts::TAU;
         let lim = Lim::new(lim);
         let dt = dt64(dt_s);
-        let p = self.frame.to_ned(&v.position);
-        let h = Vector2::new(p.x, p.y);
-        let r = h.norm();
-        let out = if r > DIRECTION_MIN_M {
-            h / r
-        } else {
-            self.fallback_out
-        };
-        let ccw = Vector2::new(out.y, -out.x);
-        let angle_now = out.y.atan2(out.x);
+        let Radial {
+            p,
+            r,
+            out,
+            ccw,
+            angle: angle_now,
+        } = radial(&self.frame, v, self.fallback_out);
         let delta = match self.angle {
             Some(prev) => wrap_pi(angle_now - prev),
             None => 0.0,
