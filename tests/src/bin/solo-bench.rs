@@ -22,6 +22,9 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use mavlink::dialects::ardupilotmega::{MavMessage, SET_POSITION_TARGET_LOCAL_NED_DATA};
+use mavlink::MavHeader;
+use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
@@ -59,51 +62,27 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[idx]
 }
 
-/// Cuts MAVLink v1/v2 frames out of `buf` and reports every SET_POSITION_TARGET_LOCAL_NED
-/// (84) and SET_POSITION_TARGET_GLOBAL_INT (86). Returns the bytes consumed.
-fn scan_frames(buf: &[u8], now: Instant, out: &mpsc::Sender<Seen>) -> usize {
-    let mut i = 0;
-    while i < buf.len() {
-        let (header, msgid, len) = match buf[i] {
-            0xFD if buf.len() - i >= 10 => {
-                let len = buf[i + 1] as usize;
-                let signed = buf[i + 2] & 1 != 0;
-                let id = u32::from_le_bytes([buf[i + 7], buf[i + 8], buf[i + 9], 0]);
-                (10, id, len + 2 + if signed { 13 } else { 0 })
-            }
-            0xFE if buf.len() - i >= 6 => (6, u32::from(buf[i + 5]), buf[i + 1] as usize + 2),
-            0xFD | 0xFE => break,
-            _ => {
-                i += 1;
-                continue;
+/// Reports every frame `parser` has whole: SET_POSITION_TARGET_* with their velocity,
+/// SET_MODE and COMMAND_* without (autopilot-link's own frame parser, CRC checked).
+fn scan_frames(parser: &mut FrameParser, now: Instant, out: &mpsc::Sender<Seen>) {
+    while let Some(frame) = parser.next_frame() {
+        let msgid = frame.message_id();
+        // SET_MODE (11), COMMAND_INT (75), COMMAND_LONG (76): the time is enough.
+        let vel = if matches!(msgid, 11 | 75 | 76) {
+            [0.0; 3]
+        } else {
+            match frame.decode() {
+                Ok(MavMessage::SET_POSITION_TARGET_LOCAL_NED(m)) => [m.vx, m.vy, m.vz],
+                Ok(MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m)) => [m.vx, m.vy, m.vz],
+                _ => continue,
             }
         };
-        if buf.len() - i < header + len {
-            break;
-        }
-        if matches!(msgid, 11 | 75 | 76) {
-            let _ = out.send(Seen {
-                at: now,
-                msgid,
-                vel: [0.0; 3],
-            });
-        }
-        if msgid == 84 || msgid == 86 {
-            // Trailing zero bytes may be truncated (MAVLink 2): pad with zeros.
-            let mut p = [0u8; 64];
-            let n = (buf[i + 1] as usize).min(64);
-            p[..n].copy_from_slice(&buf[i + header..i + header + n]);
-            // Both messages put vx, vy, vz at payload offsets 16, 20, 24 (fields sorted by size).
-            let f = |o: usize| f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]);
-            let _ = out.send(Seen {
-                at: now,
-                msgid,
-                vel: [f(16), f(20), f(24)],
-            });
-        }
-        i += header + len;
+        let _ = out.send(Seen {
+            at: now,
+            msgid,
+            vel,
+        });
     }
-    i
 }
 
 /// Forwards bytes both ways between autopilot-link (`listener`) and vehicle-sim,
@@ -133,7 +112,7 @@ fn tap(listener: TcpListener, sim_port: u16, out: mpsc::Sender<Seen>) {
         });
         let out = out.clone();
         std::thread::spawn(move || {
-            let mut pending = Vec::new();
+            let mut parser = FrameParser::new();
             let mut buf = [0u8; 4096];
             while let Ok(n) = link_r.read(&mut buf) {
                 if n == 0 {
@@ -143,9 +122,8 @@ fn tap(listener: TcpListener, sim_port: u16, out: mpsc::Sender<Seen>) {
                 if sim_w.write_all(&buf[..n]).is_err() {
                     break;
                 }
-                pending.extend_from_slice(&buf[..n]);
-                let used = scan_frames(&pending, now, &out);
-                pending.drain(..used);
+                parser.push(&buf[..n]);
+                scan_frames(&mut parser, now, &out);
             }
         });
     });
@@ -287,16 +265,15 @@ fn baseline(rounds: usize) -> Result<Vec<f64>> {
         let Ok((mut wire_in, _)) = wire_side.accept() else {
             return;
         };
-        let mut pending = Vec::new();
+        let mut parser = FrameParser::new();
         let mut buf = [0u8; 4096];
         while let Ok(n) = wire_in.read(&mut buf) {
             if n == 0 {
                 break;
             }
             let now = Instant::now();
-            pending.extend_from_slice(&buf[..n]);
-            let used = scan_frames(&pending, now, &seen_tx);
-            pending.drain(..used);
+            parser.push(&buf[..n]);
+            scan_frames(&mut parser, now, &seen_tx);
         }
     });
     std::thread::spawn(move || {
@@ -319,12 +296,20 @@ fn baseline(rounds: usize) -> Result<Vec<f64>> {
             if SoloMessage::decode(ty, &value).is_err() {
                 continue;
             }
-            // A 53-byte SET_POSITION_TARGET_LOCAL_NED (CRC not needed by the scanner).
-            let mut frame = vec![0xFD, 53, 0, 0, seq, 255, 190, 84, 0, 0];
-            frame.extend_from_slice(&[0u8; 53]);
-            frame.extend_from_slice(&[0, 0]);
+            // What a translator would write: one SET_POSITION_TARGET_LOCAL_NED.
+            let header = MavHeader {
+                system_id: 255,
+                component_id: 190,
+                sequence: seq,
+            };
+            let msg = MavMessage::SET_POSITION_TARGET_LOCAL_NED(
+                SET_POSITION_TARGET_LOCAL_NED_DATA::default(),
+            );
             seq = seq.wrapping_add(1);
-            if wire_out.write_all(&frame).is_err() {
+            if wire_out
+                .write_all(RawFrame::encode(header, &msg).as_bytes())
+                .is_err()
+            {
                 return;
             }
         }
