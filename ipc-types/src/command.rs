@@ -60,6 +60,20 @@ wire_enum! {
         MotorKill = 23 => "motor_kill",
         GoProSet = 24 => "gopro_set",
         SetHome = 25 => "set_home",
+        MotorTest = 26 => "motor_test",
+        CameraZoom = 27 => "camera_zoom",
+    }
+}
+
+wire_enum! {
+    /// How [`Command::CameraZoom`]'s value is read, numbered as MAVLink CAMERA_ZOOM_TYPE.
+    pub enum ZoomMode: u8 {
+        /// `value` zoom steps in (+) or out (−).
+        Step = 0 => "step",
+        /// Keep zooming in (+1), out (−1), or stop (0).
+        Continuous = 1 => "continuous",
+        /// Zoom to `value` percent of the camera's range (0 = widest).
+        Range = 2 => "range",
     }
 }
 
@@ -152,6 +166,7 @@ impl CommandKind {
             | CommandKind::RecordStart
             | CommandKind::RecordStop
             | CommandKind::Servo
+            | CommandKind::CameraZoom
             | CommandKind::GoProSet
             | CommandKind::GrabPayloadAuthority
             | CommandKind::ReleasePayloadAuthority => Some(AuthorityDomain::Payload),
@@ -206,6 +221,12 @@ pub mod limits {
     pub const SERVO_CHANNELS: core::ops::RangeInclusive<u8> = 1..=32;
     /// Highest MAVLink GOPRO_COMMAND id (GOPRO_COMMAND_CHARGING).
     pub const MAX_GOPRO_COMMAND: u8 = 16;
+    /// Motor numbers of a motor test (ArduPilot numbers motors from 1).
+    pub const MOTORS: core::ops::RangeInclusive<u8> = 1..=12;
+    /// Longest motor test.
+    pub const MAX_MOTOR_TEST_S: f32 = 10.0;
+    /// Most zoom steps in one command.
+    pub const MAX_ZOOM_STEPS: f32 = 100.0;
 }
 
 /// A typed command. Build a [`VehicleCommand`] from it with [`VehicleCommand::new`].
@@ -292,6 +313,20 @@ pub enum Command {
         lon_deg: f64,
         alt_msl_m: f32,
     },
+    /// Spin one motor on the ground (MAVLink `MAV_CMD_DO_MOTOR_TEST`, throttle in
+    /// percent). Never executed in the air: the arbiter refuses it `in_air`.
+    MotorTest {
+        motor: u8,
+        throttle_pct: f32,
+        duration_s: f32,
+    },
+    /// Zoom camera `camera` (0 = every camera): MAVLink `MAV_CMD_SET_CAMERA_ZOOM` for a
+    /// real camera, the virtual cameras' zoom for the vision pipeline.
+    CameraZoom {
+        camera: u8,
+        mode: ZoomMode,
+        value: f32,
+    },
 }
 
 /// Why a command could not be converted.
@@ -375,6 +410,8 @@ impl Command {
             Command::MotorKill { .. } => CommandKind::MotorKill,
             Command::GoProSet { .. } => CommandKind::GoProSet,
             Command::SetHome { .. } => CommandKind::SetHome,
+            Command::MotorTest { .. } => CommandKind::MotorTest,
+            Command::CameraZoom { .. } => CommandKind::CameraZoom,
         }
     }
 
@@ -480,6 +517,35 @@ impl Command {
                 0.0,
                 limits::MAX_GOPRO_COMMAND.into(),
             )?,
+            Command::MotorTest {
+                motor,
+                throttle_pct,
+                duration_s,
+            } => {
+                check(
+                    "motor",
+                    motor.into(),
+                    (*MOTORS.start()).into(),
+                    (*MOTORS.end()).into(),
+                )?;
+                check("throttle_pct", throttle_pct.into(), 0.0, 100.0)?;
+                check(
+                    "duration_s",
+                    duration_s.into(),
+                    0.0,
+                    MAX_MOTOR_TEST_S.into(),
+                )?;
+            }
+            Command::CameraZoom { mode, value, .. } => match mode {
+                ZoomMode::Step => check(
+                    "zoom_steps",
+                    value.into(),
+                    (-MAX_ZOOM_STEPS).into(),
+                    MAX_ZOOM_STEPS.into(),
+                )?,
+                ZoomMode::Continuous => check("zoom_direction", value.into(), -1.0, 1.0)?,
+                ZoomMode::Range => check("zoom_pct", value.into(), 0.0, 100.0)?,
+            },
             Command::Arm { .. }
             | Command::Disarm { .. }
             | Command::Land
@@ -507,7 +573,8 @@ impl Command {
 /// `SetYaw`: `f[0]` yaw, `f[1]` rate; `Gimbal`: `f[0]` pitch, `f[1]` yaw; `SetMode`:
 /// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm; `GoProSet`: `i[0]`
 /// command, `i[1]` the four value bytes little-endian; `SetHome`: lat/lon, `f[0]`
-/// altitude above mean sea level.
+/// altitude above mean sea level; `MotorTest`: `i[0]` motor, `f[0]` throttle %, `f[1]`
+/// duration; `CameraZoom`: `i[0]` camera, `i[1]` [`ZoomMode`], `f[0]` value.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
@@ -644,6 +711,24 @@ impl VehicleCommand {
                 c.i[0] = command.into();
                 c.i[1] = i32::from_le_bytes(value);
             }
+            Command::MotorTest {
+                motor,
+                throttle_pct,
+                duration_s,
+            } => {
+                c.i[0] = motor.into();
+                c.f[0] = throttle_pct;
+                c.f[1] = duration_s;
+            }
+            Command::CameraZoom {
+                camera,
+                mode,
+                value,
+            } => {
+                c.i[0] = camera.into();
+                c.i[1] = mode.to_wire().into();
+                c.f[0] = value;
+            }
         }
         Ok(c)
     }
@@ -738,6 +823,24 @@ impl VehicleCommand {
                 lon_deg: self.lon_deg,
                 alt_msl_m: self.f[0],
             },
+            CommandKind::MotorTest => Command::MotorTest {
+                motor: int_param(0, "motor", u8::MAX.into())? as u8,
+                throttle_pct: self.f[0],
+                duration_s: self.f[1],
+            },
+            CommandKind::CameraZoom => {
+                let raw = int_param(1, "zoom_mode", u8::MAX.into())? as u8;
+                Command::CameraZoom {
+                    camera: int_param(0, "camera", u8::MAX.into())? as u8,
+                    mode: ZoomMode::try_from(raw).map_err(|_| CommandError::OutOfRange {
+                        name: "zoom_mode",
+                        value: raw.into(),
+                        min: 0.0,
+                        max: 2.0,
+                    })?,
+                    value: self.f[0],
+                }
+            }
         };
         cmd.validate()?;
         Ok(cmd)
@@ -855,7 +958,64 @@ mod tests {
                 lon_deg: 149.1652,
                 alt_msl_m: 584.0,
             },
+            Command::MotorTest {
+                motor: 3,
+                throttle_pct: 12.5,
+                duration_s: 2.0,
+            },
+            Command::CameraZoom {
+                camera: 1,
+                mode: ZoomMode::Continuous,
+                value: -1.0,
+            },
         ]
+    }
+
+    #[test]
+    fn motor_test_and_zoom_ranges_are_checked() {
+        let bad = [
+            Command::MotorTest {
+                motor: 0,
+                throttle_pct: 10.0,
+                duration_s: 1.0,
+            },
+            Command::MotorTest {
+                motor: 1,
+                throttle_pct: 101.0,
+                duration_s: 1.0,
+            },
+            Command::MotorTest {
+                motor: 1,
+                throttle_pct: 10.0,
+                duration_s: f32::NAN,
+            },
+            Command::CameraZoom {
+                camera: 0,
+                mode: ZoomMode::Range,
+                value: 120.0,
+            },
+            Command::CameraZoom {
+                camera: 0,
+                mode: ZoomMode::Continuous,
+                value: 2.0,
+            },
+        ];
+        for c in bad {
+            assert!(c.validate().is_err(), "{c:?} accepted");
+        }
+        let mut wire = VehicleCommand::new(
+            1,
+            CommandSource::Imc,
+            1,
+            &Command::CameraZoom {
+                camera: 0,
+                mode: ZoomMode::Step,
+                value: 3.0,
+            },
+        )
+        .unwrap();
+        wire.i[1] = 9;
+        assert!(wire.command().is_err(), "unknown zoom mode read back");
     }
 
     #[test]

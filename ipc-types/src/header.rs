@@ -21,6 +21,7 @@ wire_enum! {
         GroundcontrolGateway = 11 => "groundcontrol-gateway",
         ImcGateway = 12 => "imc-gateway",
         MqttBroker = 13 => "mqtt-broker",
+        Hardware = 14 => "hardware",
         /// Command-line tools and tests that publish on the bus.
         Tool = 100 => "tool",
     }

@@ -13,6 +13,7 @@
 pub mod arbiter;
 pub mod command;
 pub mod fixed;
+pub mod hardware;
 pub mod header;
 pub mod payload;
 pub mod service;
@@ -27,9 +28,14 @@ pub use arbiter::{
 };
 pub use command::{
     AckResult, AuthorityDomain, Command, CommandAck, CommandError, CommandKind, CommandSource,
-    RefusalReason, VehicleCommand,
+    RefusalReason, VehicleCommand, ZoomMode,
 };
 pub use fixed::FixedStr;
+pub use hardware::{
+    GpioEntry, HardwareOp, HardwareReply, HardwareRequest, HardwareResult, HardwareState, HwName,
+    LcdOp, LedEntry, PowerChannelEntry, PowerChannelOp, SystemPowerOp, HW_MAX_ENTRIES,
+    HW_NAME_CAPACITY, LCD_LINE_CAPACITY,
+};
 pub use header::{Sample, SampleHeader, ServiceId};
 pub use payload::{GoProStatus, PayloadState};
 pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};

@@ -180,6 +180,21 @@ pub fn input_buttons() -> Topic {
     Topic::new("skymesh/input/buttons".into(), TopicQos::COMMANDS)
 }
 
+/// [`crate::HardwareRequest`]s from gateways to the hardware service.
+pub fn hardware_request() -> Topic {
+    Topic::new("skymesh/hardware/request".into(), TopicQos::COMMANDS)
+}
+
+/// [`crate::HardwareReply`]s of the hardware service.
+pub fn hardware_reply() -> Topic {
+    Topic::new("skymesh/hardware/reply".into(), TopicQos::EVENTS)
+}
+
+/// [`crate::HardwareState`] of the hardware service (latest value).
+pub fn hardware_state() -> Topic {
+    Topic::new("skymesh/hardware/state".into(), TopicQos::STATE)
+}
+
 /// [`crate::ServiceHealth`] heartbeats of the service instance `name`.
 pub fn service_health(name: &str) -> Topic {
     Topic::new(format!("skymesh/service/{name}/health"), TopicQos::SERVICE)

@@ -413,6 +413,43 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 0.0,
             ],
         )),
+        Command::MotorTest {
+            motor,
+            throttle_pct,
+            duration_s,
+        } => only(long(
+            t,
+            MavCmd::MAV_CMD_DO_MOTOR_TEST,
+            [
+                f32::from(motor),
+                // MOTOR_TEST_THROTTLE_PERCENT
+                0.0,
+                throttle_pct,
+                duration_s,
+                // one motor
+                1.0,
+                // MOTOR_TEST_ORDER_BOARD: `motor` is the output number
+                1.0,
+                0.0,
+            ],
+        )),
+        Command::CameraZoom {
+            camera,
+            mode,
+            value,
+        } => only(long(
+            t,
+            MavCmd::MAV_CMD_SET_CAMERA_ZOOM,
+            [
+                f32::from(mode.to_wire()),
+                value,
+                f32::from(camera),
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        )),
         Command::GoProSet { command, value } => {
             let cmd_id = gopro_command(command)
                 .ok_or("GoPro command ids above 16 have no MAVLink GOPRO_COMMAND")?;
