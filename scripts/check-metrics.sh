@@ -14,11 +14,18 @@ trap 'kill -KILL "${pid:-0}" 2>/dev/null || true; rm -rf "$work"' EXIT
 free() { python3 -c "import socket; s=socket.socket(socket.AF_INET, socket.$1); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])"; }
 port=$(free SOCK_STREAM)
 cp deploy/*.toml "$work/"
+cp -r deploy/animations "$work/"
 sed -i "s#^endpoint = .*#endpoint = \"tcp:127.0.0.1:$port\"#" "$work/vehicle-sim.toml"
 sed -i "s#^connection = .*#connection = \"tcpout:127.0.0.1:$port\"#" "$work/autopilot-link.toml"
 # The Solo gateway's app and follow-stream ports too.
 sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/solo-gateway.toml"
 sed -i "s#^follow_listen = .*#follow_listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#" "$work/solo-gateway.toml"
+# The IMC gateway's UDP port; the hardware service's simulated devices in the temp dir.
+sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#" "$work/imc-gateway.toml"
+sed -i "s#^state_dir = .*#state_dir = \"$work/hardware\"#" "$work/hardware.toml"
+# The GroundControl state server and pose broadcast destination.
+sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/groundcontrol-gateway.toml"
+sed -i "s#^broadcast_destinations = .*#broadcast_destinations = [\"127.0.0.1:$(free SOCK_DGRAM)\"]#" "$work/groundcontrol-gateway.toml"
 
 SKYMESH_DOMAIN=$domain "$bin/skymesh" up --config "$work/skymesh.toml" --metrics 127.0.0.1:0 \
   --status-file "$work/addr" > "$work/out.log" 2>&1 &
@@ -28,7 +35,11 @@ for _ in $(seq 1 300); do
      && grep -q 'skymesh_topic_samples_received_total' "$work/metrics.txt" \
      && grep -q 'skymesh_service_up{service="autopilot-link"} 1' "$work/metrics.txt" \
      && grep -q 'skymesh_solo_clients_connected' "$work/metrics.txt" \
-     && grep -q 'skymesh_shot_current' "$work/metrics.txt"; then
+     && grep -q 'skymesh_shot_current' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="imc-gateway"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="hardware"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="swarm-queue"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="groundcontrol-gateway"} 1' "$work/metrics.txt"; then
     break
   fi
   sleep 0.2

@@ -121,7 +121,8 @@ wire_enum! {
         Cancelled = 13 => "cancelled",
         /// An emergency stop holds the vehicle; only the safety source may command it.
         Emergency = 14 => "emergency",
-        /// Motor kill while the vehicle is in the air, not flagged as an emergency kill.
+        /// Not allowed while the vehicle is in the air: a motor kill not flagged as an
+        /// emergency, a motor test, or a servo channel not configured for use in flight.
         InAir = 15 => "in_air",
         /// The source lost authority to a higher-priority source.
         Preempted = 16 => "preempted",

@@ -19,6 +19,7 @@ pub mod payload;
 pub mod service;
 pub mod shot;
 pub mod shot_fence;
+pub mod swarm;
 pub mod topics;
 pub mod vehicle;
 
@@ -44,6 +45,10 @@ pub use shot::{
     APP_VALUE_CAPACITY,
 };
 pub use shot_fence::{AppFencePolygon, AppGeofence};
+pub use swarm::{
+    drone_flags, swarm_flags, DroneState, SwarmCommand, SwarmCommandError, SwarmCommandKind,
+    SwarmDrone, SwarmReply, SwarmResult, SwarmState, ALL_DRONES, SWARM_MAX_DRONES,
+};
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
 

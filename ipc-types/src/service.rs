@@ -57,7 +57,7 @@ wire_enum! {
 /// Number of histogram buckets a [`StatEntry`] carries (the last is usually +Inf).
 pub const HISTOGRAM_BUCKETS: usize = 12;
 /// Number of entries one [`ServiceStats`] sample carries.
-pub const MAX_STAT_ENTRIES: usize = 128;
+pub const MAX_STAT_ENTRIES: usize = 384;
 
 /// One metric series: a name, its labels and its value.
 ///
@@ -119,7 +119,7 @@ impl StatEntry {
 /// Everything a service wants exported, published once a second on
 /// `skymesh/service/{name}/stats`.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.ServiceStats.v2")]
+#[type_name("skymesh.ServiceStats.v3")]
 #[repr(C)]
 pub struct ServiceStats {
     pub header: SampleHeader,

@@ -74,6 +74,21 @@ pub fn free_udp_port() -> u16 {
         .unwrap_or(0)
 }
 
+/// `n` consecutive TCP ports free on 127.0.0.1 right now (for a `sim_swarm`,
+/// whose vehicles listen on consecutive ports).
+pub fn free_port_run(n: u8) -> Result<u16> {
+    for _ in 0..100 {
+        let base = free_port();
+        if base == 0 || u32::from(base) + u32::from(n) > u32::from(u16::MAX) {
+            continue;
+        }
+        if (1..u16::from(n)).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok()) {
+            return Ok(base);
+        }
+    }
+    bail!("no {n} consecutive free TCP ports")
+}
+
 /// How a test wants its mesh.
 #[derive(Debug, Clone)]
 pub struct MeshOptions {
@@ -99,6 +114,34 @@ pub struct MeshOptions {
     /// Vehicle 1's autopilot-link connects to this port on 127.0.0.1 instead of
     /// straight to its vehicle-sim (a benchmark's tap sits there and forwards).
     pub link_via: Option<u16>,
+    /// Also run the hardware service and the IMC gateway (for vehicle 1).
+    pub imc: bool,
+    /// Extra TOML appended to the IMC gateway's config. Without an
+    /// `announce_destinations` key of its own, Announce is off (`[]`).
+    pub imc_gateway_extra: String,
+    /// Extra TOML appended to the hardware service's config (deploy/hardware.toml
+    /// with `state_dir` inside the mesh's temp dir).
+    pub hardware_extra: String,
+    /// MAVLink router endpoints of vehicle 1's autopilot-link (default none: tests
+    /// never send to a ground station's port unless they ask).
+    pub link_endpoints: Vec<String>,
+    /// One vehicle-sim (service `vehicle-sim`) in swarm mode serves every vehicle,
+    /// on consecutive ports, homes on a grid `sim_spacing_m` apart east and north of
+    /// vehicle 1's; still one autopilot-link per vehicle (named as without this).
+    pub sim_swarm: bool,
+    /// Grid spacing of a `sim_swarm`, metres.
+    pub sim_spacing_m: f64,
+    /// Also run the swarm queue and the GroundControl gateway: drones 1..=N ↔
+    /// vehicles 1..=N, site origin = vehicle 1's home, animations in
+    /// [`Mesh::animations_dir`], the state server on [`Mesh::gc_port`], the pose
+    /// broadcast to 127.0.0.1:[`Mesh::pose_port`] (the test binds it).
+    pub swarm: bool,
+    /// The gateway's privileged client addresses.
+    pub gc_privileged: Vec<String>,
+    /// Extra TOML appended to the swarm queue's config.
+    pub swarm_queue_extra: String,
+    /// Extra TOML appended to the GroundControl gateway's config.
+    pub gc_gateway_extra: String,
 }
 
 impl Default for MeshOptions {
@@ -114,9 +157,23 @@ impl Default for MeshOptions {
             shot_engine_extra: String::new(),
             solo_gateway_extra: String::new(),
             link_via: None,
+            imc: false,
+            imc_gateway_extra: String::new(),
+            hardware_extra: String::new(),
+            link_endpoints: Vec::new(),
+            sim_swarm: false,
+            sim_spacing_m: 3.0,
+            swarm: false,
+            gc_privileged: vec!["127.0.0.1".to_string()],
+            swarm_queue_extra: String::new(),
+            gc_gateway_extra: String::new(),
         }
     }
 }
+
+/// Vehicle 1's home (vehicle-sim's default; a `sim_swarm` or a fleet is laid out
+/// east and north of it): latitude, longitude (degrees), altitude MSL (metres).
+pub const HOME: [f64; 3] = [-35.363261, 149.165230, 584.0];
 
 /// A running mesh: the supervisor with vehicle-sim and autopilot-link.
 #[derive(Debug)]
@@ -129,6 +186,18 @@ pub struct Mesh {
     pub solo_port: u16,
     /// Solo follow-stream UDP port (with `MeshOptions::solo`).
     pub follow_port: u16,
+    /// The IMC gateway's UDP port (with `MeshOptions::imc`).
+    pub imc_port: u16,
+    /// The hardware service's state directory (with `MeshOptions::imc`).
+    pub hardware_dir: PathBuf,
+    /// MAVLink port of every vehicle's simulator, vehicle 1 first.
+    pub mavlink_ports: Vec<u16>,
+    /// The GroundControl state server's TCP port (with `MeshOptions::swarm`).
+    pub gc_port: u16,
+    /// The UDP port on 127.0.0.1 the pose broadcast is sent to (with `MeshOptions::swarm`).
+    pub pose_port: u16,
+    /// The swarm queue's animations (`drone_<id>.csv`, with `MeshOptions::swarm`).
+    pub animations_dir: PathBuf,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
     _serial: MutexGuard<'static, ()>,
@@ -146,8 +215,15 @@ impl Mesh {
         let bins = bin_dir();
         let mut services = String::new();
         let mut mavlink_ports = Vec::new();
+        let swarm_base = opts
+            .sim_swarm
+            .then(|| free_port_run(opts.vehicles.max(1)))
+            .transpose()?;
         for id in 1..=opts.vehicles.max(1) {
-            let port = free_port();
+            let port = match swarm_base {
+                Some(base) => base + u16::from(id - 1),
+                None => free_port(),
+            };
             mavlink_ports.push(port);
             // One vehicle keeps the default names; a fleet gets `-<id>` suffixes.
             let suffix = if opts.vehicles > 1 {
@@ -155,22 +231,46 @@ impl Mesh {
             } else {
                 String::new()
             };
-            // Vehicles stand 10 m apart (east) so a fleet does not share one spot.
-            let home_lon = 149.165230
-                + f64::from(id - 1) * 10.0 / (111_320.0 * (35.363261f64).to_radians().cos());
-            std::fs::write(
-                d.join(format!("vehicle-sim{suffix}.toml")),
-                format!("endpoint = \"tcp:127.0.0.1:{port}\"\nsystem_id = {id}\nhome_lon = {home_lon}\n"),
-            )?;
+            // With `sim_swarm`, one simulator (configured after this loop) serves every vehicle.
+            let sim = if opts.sim_swarm {
+                "vehicle-sim".to_string()
+            } else {
+                format!("vehicle-sim{suffix}")
+            };
+            if !opts.sim_swarm {
+                // Vehicles stand 10 m apart (east) so a fleet does not share one spot.
+                let home_lon = 149.165230
+                    + f64::from(id - 1) * 10.0 / (111_320.0 * (35.363261f64).to_radians().cos());
+                std::fs::write(
+                    d.join(format!("{sim}.toml")),
+                    format!("endpoint = \"tcp:127.0.0.1:{port}\"\nsystem_id = {id}\nhome_lon = {home_lon}\n"),
+                )?;
+                let _ = write!(
+                    services,
+                    r#"
+[[service]]
+name = "{sim}"
+binary = "{bins}/skymesh-vehicle-sim"
+config = "{sim}.toml"
+critical = true
+"#,
+                    bins = bins.display(),
+                );
+            }
             let link_port = match opts.link_via {
                 Some(via) if id == 1 => via,
                 _ => port,
             };
+            let endpoints = if id == 1 {
+                format!("{:?}", opts.link_endpoints)
+            } else {
+                "[]".to_string()
+            };
             std::fs::write(
                 d.join(format!("autopilot-link{suffix}.toml")),
                 format!(
-                    // No router endpoints: tests never send to a ground station's port.
-                    "connection = \"tcpout:127.0.0.1:{link_port}\"\nvehicle_id = {id}\nattitude_hz = {}\nendpoints = []\n{}\n",
+                    // No router endpoints unless asked: tests never send to a ground station's port.
+                    "connection = \"tcpout:127.0.0.1:{link_port}\"\nvehicle_id = {id}\nattitude_hz = {}\nendpoints = {endpoints}\n{}\n",
                     opts.attitude_hz, opts.autopilot_link_extra
                 ),
             )?;
@@ -178,22 +278,97 @@ impl Mesh {
                 services,
                 r#"
 [[service]]
-name = "vehicle-sim{suffix}"
-binary = "{bins}/skymesh-vehicle-sim"
-config = "vehicle-sim{suffix}.toml"
-critical = true
-
-[[service]]
 name = "autopilot-link{suffix}"
 binary = "{bins}/skymesh-autopilot-link"
 config = "autopilot-link{suffix}.toml"
-after = ["vehicle-sim{suffix}"]
+after = ["{sim}"]
 critical = true
 "#,
                 bins = bins.display(),
             );
         }
         let mavlink_port = mavlink_ports[0];
+        if let Some(base) = swarm_base {
+            std::fs::write(
+                d.join("vehicle-sim.toml"),
+                format!(
+                    "endpoint = \"tcp:127.0.0.1:{base}\"\nsystem_id = 1\n\
+                     [swarm]\ncount = {}\nport_step = 1\nspacing_m = {}\nlayout = \"grid\"\n",
+                    opts.vehicles.max(1),
+                    opts.sim_spacing_m
+                ),
+            )?;
+            // First, so it reads first in the supervisor's config.
+            services.insert_str(
+                0,
+                &format!(
+                    r#"
+[[service]]
+name = "vehicle-sim"
+binary = "{bins}/skymesh-vehicle-sim"
+config = "vehicle-sim.toml"
+critical = true
+"#,
+                    bins = bins.display(),
+                ),
+            );
+        }
+        let (mut gc_port, mut pose_port) = (0, 0);
+        let animations_dir = d.join("animations");
+        if opts.swarm {
+            gc_port = free_port();
+            pose_port = free_udp_port();
+            std::fs::create_dir_all(&animations_dir)?;
+            let n = opts.vehicles.max(1);
+            std::fs::write(
+                d.join("swarm-queue.toml"),
+                format!(
+                    "site_origin = {{ lat_deg = {}, lon_deg = {}, alt_msl_m = {} }}\n\
+                     drones = {{ first_id = 1, count = {n}, first_vehicle_id = 1 }}\n\
+                     animations_dir = {:?}\n{}\n",
+                    HOME[0],
+                    HOME[1],
+                    HOME[2],
+                    animations_dir.display().to_string(),
+                    opts.swarm_queue_extra
+                ),
+            )?;
+            std::fs::write(
+                d.join("groundcontrol-gateway.toml"),
+                format!(
+                    "listen = \"127.0.0.1:{gc_port}\"\nprivileged = {:?}\n\
+                     broadcast_destinations = [\"127.0.0.1:{pose_port}\"]\n\
+                     broadcast_bind = \"127.0.0.1:0\"\n{}\n",
+                    opts.gc_privileged, opts.gc_gateway_extra
+                ),
+            )?;
+            let links: Vec<String> = (1..=n)
+                .map(|id| {
+                    if opts.vehicles > 1 {
+                        format!("autopilot-link-{id}")
+                    } else {
+                        "autopilot-link".to_string()
+                    }
+                })
+                .collect();
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "swarm-queue"
+binary = "{bins}/skymesh-swarm-queue"
+config = "swarm-queue.toml"
+after = {links:?}
+
+[[service]]
+name = "groundcontrol-gateway"
+binary = "{bins}/skymesh-groundcontrol-gateway"
+config = "groundcontrol-gateway.toml"
+after = ["swarm-queue"]
+"#,
+                bins = bins.display(),
+            );
+        }
         let (mut solo_port, mut follow_port) = (0, 0);
         if opts.solo {
             solo_port = free_port();
@@ -226,6 +401,68 @@ name = "shot-engine"
 binary = "{bins}/skymesh-shot-engine"
 config = "shot-engine.toml"
 after = ["autopilot-link"]
+"#,
+                bins = bins.display(),
+            );
+        }
+        let mut imc_port = 0;
+        let hardware_dir = d.join("hardware");
+        if opts.imc {
+            imc_port = free_udp_port();
+            // The shipped hardware config (its devices, simulated) with the state in
+            // this mesh's temp dir.
+            let shipped = std::fs::read_to_string(root.join("deploy/hardware.toml"))?;
+            let state_dir = format!("state_dir = {:?}", hardware_dir.display().to_string());
+            let mut replaced = false;
+            let mut hardware: String = shipped
+                .lines()
+                .map(|l| {
+                    if l.starts_with("state_dir =") {
+                        replaced = true;
+                        state_dir.clone()
+                    } else {
+                        l.to_string()
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            if !replaced {
+                hardware = format!("{state_dir}\n{hardware}");
+            }
+            std::fs::write(
+                d.join("hardware.toml"),
+                format!("{hardware}\n{}\n", opts.hardware_extra),
+            )?;
+            let announce = if opts.imc_gateway_extra.contains("announce_destinations") {
+                ""
+            } else {
+                "announce_destinations = []\n"
+            };
+            std::fs::write(
+                d.join("imc-gateway.toml"),
+                format!(
+                    "listen = \"127.0.0.1:{imc_port}\"\nvehicle_id = 1\n{announce}{}\n",
+                    opts.imc_gateway_extra
+                ),
+            )?;
+            let link = if opts.vehicles > 1 {
+                "autopilot-link-1"
+            } else {
+                "autopilot-link"
+            };
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "hardware"
+binary = "{bins}/skymesh-hardware"
+config = "hardware.toml"
+
+[[service]]
+name = "imc-gateway"
+binary = "{bins}/skymesh-imc-gateway"
+config = "imc-gateway.toml"
+after = ["{link}", "hardware"]
 "#,
                 bins = bins.display(),
             );
@@ -274,6 +511,12 @@ grace_period_ms = 3000
             mavlink_port,
             solo_port,
             follow_port,
+            imc_port,
+            hardware_dir,
+            mavlink_ports,
+            gc_port,
+            pose_port,
+            animations_dir,
             supervisor: Some(child),
             metrics_addr: None,
             _serial: serial,

@@ -23,6 +23,8 @@
 //! | `CameraCapture` | COMMAND_LONG `IMAGE_START_CAPTURE` p3 = 1 image, p4 = capture sequence | COMMAND_ACK |
 //! | `RecordStart` / `RecordStop` | COMMAND_LONG `VIDEO_START_CAPTURE` / `VIDEO_STOP_CAPTURE` | COMMAND_ACK |
 //! | `Servo` | COMMAND_LONG `DO_SET_SERVO` p1 = channel, p2 = PWM µs | COMMAND_ACK |
+//! | `MotorTest { motor, throttle_pct, duration_s }` | COMMAND_LONG `DO_MOTOR_TEST` p1 = motor, p2 = 0 (`MOTOR_TEST_THROTTLE_PERCENT`), p3 = throttle %, p4 = duration s, p5 = 1 motor | COMMAND_ACK (ArduCopter: only landed) |
+//! | `CameraZoom { camera, mode, value }` | COMMAND_LONG `SET_CAMERA_ZOOM` p1 = `CAMERA_ZOOM_TYPE` (0 step, 1 continuous, 2 range), p2 = value, p3 = camera id (0 = all) | COMMAND_ACK |
 //! | `Brake` in GUIDED | SET_POSITION_TARGET_LOCAL_NED zero velocity (stays GUIDED, so setpoints resume at once) | accepted when written |
 //! | `Brake` otherwise | COMMAND_LONG `DO_SET_MODE` BRAKE (17) | COMMAND_ACK |
 //! | `EmergencyStop` | as `Brake`: brake and hover (motors keep running) | as `Brake` |
@@ -39,6 +41,24 @@
 //! and it does not end a velocity stream (the vehicle does not move). The fence
 //! still governs every position target, RTL's flight included where the autopilot's
 //! own fence applies; a home outside the fence only means RTL ends there.
+//!
+//! ## Actuators (IMC and other remote tools)
+//!
+//! Remote tools drive actuators through the bus commands above; the IMC gateway maps
+//! its messages as follows (the value conversions are the gateway's):
+//!
+//! | IMC message | `Command` | MAVLink | authority |
+//! |---|---|---|---|
+//! | SetServoPosition, SetControlSurfaceDeflection, SetPWM | `Servo { channel, pwm_us }` | `DO_SET_SERVO` | payload |
+//! | SetThrusterActuation | `MotorTest { motor, throttle_pct, duration_s }` | `DO_MOTOR_TEST` | flight |
+//! | CameraZoom | `CameraZoom { camera, mode, value }` | `SET_CAMERA_ZOOM` | payload |
+//!
+//! In the air (the arbiter's notion: armed and high, fast or of unknown position)
+//! the arbiter refuses every `MotorTest` (`in_air`, whatever the source) and every
+//! `Servo` whose channel is not listed in `[arbiter] servo_channels_in_flight`
+//! (empty by default); on the ground both pass. `CameraZoom` is never restricted.
+//! ArduCopter itself refuses a motor test unless landed and a `DO_SET_SERVO` on a
+//! channel its motors use.
 //!
 //! Answers are tracked in [`crate::acks`].
 
@@ -429,7 +449,7 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 // one motor
                 1.0,
                 // MOTOR_TEST_ORDER_BOARD: `motor` is the output number
-                1.0,
+                2.0,
                 0.0,
             ],
         )),
@@ -513,7 +533,7 @@ pub fn admit(sample: &VehicleCommand, vehicle_id: u8, link_up: bool) -> Result<C
 mod tests {
     use super::*;
     use crate::acks::Origin;
-    use skymesh_ipc_types::{CommandKind, CommandSource};
+    use skymesh_ipc_types::{CommandKind, CommandSource, ZoomMode};
 
     const T: Target = Target {
         system: 1,
@@ -801,6 +821,45 @@ mod tests {
         let arm = plan_of(Command::Arm { force: false }).command.unwrap();
         assert_eq!(arm.key(), AnswerKey::CommandAck(400));
         assert!(arm.retransmits());
+    }
+
+    #[test]
+    fn motor_test_and_camera_zoom_map_to_do_motor_test_and_set_camera_zoom() {
+        let p = plan_of(Command::MotorTest {
+            motor: 3,
+            throttle_pct: 12.5,
+            duration_s: 2.0,
+        });
+        assert!(p.setpoint.is_none());
+        let c = long_of(&p);
+        assert_eq!((c.target_system, c.target_component), (1, 1));
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_MOTOR_TEST);
+        // Motor 3, MOTOR_TEST_THROTTLE_PERCENT, 12.5 %, 2 s, one motor.
+        assert_eq!(
+            [c.param1, c.param2, c.param3, c.param4, c.param5],
+            [3.0, 0.0, 12.5, 2.0, 1.0]
+        );
+        assert_eq!(
+            p.command.unwrap().key(),
+            AnswerKey::CommandAck(MavCmd::MAV_CMD_DO_MOTOR_TEST as u32)
+        );
+
+        for (mode, value, p1) in [
+            (ZoomMode::Step, -3.0, 0.0),
+            (ZoomMode::Continuous, 1.0, 1.0),
+            (ZoomMode::Range, 55.5, 2.0),
+        ] {
+            let p = plan_of(Command::CameraZoom {
+                camera: 2,
+                mode,
+                value,
+            });
+            let c = long_of(&p);
+            assert_eq!(c.command, MavCmd::MAV_CMD_SET_CAMERA_ZOOM);
+            // param1 CAMERA_ZOOM_TYPE, param2 the value, param3 the camera id.
+            assert_eq!([c.param1, c.param2, c.param3], [p1, value, 2.0], "{mode}");
+            assert_eq!([c.param4, c.param5, c.param6, c.param7], [0.0; 4]);
+        }
     }
 
     fn sample(kind_cmd: &Command, id: u32) -> VehicleCommand {

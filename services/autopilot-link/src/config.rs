@@ -365,6 +365,8 @@ pub struct RawArbiter {
     pub fence_response_s: f64,
     pub in_air_alt_m: f64,
     pub in_air_speed_mps: f64,
+    /// Servo channels (1..=32) a `Servo` command may drive in the air.
+    pub servo_channels_in_flight: Vec<i64>,
 }
 
 impl Default for RawArbiter {
@@ -384,6 +386,7 @@ impl Default for RawArbiter {
             fence_response_s: 0.3,
             in_air_alt_m: 0.5,
             in_air_speed_mps: 0.5,
+            servo_channels_in_flight: Vec::new(),
         }
     }
 }
@@ -461,8 +464,34 @@ impl RawArbiter {
             fence_response_s: number("arbiter.fence_response_s", self.fence_response_s, 0.0, 5.0)?,
             in_air_alt_m: number("arbiter.in_air_alt_m", self.in_air_alt_m, 0.1, 10.0)?,
             in_air_speed_mps: number("arbiter.in_air_speed_mps", self.in_air_speed_mps, 0.1, 10.0)?,
+            servo_channels_in_flight: servo_channels(&self.servo_channels_in_flight)?,
         })
     }
+}
+
+/// `arbiter.servo_channels_in_flight`: each a servo channel (1..=32), none twice;
+/// returned sorted.
+fn servo_channels(list: &[i64]) -> Result<Vec<u8>, ConfigError> {
+    const FIELD: &str = "arbiter.servo_channels_in_flight";
+    let range = skymesh_ipc_types::command::limits::SERVO_CHANNELS;
+    let mut out = Vec::with_capacity(list.len());
+    for &channel in list {
+        let channel = in_range(
+            FIELD,
+            channel,
+            i64::from(*range.start()),
+            i64::from(*range.end()),
+        )? as u8;
+        if out.contains(&channel) {
+            return Err(ConfigError::invalid(
+                FIELD,
+                format!("channel {channel} is listed twice"),
+            ));
+        }
+        out.push(channel);
+    }
+    out.sort_unstable();
+    Ok(out)
 }
 
 impl Settings {
@@ -641,6 +670,18 @@ mod tests {
                 "[arbiter.setpoint_max_age_by_source]\ndrone = 100",
                 "arbiter.setpoint_max_age_by_source.drone",
             ),
+            (
+                "[arbiter]\nservo_channels_in_flight = [0]",
+                "arbiter.servo_channels_in_flight",
+            ),
+            (
+                "[arbiter]\nservo_channels_in_flight = [33]",
+                "arbiter.servo_channels_in_flight",
+            ),
+            (
+                "[arbiter]\nservo_channels_in_flight = [9, 10, 9]",
+                "arbiter.servo_channels_in_flight",
+            ),
         ] {
             let e = parse_str(text).unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");
@@ -661,6 +702,19 @@ mod tests {
                 .gimbal_attitude_hz,
             None,
             "0 = not requested"
+        );
+        assert!(parse_str("")
+            .unwrap()
+            .arbiter
+            .servo_channels_in_flight
+            .is_empty());
+        assert_eq!(
+            parse_str("[arbiter]\nservo_channels_in_flight = [32, 9, 1]")
+                .unwrap()
+                .arbiter
+                .servo_channels_in_flight,
+            [1, 9, 32],
+            "sorted"
         );
         let s = parse_str("[arbiter]\nauthority_timeout_s = 2\n[arbiter.setpoint_max_age_by_source]\nvision = 200").unwrap();
         assert_eq!(s.arbiter.authority_timeout, Duration::from_secs(2));

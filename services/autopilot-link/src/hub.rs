@@ -11,7 +11,7 @@
 //! `endpoint` is the configured endpoint (with the bound port for `udpin`/`tcpin`),
 //! or `autopilot` for frames forwarded to the autopilot and its malformed input.
 //! Every series is registered on first use: an endpoint costs between 0 and 8 of
-//! the stats sample's 128 entries (at most 8 endpoints).
+//! the stats sample's 384 entries (at most 8 endpoints).
 
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 
@@ -68,7 +68,7 @@ impl DropReason {
 
 /// The series of one endpoint (or of the autopilot side, label `autopilot`), each
 /// registered on first use so that idle endpoints cost none of the stats sample's
-/// 128 entries.
+/// 384 entries.
 #[derive(Debug)]
 pub struct EndpointMetrics {
     stats: Stats,

@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 use crate::frame::Target;
 
 /// At most this many endpoints (they share an 8-bit destination mask and the stats
-/// sample's 128 series).
+/// sample's 384 series).
 pub const MAX_ENDPOINTS: usize = 8;
 /// Learnt system/component pairs; beyond this new sources are not learnt (their
 /// traffic is still routed, by the default rules).

@@ -58,8 +58,11 @@ pub async fn run_heartbeat(
     let mut stats_pub = bus.publisher::<ServiceStats>(&topics::service_stats(&name))?;
     let started = Instant::now();
     let watchdog = systemd::watchdog_interval();
-    let mut stats = Box::<ServiceStats>::default();
-    stats.name = FixedStr::new(&name);
+    let stats_name = FixedStr::new(&name);
+    let snapshot = |out: &mut ServiceStats| {
+        out.name = stats_name;
+        bus.stats().snapshot_into(out);
+    };
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut last_stats = Instant::now() - STATS_PERIOD;
@@ -82,12 +85,10 @@ pub async fn run_heartbeat(
         }
         if last_stats.elapsed() >= STATS_PERIOD {
             last_stats = Instant::now();
-            bus.stats().snapshot_into(&mut stats);
-            stats_pub.publish(*stats)?;
+            stats_pub.publish_with(snapshot)?;
         }
     }
-    bus.stats().snapshot_into(&mut stats);
-    let _ = stats_pub.publish(*stats);
+    let _ = stats_pub.publish_with(snapshot);
     let _ = health_pub.publish(health(ServiceState::Stopping));
     Ok(())
 }

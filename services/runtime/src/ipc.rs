@@ -18,7 +18,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::ipc_threadsafe;
-use skymesh_ipc_types::{Sample, ServiceId, Topic};
+use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
@@ -311,6 +311,17 @@ impl Bus {
         &self.inner.stats
     }
 
+    /// The header fields every publisher of this bus stamps (`service`, `instance`;
+    /// sequence and time zero): what an answer addressed to this process carries
+    /// (e.g. `HardwareReply::answers`).
+    pub fn origin(&self) -> SampleHeader {
+        SampleHeader {
+            service: self.inner.service.to_wire(),
+            instance: self.inner.instance,
+            ..SampleHeader::default()
+        }
+    }
+
     fn open_event(
         &self,
         topic: &Topic,
@@ -488,6 +499,30 @@ impl<T: Sample> Publisher<T> {
         Ok(self.seq)
     }
 
+    /// Like [`Publisher::publish`], but `fill` writes the sample in place in shared
+    /// memory (starting from `T::default()`): for large samples (the stats sample is
+    /// ~130 KiB) that must not be copied through the stack.
+    pub fn publish_with(&mut self, fill: impl FnOnce(&mut T)) -> Result<u64, IpcError> {
+        let mut sample = self
+            .port
+            .loan()
+            .map_err(|e| ipc_err("loan", &self.topic, e))?;
+        let value = sample.payload_mut();
+        fill(value);
+        self.seq += 1;
+        let h = value.header_mut();
+        h.seq = self.seq;
+        h.stamp_ns = monotonic_ns();
+        h.service = self.service;
+        h.instance = self.instance;
+        sample.send().map_err(|e| ipc_err("send", &self.topic, e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| ipc_err("notify", &self.topic, e))?;
+        self.published.inc();
+        Ok(self.seq)
+    }
+
     pub fn topic(&self) -> &str {
         &self.topic
     }
@@ -535,6 +570,20 @@ impl<T: Sample> Subscriber<T> {
         Ok(Some(value))
     }
 
+    /// Takes one pending sample without waiting and hands it to `read` where it lies
+    /// in shared memory (no copy: for large samples).
+    pub fn try_recv_with<R>(&self, read: impl FnOnce(&T) -> R) -> Result<Option<R>, IpcError> {
+        let Some(sample) = self
+            .port
+            .receive()
+            .map_err(|e| ipc_err("receive", &self.topic, e))?
+        else {
+            return Ok(None);
+        };
+        self.account(sample.payload());
+        Ok(Some(read(sample.payload())))
+    }
+
     fn account(&self, value: &T) {
         let h = value.header();
         self.received.inc();
@@ -559,28 +608,45 @@ impl<T: Sample> Subscriber<T> {
             if let Some(v) = self.try_recv()? {
                 return Ok(v);
             }
-            let topic = &self.topic;
-            let wait_err = |source| IpcError::Wait {
-                topic: topic.clone(),
-                source,
-            };
-            let afd = match &mut self.afd {
-                Some(afd) => afd,
-                None => self
-                    .afd
-                    .insert(register_listener(&self.listener).map_err(wait_err)?),
-            };
-            let mut guard = afd.readable().await.map_err(wait_err)?;
-            let woken = self
-                .listener
-                .try_wait(|_| {})
-                .map_err(|e| ipc_err("listener wait", &self.topic, e))?;
-            if woken == 0 {
-                // Readiness was spurious or already consumed; tokio only clears it if
-                // nothing new arrived since `readable()` returned.
-                guard.clear_ready();
-            }
+            self.wait_readable().await?;
         }
+    }
+
+    /// Waits for the next sample and hands it to `read` in place (see
+    /// [`Subscriber::try_recv_with`]). Cancel-safe.
+    pub async fn recv_with<R>(&mut self, mut read: impl FnMut(&T) -> R) -> Result<R, IpcError> {
+        loop {
+            if let Some(r) = self.try_recv_with(&mut read)? {
+                return Ok(r);
+            }
+            self.wait_readable().await?;
+        }
+    }
+
+    /// Waits until the topic's event fires (a publisher notified).
+    async fn wait_readable(&mut self) -> Result<(), IpcError> {
+        let topic = &self.topic;
+        let wait_err = |source| IpcError::Wait {
+            topic: topic.clone(),
+            source,
+        };
+        let afd = match &mut self.afd {
+            Some(afd) => afd,
+            None => self
+                .afd
+                .insert(register_listener(&self.listener).map_err(wait_err)?),
+        };
+        let mut guard = afd.readable().await.map_err(wait_err)?;
+        let woken = self
+            .listener
+            .try_wait(|_| {})
+            .map_err(|e| ipc_err("listener wait", &self.topic, e))?;
+        if woken == 0 {
+            // Readiness was spurious or already consumed; tokio only clears it if
+            // nothing new arrived since `readable()` returned.
+            guard.clear_ready();
+        }
+        Ok(())
     }
 
     /// Drains everything pending and returns the newest sample, if any.

@@ -2,7 +2,7 @@
 //!
 //! Label sets are bounded: message types are the `solo-proto` names of the known
 //! types or `unknown`, malformed kinds are [`Malformed`]. Labelled series are
-//! registered on first use: a service has 128 series in its stats sample, and the
+//! registered on first use: a service has 384 series in its stats sample, and the
 //! protocol has ~60 types in two directions.
 
 use skymesh_runtime::{CounterFamily, Gauge, Stats};

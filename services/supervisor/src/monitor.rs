@@ -157,7 +157,9 @@ pub fn on_stats(mesh: &Mesh, idx: usize, s: &ServiceStats) {
     let monitor_only = mesh.monitor_only;
     mesh.update(idx, |e| {
         if s.header.stamp_ns >= e.spawned_ns && (monitor_only || e.pid.is_some()) {
-            e.stats = Some(Box::new(*s));
+            // In place: the sample is ~130 KiB, too big to pass through the stack.
+            let slot: &mut ServiceStats = e.stats.get_or_insert_with(Box::default);
+            *slot = *s;
         }
     });
 }
@@ -190,7 +192,7 @@ async fn watch(
         let failed = tokio::select! {
             _ = stop.cancelled() => return,
             r = health.recv() => r.map(|h| on_health(&mesh, idx, &h)).err(),
-            r = stats.recv() => r.map(|s| on_stats(&mesh, idx, &s)).err(),
+            r = stats.recv_with(|s| on_stats(&mesh, idx, s)) => r.err(),
         };
         if let Some(e) = failed {
             tracing::warn!(service = %mesh.with(idx, |e| e.name.clone()), error = %e, "reading heartbeats failed; retrying");

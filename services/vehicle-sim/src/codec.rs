@@ -17,12 +17,14 @@
 //! The dialect is built without MAVLink 2 extension fields, so
 //! GIMBAL_DEVICE_ATTITUDE_STATUS, whose `delta_yaw`, `delta_yaw_velocity` and
 //! `gimbal_device_id` are extensions, is encoded here by hand
-//! ([`encode_gimbal_device_attitude_status`]); receivers without the extensions
-//! read the base fields and ignore the rest, as MAVLink 2 requires.
+//! ([`encode_gimbal_device_attitude_status`]), as is SERVO_OUTPUT_RAW with its
+//! extensions `servo9_raw..servo16_raw` ([`encode_servo_output_raw`]); receivers
+//! without the extensions read the base fields and ignore the rest, as MAVLink 2
+//! requires.
 
 use mavlink::dialects::ardupilotmega::{
     MavMessage, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA,
-    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, SERVO_OUTPUT_RAW_DATA,
 };
 use mavlink::error::ParserError;
 use mavlink::{
@@ -321,6 +323,35 @@ pub fn encode_gimbal_device_attitude_status(
     ext[0..4].copy_from_slice(&status.delta_yaw.to_le_bytes());
     ext[4..8].copy_from_slice(&status.delta_yaw_velocity.to_le_bytes());
     ext[8] = status.gimbal_device_id;
+    frame_v2(header, D::ID, D::EXTRA_CRC, &payload, out);
+}
+
+/// SERVO_OUTPUT_RAW with its MAVLink 2 extension fields.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServoOutputRaw {
+    /// The base fields: time, servo outputs 1..=8, port.
+    pub base: SERVO_OUTPUT_RAW_DATA,
+    /// Extensions: servo outputs 9..=16, µs (0 = unused).
+    pub servo9_16: [u16; 8],
+}
+
+/// Bytes of SERVO_OUTPUT_RAW's extension fields on the wire.
+pub const SERVO_OUTPUT_EXTENSION_LEN: usize = 16;
+
+/// Append a MAVLink 2 SERVO_OUTPUT_RAW frame including `servo9_raw..servo16_raw`
+/// (after the base payload, in declaration order).
+pub fn encode_servo_output_raw(header: MavHeader, servos: &ServoOutputRaw, out: &mut Vec<u8>) {
+    type D = SERVO_OUTPUT_RAW_DATA;
+    let mut payload = [0u8; D::ENCODED_LEN + SERVO_OUTPUT_EXTENSION_LEN];
+    servos
+        .base
+        .ser(MavlinkVersion::V2, &mut payload[..D::ENCODED_LEN]);
+    for (chunk, pwm) in payload[D::ENCODED_LEN..]
+        .chunks_exact_mut(2)
+        .zip(servos.servo9_16)
+    {
+        chunk.copy_from_slice(&pwm.to_le_bytes());
+    }
     frame_v2(header, D::ID, D::EXTRA_CRC, &payload, out);
 }
 

@@ -1,9 +1,12 @@
-//! The simulation task: owns the vehicle, steps it at [`PHYSICS_HZ`] against
-//! the clock, runs every link's telemetry schedule, and answers inbound frames.
+//! The simulation task: owns the vehicles (one, or a swarm's), steps them all at
+//! [`PHYSICS_HZ`] against the clock in one tick loop, runs every link's
+//! telemetry schedule, and answers inbound frames.
 //!
 //! One task owns all state, so there are no locks: I/O tasks send it
 //! [`LinkEvent`]s and receive encoded frames on their link's queue. The engine
-//! never waits on a client: a full queue drops the frame and counts it.
+//! never waits on a client: a full queue drops the frame and counts it. A swarm
+//! costs one task and one timer however many vehicles it has; each vehicle's
+//! endpoint adds only its server task and its clients' tasks.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -24,8 +27,19 @@ use crate::stats::{self, SimStats};
 use crate::streams::StreamScheduler;
 use crate::telemetry;
 
-/// Identifies one link (a TCP client, or the UDP socket).
+/// Identifies one link (a TCP client, or a UDP socket). The upper 32 bits are
+/// the index of the vehicle the link belongs to ([`link_id`]).
 pub(crate) type LinkId = u64;
+
+/// The id of link `n` (numbered by its server) of vehicle `vehicle`.
+pub(crate) fn link_id(vehicle: usize, n: u64) -> LinkId {
+    ((vehicle as u64) << 32) | (n & 0xffff_ffff)
+}
+
+/// The index of the vehicle link `id` belongs to.
+fn vehicle_of(id: LinkId) -> usize {
+    (id >> 32) as usize
+}
 
 /// Encoded frames queued per link before the engine drops frames for it
 /// (about four seconds of default telemetry plus 100 Hz ATTITUDE).
@@ -63,25 +77,36 @@ struct Link {
     seq: [u8; 256],
 }
 
-/// The simulation task's state.
-pub(crate) struct Engine {
+/// One simulated vehicle and the links of its endpoint.
+struct SimVehicle {
     system_id: u8,
     vehicle: Vehicle,
     handler: Handler,
     links: BTreeMap<LinkId, Link>,
-    stream_defaults: StreamDefaults,
-    stats: Arc<SimStats>,
-    /// Physics steps taken; sim time is `steps × dt`.
-    steps: u64,
     /// The GoPro heartbeat changed; send one to every link after the replies.
     gopro_changed: bool,
+}
+
+/// The simulation task's state: every vehicle of the process, stepped together
+/// by one tick loop.
+pub(crate) struct Engine {
+    vehicles: Vec<SimVehicle>,
+    stream_defaults: StreamDefaults,
+    stats: Arc<SimStats>,
+    /// Physics steps taken; sim time is `steps × dt` (the same for every vehicle).
+    steps: u64,
+    /// Scratch list of the stream ids due on one link (reused every tick).
+    due: Vec<u32>,
 }
 
 impl std::fmt::Debug for Engine {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Engine")
-            .field("system_id", &self.system_id)
-            .field("links", &self.links.len())
+            .field("vehicles", &self.vehicles.len())
+            .field(
+                "links",
+                &self.vehicles.iter().map(|v| v.links.len()).sum::<usize>(),
+            )
             .field("steps", &self.steps)
             .finish_non_exhaustive()
     }
@@ -95,16 +120,26 @@ fn dt() -> Duration {
 }
 
 impl Engine {
+    /// Every vehicle of `settings` ([`Settings::vehicles`]), in index order.
     pub(crate) fn new(settings: &Settings, stats: Arc<SimStats>) -> Self {
+        let vehicles: Vec<SimVehicle> = settings
+            .vehicles()
+            .into_iter()
+            .map(|spec| SimVehicle {
+                system_id: spec.system_id,
+                vehicle: Vehicle::new(spec.vehicle),
+                handler: Handler::new(spec.system_id),
+                links: BTreeMap::new(),
+                gopro_changed: false,
+            })
+            .collect();
+        stats::set(&stats.vehicles, vehicles.len() as u64);
         Self {
-            system_id: settings.system_id,
-            vehicle: Vehicle::new(settings.vehicle.clone()),
-            handler: Handler::new(settings.system_id),
-            links: BTreeMap::new(),
+            vehicles,
             stream_defaults: settings.streams,
             stats,
             steps: 0,
-            gopro_changed: false,
+            due: Vec::new(),
         }
     }
 
@@ -129,6 +164,7 @@ impl Engine {
                     let n = due.saturating_sub(wall_steps);
                     if n > MAX_CATCH_UP_STEPS {
                         debug!(skipped = n - MAX_CATCH_UP_STEPS, "simulation fell behind; skipping time");
+                        stats::add(&self.stats.steps_skipped, n - MAX_CATCH_UP_STEPS);
                     }
                     wall_steps = due;
                     self.tick(n.min(MAX_CATCH_UP_STEPS));
@@ -140,8 +176,9 @@ impl Engine {
             }
         }
         info!(
-            sim_time_s = self.vehicle.time_s(),
-            links = self.links.len(),
+            sim_time_s = self.steps as f64 * dt.as_secs_f64(),
+            vehicles = self.vehicles.len(),
+            links = self.vehicles.iter().map(|v| v.links.len()).sum::<usize>(),
             "simulation stopped"
         );
     }
@@ -150,32 +187,46 @@ impl Engine {
         Duration::from_micros(self.steps.saturating_mul(DT_US))
     }
 
-    /// Step the physics `n` times, then send events and due telemetry.
+    /// Step every vehicle's physics `n` times, then send its events and due telemetry.
     fn tick(&mut self, n: u64) {
         let dt_s = dt().as_secs_f64();
-        for _ in 0..n {
-            self.vehicle.step(dt_s);
-            self.steps += 1;
-        }
-        self.broadcast_events();
-        self.flush_gopro_heartbeat();
+        self.steps += n;
         let now = self.sim_now();
-        for link in self.links.values_mut() {
-            for id in link.streams.due(now) {
-                if let Some(out) = telemetry::build_outgoing(id, &self.vehicle, self.system_id) {
-                    send(link, self.system_id, &out, &self.stats);
-                }
+        let (mut armed, mut linked) = (0, 0);
+        for v in &mut self.vehicles {
+            for _ in 0..n {
+                v.vehicle.step(dt_s);
             }
+            v.broadcast_events(&self.stats);
+            v.flush_gopro_heartbeat(&self.stats);
+            v.send_due_telemetry(now, &mut self.due, &self.stats);
+            armed += u64::from(v.vehicle.armed());
+            linked += u64::from(!v.links.is_empty());
         }
-        self.stats.observe(&self.vehicle);
+        stats::set(&self.stats.vehicles_armed, armed);
+        stats::set(&self.stats.vehicles_linked, linked);
+        // The payload gauges are the first vehicle's (one set of series for any swarm size).
+        if let Some(first) = self.vehicles.first() {
+            self.stats.observe(&first.vehicle);
+        }
     }
 
     fn on_event(&mut self, ev: LinkEvent) {
+        let now = self.sim_now();
+        let id = match &ev {
+            LinkEvent::Opened { id, .. }
+            | LinkEvent::Frame { id, .. }
+            | LinkEvent::Closed { id } => *id,
+        };
+        let Some(v) = self.vehicles.get_mut(vehicle_of(id)) else {
+            debug!(link = id, "event for a link of no vehicle; ignored");
+            return;
+        };
         match ev {
             LinkEvent::Opened { id, peer, tx } => {
-                info!(link = id, %peer, "link opened");
-                let streams = StreamScheduler::new(&self.stream_defaults, self.sim_now());
-                self.links.insert(
+                info!(link = id, vehicle = v.system_id, %peer, "link opened");
+                let streams = StreamScheduler::new(&self.stream_defaults, now);
+                v.links.insert(
                     id,
                     Link {
                         peer,
@@ -186,26 +237,39 @@ impl Engine {
                 );
             }
             LinkEvent::Closed { id } => {
-                if let Some(link) = self.links.remove(&id) {
-                    info!(link = id, peer = %link.peer, "link closed");
+                if let Some(link) = v.links.remove(&id) {
+                    info!(link = id, vehicle = v.system_id, peer = %link.peer, "link closed");
                 }
             }
-            LinkEvent::Frame { id, frame } => self.on_frame(id, &frame),
+            LinkEvent::Frame { id, frame } => v.on_frame(id, &frame, now, &self.stats),
+        }
+    }
+}
+
+impl SimVehicle {
+    /// Queue every stream due at `now` on every link.
+    fn send_due_telemetry(&mut self, now: Duration, due: &mut Vec<u32>, stats: &SimStats) {
+        for link in self.links.values_mut() {
+            link.streams.due_into(now, due);
+            for id in due.iter() {
+                if let Some(out) = telemetry::build_outgoing(*id, &self.vehicle, self.system_id) {
+                    send(link, self.system_id, &out, stats);
+                }
+            }
         }
     }
 
-    fn on_frame(&mut self, id: LinkId, frame: &Inbound) {
+    fn on_frame(&mut self, id: LinkId, frame: &Inbound, now: Duration, stats: &SimStats) {
         let resp = self.handler.handle(&mut self.vehicle, frame);
         if let Some(result) = resp.ack {
-            self.stats.count_command(result);
+            stats.count_command(result);
         }
         if let Some((request, status)) = resp.gopro {
-            self.stats.count_gopro(request, status);
+            stats.count_gopro(request, status);
         }
         // Status texts raised while handling (e.g. the PreArm reason) go out
         // before the COMMAND_ACK, as on ArduPilot.
-        self.broadcast_events();
-        let now = self.sim_now();
+        self.broadcast_events(stats);
         let Some(link) = self.links.get_mut(&id) else {
             return;
         };
@@ -224,15 +288,15 @@ impl Engine {
             }
         }
         for reply in &resp.replies {
-            send(link, self.system_id, reply, &self.stats);
+            send(link, self.system_id, reply, stats);
         }
         // A GoPro change is announced after its GOPRO_SET_RESPONSE.
-        self.flush_gopro_heartbeat();
+        self.flush_gopro_heartbeat(stats);
     }
 
     /// The GoPro's state changed: the gimbal sends a GOPRO_HEARTBEAT at once
     /// (besides its 1 Hz ones) to every link.
-    fn flush_gopro_heartbeat(&mut self) {
+    fn flush_gopro_heartbeat(&mut self, stats: &SimStats) {
         if !std::mem::take(&mut self.gopro_changed) {
             return;
         }
@@ -241,18 +305,18 @@ impl Engine {
         };
         let out = Outgoing::from_gimbal(msg);
         for link in self.links.values_mut() {
-            send(link, self.system_id, &out, &self.stats);
+            send(link, self.system_id, &out, stats);
         }
     }
 
     /// Vehicle events go to every link: STATUSTEXT, and HOME_POSITION when
     /// home changes (ArduPilot announces a new home unasked). A GoPro change
     /// only marks the GoPro heartbeat due ([`Self::flush_gopro_heartbeat`]).
-    fn broadcast_events(&mut self) {
+    fn broadcast_events(&mut self, stats: &SimStats) {
         for ev in self.vehicle.take_events() {
             let msg: MavMessage = match ev {
                 Event::Text { severity, text } => {
-                    info!(?severity, %text, "status text");
+                    info!(vehicle = self.system_id, ?severity, %text, "status text");
                     telemetry::statustext(severity, &text)
                 }
                 Event::HomeChanged => {
@@ -268,7 +332,7 @@ impl Engine {
             };
             let out = Outgoing::Message(msg);
             for link in self.links.values_mut() {
-                send(link, self.system_id, &out, &self.stats);
+                send(link, self.system_id, &out, stats);
             }
         }
     }
@@ -295,11 +359,72 @@ fn send(link: &mut Link, system_id: u8, out: &Outgoing, stats: &SimStats) {
         Outgoing::GimbalStatus(status) => {
             codec::encode_gimbal_device_attitude_status(header, status, &mut buf)
         }
+        Outgoing::ServoOutput(servos) => codec::encode_servo_output_raw(header, servos, &mut buf),
     }
     match link.tx.try_send(buf) {
         Ok(()) => stats::add(&stats.frames_out, 1),
         Err(TrySendError::Full(_)) => stats::add(&stats.frames_dropped, 1),
         // The I/O task is gone; its Closed event is on the way.
         Err(TrySendError::Closed(_)) => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_ids_carry_their_vehicle() {
+        for vehicle in [0usize, 1, 7, 249] {
+            for n in [0u64, 1, 2, 0xffff_ffff] {
+                assert_eq!(vehicle_of(link_id(vehicle, n)), vehicle);
+            }
+        }
+        assert_ne!(link_id(0, 1), link_id(1, 1));
+        assert_eq!(link_id(0, 5), 5, "a single vehicle's ids are unchanged");
+    }
+
+    #[test]
+    fn one_engine_holds_every_vehicle_of_a_swarm() {
+        let settings = crate::RawConfig::from_toml("[swarm]\ncount = 4\n")
+            .and_then(crate::RawConfig::validate)
+            .expect("valid");
+        let stats = Arc::new(SimStats::default());
+        let mut engine = Engine::new(&settings, stats.clone());
+        let ids: Vec<u8> = engine.vehicles.iter().map(|v| v.system_id).collect();
+        assert_eq!(ids, [1, 2, 3, 4]);
+        assert_eq!(stats.snapshot().vehicles, 4);
+        // One tick steps every vehicle (sim time is shared).
+        engine.tick(3);
+        for v in &engine.vehicles {
+            assert!((v.vehicle.time_s() - 0.03).abs() < 1e-9);
+        }
+        // A link of vehicle 2 gets vehicle 2's telemetry only.
+        let (tx, mut rx) = mpsc::channel(64);
+        engine.on_event(LinkEvent::Opened {
+            id: link_id(2, 1),
+            peer: "test".into(),
+            tx,
+        });
+        engine.tick(1);
+        let frame = rx.try_recv().expect("telemetry queued at once");
+        // MAVLink 2: system id at offset 5.
+        assert_eq!((frame[0], frame[5]), (0xFD, 3));
+        assert_eq!(stats.snapshot().vehicles_linked, 1);
+        assert!(engine
+            .vehicles
+            .iter()
+            .enumerate()
+            .all(|(i, v)| v.links.len() == usize::from(i == 2)));
+        engine.on_event(LinkEvent::Closed { id: link_id(2, 1) });
+        // An id of no vehicle is ignored.
+        let (tx, _rx) = mpsc::channel(1);
+        engine.on_event(LinkEvent::Opened {
+            id: link_id(9, 1),
+            peer: "nobody".into(),
+            tx,
+        });
+        engine.tick(1);
+        assert_eq!(stats.snapshot().vehicles_linked, 0);
     }
 }

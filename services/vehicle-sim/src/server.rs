@@ -4,7 +4,7 @@
 
 use std::io;
 use std::net::SocketAddr;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -19,7 +19,7 @@ use tracing::{debug, info, warn};
 
 use crate::codec::{BadFrame, FrameDecoder};
 use crate::config::{Endpoint, Settings};
-use crate::engine::{LinkEvent, LinkId, LINK_QUEUE_FRAMES};
+use crate::engine::{link_id, LinkEvent, LinkId, LINK_QUEUE_FRAMES};
 use crate::stats::{self, SimStats};
 
 /// Read buffer per TCP client.
@@ -50,9 +50,25 @@ impl BoundEndpoint {
     }
 }
 
-/// Bind the configured endpoint.
+/// Bind the configured endpoint (vehicle 0's in swarm mode; see [`bind_all`]).
 pub async fn bind(settings: &Settings) -> anyhow::Result<BoundEndpoint> {
-    match settings.endpoint {
+    bind_endpoint(settings.endpoint).await
+}
+
+/// Bind every vehicle's endpoint ([`Settings::vehicles`]), in vehicle order.
+pub async fn bind_all(settings: &Settings) -> anyhow::Result<Vec<BoundEndpoint>> {
+    let mut out = Vec::with_capacity(settings.vehicle_count());
+    for spec in settings.vehicles() {
+        let bound = bind_endpoint(spec.endpoint)
+            .await
+            .with_context(|| format!("vehicle with system id {}", spec.system_id))?;
+        out.push(bound);
+    }
+    Ok(out)
+}
+
+async fn bind_endpoint(endpoint: Endpoint) -> anyhow::Result<BoundEndpoint> {
+    match endpoint {
         Endpoint::Tcp(addr) => Ok(BoundEndpoint::Tcp(
             TcpListener::bind(addr)
                 .await
@@ -66,9 +82,11 @@ pub async fn bind(settings: &Settings) -> anyhow::Result<BoundEndpoint> {
     }
 }
 
-/// Serve until `shutdown`; client tasks are spawned on `tracker`.
+/// Serve vehicle `vehicle`'s endpoint until `shutdown`; client tasks are
+/// spawned on `tracker`. `max_clients` applies to this endpoint alone.
 pub(crate) async fn serve(
     listener: BoundEndpoint,
+    vehicle: usize,
     events: mpsc::Sender<LinkEvent>,
     max_clients: usize,
     stats: Arc<SimStats>,
@@ -77,22 +95,27 @@ pub(crate) async fn serve(
 ) -> anyhow::Result<()> {
     match listener {
         BoundEndpoint::Tcp(l) => {
-            serve_tcp(l, events, max_clients, stats, shutdown, tracker).await;
+            serve_tcp(l, vehicle, events, max_clients, stats, shutdown, tracker).await;
             Ok(())
         }
-        BoundEndpoint::Udp(s) => serve_udp(s, events, max_clients, stats, shutdown).await,
+        BoundEndpoint::Udp(s) => {
+            serve_udp(s, link_id(vehicle, 0), events, max_clients, stats, shutdown).await
+        }
     }
 }
 
 async fn serve_tcp(
     listener: TcpListener,
+    vehicle: usize,
     events: mpsc::Sender<LinkEvent>,
     max_clients: usize,
     stats: Arc<SimStats>,
     shutdown: CancellationToken,
     tracker: TaskTracker,
 ) {
-    let mut next_id: LinkId = 1;
+    // Clients of this endpoint (the stats gauge counts every vehicle's).
+    let connected = Arc::new(AtomicU64::new(0));
+    let mut next_id: u64 = 1;
     loop {
         let (stream, peer) = tokio::select! {
             () = shutdown.cancelled() => return,
@@ -108,18 +131,19 @@ async fn serve_tcp(
             },
         };
         // Counted here, before the spawn, so a burst of connects cannot race past the limit.
-        if stats.clients_connected.load(Ordering::Relaxed) >= max_clients as u64 {
+        if connected.load(Ordering::Relaxed) >= max_clients as u64 {
             warn!(%peer, max_clients, "refusing client: too many connected");
             stats::add(&stats.clients_rejected, 1);
             continue;
         }
+        connected.fetch_add(1, Ordering::Relaxed);
         stats::add(&stats.clients_connected, 1);
         stats::add(&stats.clients_total, 1);
         // Small frames (acks, 100 Hz attitude) should not wait for Nagle.
         if let Err(e) = stream.set_nodelay(true) {
             debug!(%peer, error = %e, "set_nodelay failed");
         }
-        let id = next_id;
+        let id = link_id(vehicle, next_id);
         next_id += 1;
         tracker.spawn(tcp_client(
             id,
@@ -127,6 +151,7 @@ async fn serve_tcp(
             peer,
             events.clone(),
             stats.clone(),
+            connected.clone(),
             shutdown.clone(),
         ));
     }
@@ -138,6 +163,7 @@ async fn tcp_client(
     peer: SocketAddr,
     events: mpsc::Sender<LinkEvent>,
     stats: Arc<SimStats>,
+    connected: Arc<AtomicU64>,
     shutdown: CancellationToken,
 ) {
     let (tx, mut rx) = mpsc::channel(LINK_QUEUE_FRAMES);
@@ -175,6 +201,7 @@ async fn tcp_client(
         info!(link = id, %peer, reason, bad_frames = bad.count, "client disconnected");
     }
     stats::sub(&stats.clients_connected, 1);
+    connected.fetch_sub(1, Ordering::Relaxed);
 }
 
 async fn read_loop(
@@ -267,16 +294,16 @@ impl BadFrameLog {
 /// datagram (at most `max_peers`, oldest forgotten first).
 async fn serve_udp(
     socket: UdpSocket,
+    id: LinkId,
     events: mpsc::Sender<LinkEvent>,
     max_peers: usize,
     stats: Arc<SimStats>,
     shutdown: CancellationToken,
 ) -> anyhow::Result<()> {
-    const ID: LinkId = 0;
     let local = socket.local_addr().context("udp local address")?;
     let (tx, mut rx) = mpsc::channel::<Vec<u8>>(LINK_QUEUE_FRAMES);
     let opened = LinkEvent::Opened {
-        id: ID,
+        id,
         peer: format!("udp:{local}"),
         tx,
     };
@@ -321,18 +348,18 @@ async fn serve_udp(
                 // whatever it could not complete is garbage.
                 let mut decoder = FrameDecoder::new();
                 decoder.push(&buf[..n]);
-                if !forward_frames(ID, &mut decoder, &events, &stats, &mut bad).await {
+                if !forward_frames(id, &mut decoder, &events, &stats, &mut bad).await {
                     break;
                 }
                 let leftover = decoder.buffered();
                 if leftover > 0 {
                     stats::add(&stats.garbage_bytes, leftover as u64);
-                    bad.note(ID, &BadFrame::Garbage { len: leftover });
+                    bad.note(id, &BadFrame::Garbage { len: leftover });
                 }
             }
         }
     }
-    let _ = events.send(LinkEvent::Closed { id: ID }).await;
+    let _ = events.send(LinkEvent::Closed { id }).await;
     info!(
         peers = peers.len(),
         bad_frames = bad.count,

@@ -20,10 +20,11 @@ impl ServiceConfig for RawConfig {
 
 /// Binds the endpoint, reports ready and simulates until shutdown.
 pub async fn run_service(settings: Settings, ctx: Context) -> anyhow::Result<()> {
-    let bound = crate::bind(&settings).await?;
+    let bound = crate::bind_all(&settings).await?;
     tracing::info!(
-        endpoint = %bound.local_addr()?,
+        endpoint = %bound[0].local_addr()?,
         system_id = settings.system_id,
+        vehicles = bound.len(),
         "serving MAVLink"
     );
     let stats = Arc::new(SimStats::default());
@@ -33,13 +34,16 @@ pub async fn run_service(settings: Settings, ctx: Context) -> anyhow::Result<()>
         ctx.shutdown.clone(),
     ));
     ctx.ready();
-    let result = crate::run(settings, bound, stats, ctx.shutdown.clone()).await;
+    let result = crate::run_all(settings, bound, stats, ctx.shutdown.clone()).await;
     ctx.shutdown.cancel();
     let _ = exporter.await;
     result
 }
 
 /// Copies the sim's counters into the service's stats registry once a second.
+/// A swarm exports the same fixed set of series as one vehicle (every vehicle
+/// counted together, the payload gauges the first vehicle's), so the size of
+/// the stats sample does not grow with the swarm.
 async fn export_stats(sim: Arc<SimStats>, stats: Stats, stop: tokio_util::sync::CancellationToken) {
     let frames_in = stats.counter("skymesh_sim_mavlink_frames_total", &[("direction", "in")]);
     let frames_out = stats.counter("skymesh_sim_mavlink_frames_total", &[("direction", "out")]);
@@ -71,6 +75,10 @@ async fn export_stats(sim: Arc<SimStats>, stats: Stats, stop: tokio_util::sync::
         gopro("get", "success"),
         gopro("get", "failed"),
     );
+    let vehicles = stats.gauge("skymesh_sim_vehicles", &[]);
+    let vehicles_armed = stats.gauge("skymesh_sim_vehicles_armed", &[]);
+    let vehicles_linked = stats.gauge("skymesh_sim_vehicles_linked", &[]);
+    let steps_skipped = stats.counter("skymesh_sim_physics_steps_skipped_total", &[]);
     let gimbal_pitch = stats.gauge("skymesh_sim_gimbal_pitch_degrees", &[]);
     let gimbal_yaw = stats.gauge("skymesh_sim_gimbal_yaw_degrees", &[]);
     let mut prev = SimStatsSnapshot::default();
@@ -107,6 +115,10 @@ async fn export_stats(sim: Arc<SimStats>, stats: Stats, stop: tokio_util::sync::
         set_failed.add(now.gopro_set_failed.saturating_sub(prev.gopro_set_failed));
         get_ok.add(now.gopro_get_success.saturating_sub(prev.gopro_get_success));
         get_failed.add(now.gopro_get_failed.saturating_sub(prev.gopro_get_failed));
+        vehicles.set(now.vehicles as f64);
+        vehicles_armed.set(now.vehicles_armed as f64);
+        vehicles_linked.set(now.vehicles_linked as f64);
+        steps_skipped.add(now.steps_skipped.saturating_sub(prev.steps_skipped));
         gimbal_pitch.set(now.gimbal_pitch_cdeg as f64 / 100.0);
         gimbal_yaw.set(now.gimbal_yaw_cdeg as f64 / 100.0);
         prev = now;

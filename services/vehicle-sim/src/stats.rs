@@ -8,8 +8,9 @@ use mavlink::dialects::ardupilotmega::{GoproRequestStatus, MavResult};
 use crate::handler::GoProRequest;
 use crate::model::Vehicle;
 
-/// Live counters. All are monotonic except `clients_connected` and the payload
-/// state (`gopro_recording`, `gimbal_*`).
+/// Live counters, for all vehicles of the process together. All are monotonic
+/// except `clients_connected`, `vehicles*` and the payload state
+/// (`gopro_recording`, `gimbal_*`: the first vehicle's).
 #[derive(Debug, Default)]
 pub struct SimStats {
     /// Frames decoded from clients.
@@ -54,6 +55,14 @@ pub struct SimStats {
     pub gimbal_pitch_cdeg: AtomicI64,
     /// Gimbal yaw relative to the nose, centidegrees.
     pub gimbal_yaw_cdeg: AtomicI64,
+    /// Vehicles this process simulates (1, or the swarm's count).
+    pub vehicles: AtomicU64,
+    /// Vehicles armed now.
+    pub vehicles_armed: AtomicU64,
+    /// Vehicles with at least one client (TCP) or the UDP socket open.
+    pub vehicles_linked: AtomicU64,
+    /// Physics steps skipped because the simulation fell behind the clock.
+    pub steps_skipped: AtomicU64,
 }
 
 /// A plain copy of [`SimStats`] at one instant.
@@ -81,6 +90,10 @@ pub struct SimStatsSnapshot {
     pub gopro_get_failed: u64,
     pub gimbal_pitch_cdeg: i64,
     pub gimbal_yaw_cdeg: i64,
+    pub vehicles: u64,
+    pub vehicles_armed: u64,
+    pub vehicles_linked: u64,
+    pub steps_skipped: u64,
 }
 
 impl SimStats {
@@ -109,6 +122,10 @@ impl SimStats {
             gopro_get_failed: r(&self.gopro_get_failed),
             gimbal_pitch_cdeg: self.gimbal_pitch_cdeg.load(Ordering::Relaxed),
             gimbal_yaw_cdeg: self.gimbal_yaw_cdeg.load(Ordering::Relaxed),
+            vehicles: r(&self.vehicles),
+            vehicles_armed: r(&self.vehicles_armed),
+            vehicles_linked: r(&self.vehicles_linked),
+            steps_skipped: r(&self.steps_skipped),
         }
     }
 
@@ -155,6 +172,11 @@ impl SimStats {
 /// Relaxed increment: counters are independent, no ordering needed.
 pub(crate) fn add(c: &AtomicU64, n: u64) {
     c.fetch_add(n, Ordering::Relaxed);
+}
+
+/// Relaxed store of a gauge.
+pub(crate) fn set(c: &AtomicU64, n: u64) {
+    c.store(n, Ordering::Relaxed);
 }
 
 /// Relaxed decrement of a gauge.

@@ -12,7 +12,8 @@ use std::time::Duration;
 use mavlink::dialects::ardupilotmega::{
     MavDataStream, ATTITUDE_DATA, BATTERY_STATUS_DATA, EKF_STATUS_REPORT_DATA,
     GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, GLOBAL_POSITION_INT_DATA, GOPRO_HEARTBEAT_DATA,
-    GPS_RAW_INT_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
+    GPS_RAW_INT_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, SERVO_OUTPUT_RAW_DATA,
+    SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 use mavlink::MessageData;
 
@@ -59,6 +60,7 @@ pub fn stream_group(stream: MavDataStream) -> &'static [u32] {
         MavDataStream::MAV_DATA_STREAM_POSITION => {
             &[GLOBAL_POSITION_INT_DATA::ID, LOCAL_POSITION_NED_DATA::ID]
         }
+        MavDataStream::MAV_DATA_STREAM_RC_CHANNELS => &[SERVO_OUTPUT_RAW_DATA::ID],
         MavDataStream::MAV_DATA_STREAM_EXTRA1 => &[ATTITUDE_DATA::ID],
         MavDataStream::MAV_DATA_STREAM_EXTRA2 => &[VFR_HUD_DATA::ID],
         MavDataStream::MAV_DATA_STREAM_EXTRA3 => &[
@@ -76,8 +78,9 @@ pub fn stream_group(stream: MavDataStream) -> &'static [u32] {
             BATTERY_STATUS_DATA::ID,
             EKF_STATUS_REPORT_DATA::ID,
             GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
+            SERVO_OUTPUT_RAW_DATA::ID,
         ],
-        // RAW_SENSORS, RC_CHANNELS, RAW_CONTROLLER: nothing the sim produces.
+        // RAW_SENSORS, RAW_CONTROLLER: nothing the sim produces.
         _ => &[],
     }
 }
@@ -96,9 +99,9 @@ pub struct StreamScheduler {
 }
 
 impl StreamScheduler {
-    /// Default rates: HEARTBEAT 1 Hz, ATTITUDE, the gimbal attitude, the GoPro
-    /// heartbeat and the rest from `defaults`; everything due at `now` so a new
-    /// link hears a heartbeat at once.
+    /// Default rates: HEARTBEAT 1 Hz, ATTITUDE, the gimbal attitude, the servo
+    /// outputs, the GoPro heartbeat and the rest from `defaults`; everything due at
+    /// `now` so a new link hears a heartbeat at once.
     pub fn new(defaults: &StreamDefaults, now: Duration) -> Self {
         let mut d = BTreeMap::new();
         d.insert(HEARTBEAT_DATA::ID, Some(Duration::from_secs(1)));
@@ -110,6 +113,7 @@ impl StreamScheduler {
             GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID,
             defaults.gimbal_attitude,
         );
+        d.insert(SERVO_OUTPUT_RAW_DATA::ID, defaults.servo_output);
         d.insert(GOPRO_HEARTBEAT_DATA::ID, defaults.gopro_heartbeat);
         let streams = d
             .iter()
@@ -172,6 +176,13 @@ impl StreamScheduler {
     /// Message ids due at `now`, in id order (HEARTBEAT first).
     pub fn due(&mut self, now: Duration) -> Vec<u32> {
         let mut out = Vec::new();
+        self.due_into(now, &mut out);
+        out
+    }
+
+    /// [`Self::due`] into `out` (cleared first), so a caller can reuse one buffer.
+    pub fn due_into(&mut self, now: Duration, out: &mut Vec<u32>) {
+        out.clear();
         for (id, s) in &mut self.streams {
             let Some(interval) = s.interval else { continue };
             if now >= s.next_due {
@@ -184,7 +195,6 @@ impl StreamScheduler {
                 }
             }
         }
-        out
     }
 }
 
@@ -197,6 +207,7 @@ mod tests {
             attitude: Some(Duration::from_millis(100)),
             telemetry: Some(Duration::from_secs(1)),
             gimbal_attitude: Some(Duration::from_millis(100)),
+            servo_output: Some(Duration::from_millis(500)),
             gopro_heartbeat: Some(Duration::from_secs(1)),
         }
     }
@@ -324,6 +335,35 @@ mod tests {
             count(&mut s, GOPRO_HEARTBEAT_DATA::ID, Duration::ZERO, 5),
             0
         );
+    }
+
+    #[test]
+    fn servo_output_has_its_own_default_and_is_in_the_rc_channels_group() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        let id = SERVO_OUTPUT_RAW_DATA::ID;
+        assert_eq!(count(&mut s.clone(), id, Duration::ZERO, 10), 20, "2 Hz");
+        s.request_data_stream(
+            MavDataStream::MAV_DATA_STREAM_RC_CHANNELS,
+            10,
+            true,
+            Duration::ZERO,
+        );
+        assert_eq!(s.interval(id), Some(Duration::from_millis(100)));
+        assert_eq!(
+            s.interval(ATTITUDE_DATA::ID),
+            Some(Duration::from_millis(100)),
+            "only the group's messages change"
+        );
+        s.request_data_stream(MavDataStream::MAV_DATA_STREAM_ALL, 0, false, Duration::ZERO);
+        assert_eq!(s.interval(id), None);
+        s.set_interval(id, IntervalRequest::Default, Duration::ZERO);
+        assert_eq!(s.interval(id), Some(Duration::from_millis(500)));
+        let off = StreamDefaults {
+            servo_output: None,
+            ..defaults()
+        };
+        let mut s = StreamScheduler::new(&off, Duration::ZERO);
+        assert_eq!(count(&mut s, id, Duration::ZERO, 5), 0);
     }
 
     #[test]

@@ -9,11 +9,12 @@ use mavlink::dialects::ardupilotmega::{
     MavSysStatusSensor, MavType, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA,
     COMMAND_ACK_DATA, EKF_STATUS_REPORT_DATA, GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
     GLOBAL_POSITION_INT_DATA, GOPRO_HEARTBEAT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA,
-    HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
+    HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA,
+    SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 use mavlink::MessageData;
 
-use crate::codec::GimbalDeviceAttitudeStatus;
+use crate::codec::{GimbalDeviceAttitudeStatus, ServoOutputRaw};
 use crate::handler::Outgoing;
 use crate::model::Vehicle;
 
@@ -25,11 +26,12 @@ pub const GIMBAL_DEVICE_ID: u8 = 1;
 /// Message ids [`build`] can produce: the only ones SET_MESSAGE_INTERVAL and
 /// REQUEST_MESSAGE accept. (GOPRO_HEARTBEAT is the gimbal's, not the
 /// autopilot's: it is always sent at 1 Hz and cannot be asked for.)
-pub const PRODUCIBLE: [u32; 12] = [
+pub const PRODUCIBLE: [u32; 13] = [
     HEARTBEAT_DATA::ID,
     SYS_STATUS_DATA::ID,
     GPS_RAW_INT_DATA::ID,
     ATTITUDE_DATA::ID,
+    SERVO_OUTPUT_RAW_DATA::ID,
     LOCAL_POSITION_NED_DATA::ID,
     GLOBAL_POSITION_INT_DATA::ID,
     VFR_HUD_DATA::ID,
@@ -64,18 +66,20 @@ pub fn build(id: u32, v: &Vehicle, system_id: u8) -> Option<MavMessage> {
         GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => Some(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(
             gimbal_device_attitude_status(v).base,
         )),
+        SERVO_OUTPUT_RAW_DATA::ID => Some(MavMessage::SERVO_OUTPUT_RAW(servo_output_raw(v).base)),
         _ => None,
     }
 }
 
-/// Message `id` as it goes on the wire: GIMBAL_DEVICE_ATTITUDE_STATUS with its
-/// extension fields, GOPRO_HEARTBEAT from the gimbal (`None` without a GoPro),
-/// the rest as [`build`] makes them, from the autopilot.
+/// Message `id` as it goes on the wire: GIMBAL_DEVICE_ATTITUDE_STATUS and
+/// SERVO_OUTPUT_RAW with their extension fields, GOPRO_HEARTBEAT from the gimbal
+/// (`None` without a GoPro), the rest as [`build`] makes them, from the autopilot.
 pub fn build_outgoing(id: u32, v: &Vehicle, system_id: u8) -> Option<Outgoing> {
     match id {
         GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => {
             Some(Outgoing::GimbalStatus(gimbal_device_attitude_status(v)))
         }
+        SERVO_OUTPUT_RAW_DATA::ID => Some(Outgoing::ServoOutput(servo_output_raw(v))),
         GOPRO_HEARTBEAT_DATA::ID => gopro_heartbeat(v).map(Outgoing::from_gimbal),
         _ => build(id, v, system_id).map(Outgoing::Message),
     }
@@ -361,6 +365,39 @@ pub fn gimbal_device_attitude_status(v: &Vehicle) -> GimbalDeviceAttitudeStatus 
             f32::NAN
         },
         gimbal_device_id: GIMBAL_DEVICE_ID,
+    }
+}
+
+/// SERVO_OUTPUT_RAW, port 0 (outputs 1..=16), as ArduCopter fills it: outputs
+/// 1..=4 are the motors ([`Vehicle::motor_outputs`]: idle, flight throttle or a
+/// motor test), 5..=16 what MAV_CMD_DO_SET_SERVO last set on that channel (0 if
+/// never set).
+pub fn servo_output_raw(v: &Vehicle) -> ServoOutputRaw {
+    let servos = &v.payload().servos;
+    let mut out = [0u16; 16];
+    for (i, pwm) in out.iter_mut().enumerate() {
+        let channel = i as u8 + 1;
+        *pwm = servos.get(&channel).copied().unwrap_or(0);
+    }
+    for (pwm, motor) in out.iter_mut().zip(v.motor_outputs()) {
+        *pwm = motor;
+    }
+    let [s1, s2, s3, s4, s5, s6, s7, s8, rest @ ..] = out;
+    ServoOutputRaw {
+        base: SERVO_OUTPUT_RAW_DATA {
+            // ArduPilot sends its boot time in µs, wrapping at 32 bits.
+            time_usec: (v.time_s() * 1e6) as u64 as u32,
+            servo1_raw: s1,
+            servo2_raw: s2,
+            servo3_raw: s3,
+            servo4_raw: s4,
+            servo5_raw: s5,
+            servo6_raw: s6,
+            servo7_raw: s7,
+            servo8_raw: s8,
+            port: 0,
+        },
+        servo9_16: rest,
     }
 }
 

@@ -1,7 +1,7 @@
 //! Audit: every decision is counted and logged as one structured line (the
 //! `CommandAck` is published by the service), plus the arbiter's other series.
 //!
-//! Series (all registered on first use: the stats sample holds 128 entries for the
+//! Series (all registered on first use: the stats sample holds 384 entries for the
 //! whole service, so no label combination is spent before it happens):
 //! - `skymesh_arbiter_decisions_total{source,decision,reason}` — decision is
 //!   `accepted`, `limited` or `refused`; reason is a `RefusalReason` name (`none`

@@ -10,7 +10,7 @@
 //! | no emergency stop in force, unless the sender is the safety source | `Emergency` |
 //! | authority ([`authority`]: implicit grab, pre-emption by priority) | `NoAuthority` |
 //! | a setpoint is fresh ([`freshness`]) | `Stale` |
-//! | a motor kill while in the air is flagged as an emergency kill | `InAir` |
+//! | in the air ([`in_air`]): a motor kill is flagged as an emergency kill, no motor test, a servo only on a channel of `servo_channels_in_flight` | `InAir` |
 //! | speed limits from the config (reduce → `Limited`) and the geofence ([`geofence`]: position targets refused, velocities reduced → `Limited`) | `Geofence` |
 //!
 //! Only a command that passes every step changes authority (so a refused command
@@ -31,6 +31,9 @@ pub mod freshness;
 pub mod geofence;
 #[cfg(test)]
 mod geofence_tests;
+pub mod in_air;
+#[cfg(test)]
+mod in_air_tests;
 #[cfg(test)]
 mod tests;
 
@@ -66,6 +69,9 @@ pub struct ArbiterSettings {
     pub fence_response_s: f32,
     pub in_air_alt_m: f32,
     pub in_air_speed_mps: f32,
+    /// Servo channels a `Servo` command may drive while in the air (sorted, each
+    /// 1..=32); every other channel is refused `InAir` in flight ([`in_air`]).
+    pub servo_channels_in_flight: Vec<u8>,
 }
 
 /// Position and velocity of the vehicle, as far as the arbiter needs them.
@@ -354,11 +360,10 @@ impl Arbiter {
                 Freshness::Fresh { until_ns } => stream_until = Some(until_ns),
             }
         }
-        if command == (Command::MotorKill { emergency: false }) && vehicle.in_air(&self.settings) {
-            return refused(
-                RefusalReason::InAir,
-                "in the air: only an emergency kill stops the motors",
-            );
+        if let Some(detail) = in_air::refusal(&command, &self.settings.servo_channels_in_flight) {
+            if vehicle.in_air(&self.settings) {
+                return refused(RefusalReason::InAir, detail);
+            }
         }
         let (command, limited) = match self.envelope(command, vehicle, source, effects) {
             Ok(x) => x,

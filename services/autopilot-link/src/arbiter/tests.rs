@@ -5,11 +5,11 @@ use skymesh_ipc_types::{AuthorityChange, FenceKind};
 use CommandSource::*;
 
 const MS: u64 = 1_000_000;
-const S: u64 = 1000 * MS;
+pub(super) const S: u64 = 1000 * MS;
 /// Home of vehicle-sim.
 const HOME: (f64, f64) = (-35.363261, 149.165230);
 
-fn settings() -> ArbiterSettings {
+pub(super) fn settings() -> ArbiterSettings {
     use skymesh_runtime::ServiceConfig;
     crate::config::RawConfig::default()
         .validate()
@@ -17,7 +17,7 @@ fn settings() -> ArbiterSettings {
         .arbiter
 }
 
-fn sample(source: CommandSource, cmd: Command, stamp_ns: u64) -> VehicleCommand {
+pub(super) fn sample(source: CommandSource, cmd: Command, stamp_ns: u64) -> VehicleCommand {
     let mut s = VehicleCommand::new(1, source, 7, &cmd).expect("valid");
     s.header.stamp_ns = stamp_ns;
     s
@@ -31,7 +31,7 @@ fn vel(n: f32, e: f32, d: f32) -> Command {
 }
 
 /// Hovering at 10 m over a point `north`/`east` metres from home, in GUIDED.
-fn flying(north: f64, east: f64, vel_ned_mps: [f32; 3]) -> VehicleView {
+pub(super) fn flying(north: f64, east: f64, vel_ned_mps: [f32; 3]) -> VehicleView {
     let frame = geofence::LocalFrame::new(HOME.0, HOME.1);
     let unit = frame.to_local(HOME.0 + 1e-3, HOME.1 + 1e-3);
     VehicleView {
@@ -46,14 +46,14 @@ fn flying(north: f64, east: f64, vel_ned_mps: [f32; 3]) -> VehicleView {
     }
 }
 
-fn refusal(d: &Decision) -> (RefusalReason, &str) {
+pub(super) fn refusal(d: &Decision) -> (RefusalReason, &str) {
     match &d.outcome {
         Outcome::Refused { reason, detail } => (*reason, detail.as_str()),
         other => panic!("expected a refusal, got {other:?}"),
     }
 }
 
-fn executed(d: &Decision) -> Command {
+pub(super) fn executed(d: &Decision) -> Command {
     match &d.outcome {
         Outcome::Execute { command, .. } => *command,
         other => panic!("expected execution, got {other:?}"),

@@ -349,3 +349,53 @@ fn gimbal_status_truncates_trailing_zeros_across_the_extensions() {
         vec![MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(zero.base)]
     );
 }
+
+#[test]
+fn servo_output_raw_carries_servos_9_to_16() {
+    type D = SERVO_OUTPUT_RAW_DATA;
+    let servos = ServoOutputRaw {
+        base: SERVO_OUTPUT_RAW_DATA {
+            time_usec: 5_000_000,
+            servo1_raw: 1000,
+            servo5_raw: 1900,
+            ..D::DEFAULT
+        },
+        servo9_16: [1100, 0, 0, 0, 0, 0, 0, 2000],
+    };
+    let mut frame = Vec::new();
+    encode_servo_output_raw(hdr(7), &servos, &mut frame);
+    assert_eq!(
+        usize::from(frame[1]),
+        D::ENCODED_LEN + SERVO_OUTPUT_EXTENSION_LEN,
+        "servo 16 is set: nothing truncated"
+    );
+    let ext = &frame[HEADER_V2 + D::ENCODED_LEN..];
+    assert_eq!(ext[0..2], 1100u16.to_le_bytes());
+    assert_eq!(ext[14..16], 2000u16.to_le_bytes());
+    // A decoder without the extensions reads the base fields and the checksum.
+    let mut d = FrameDecoder::new();
+    d.push(&frame);
+    let (ok, bad) = drain(&mut d);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert_eq!(
+        msgs(&ok),
+        vec![MavMessage::SERVO_OUTPUT_RAW(servos.base.clone())]
+    );
+
+    // Nothing above servo 8: the extensions are truncated away entirely.
+    let base_only = ServoOutputRaw {
+        servo9_16: [0; 8],
+        ..servos
+    };
+    frame.clear();
+    encode_servo_output_raw(hdr(8), &base_only, &mut frame);
+    // The last non-zero byte is servo5's high byte (offset 13).
+    assert_eq!(frame[1], 14);
+    d.push(&frame);
+    let (ok, bad) = drain(&mut d);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert_eq!(
+        msgs(&ok),
+        vec![MavMessage::SERVO_OUTPUT_RAW(base_only.base)]
+    );
+}

@@ -13,8 +13,8 @@ use mavlink::MessageData;
 use nalgebra::Vector3;
 use tracing::{debug, info, warn};
 
-use super::gimbal;
 use super::setpoint::global_to_ned;
+use super::{actuators, gimbal};
 use super::{set_mode, Outgoing, Response, StreamRequest};
 use crate::model::{FlightMode, SpeedKind, Vehicle};
 use crate::streams::IntervalRequest;
@@ -25,9 +25,6 @@ const FORCE_MAGIC: f32 = 21196.0;
 
 /// MAV_DO_REPOSITION_FLAGS_CHANGE_MODE.
 const REPOSITION_CHANGE_MODE: i32 = 1;
-
-/// Servo channels ArduPilot has outputs for.
-const MAX_SERVO_CHANNEL: f32 = 32.0;
 
 /// A command from either COMMAND_LONG or COMMAND_INT.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -190,15 +187,9 @@ fn run(
             v.set_roi(None);
             MAV_RESULT_ACCEPTED
         }
-        MavCmd::MAV_CMD_DO_SET_SERVO => {
-            if (1.0..=MAX_SERVO_CHANNEL).contains(&p1) && (0.0..=f32::from(u16::MAX)).contains(&p2)
-            {
-                v.payload_mut().servos.insert(p1 as u8, p2 as u16);
-                MAV_RESULT_ACCEPTED
-            } else {
-                MAV_RESULT_FAILED
-            }
-        }
+        MavCmd::MAV_CMD_DO_SET_SERVO => actuators::set_servo(v, p1, p2),
+        MavCmd::MAV_CMD_DO_MOTOR_TEST => actuators::motor_test(v, cmd),
+        MavCmd::MAV_CMD_SET_CAMERA_ZOOM => actuators::camera_zoom(v, cmd),
         MavCmd::MAV_CMD_DO_REPOSITION => reposition(v, cmd),
         MavCmd::MAV_CMD_DO_SET_HOME => set_home(v, cmd),
         MavCmd::MAV_CMD_DO_MOUNT_CONTROL => gimbal::mount_control(v, cmd),

@@ -5,6 +5,7 @@
 // REQUEST_DATA_STREAM is deprecated in MAVLink but ArduPilot still honours it.
 #![allow(deprecated)]
 
+mod actuators;
 mod command;
 mod gimbal;
 mod gopro;
@@ -16,7 +17,7 @@ use mavlink::dialects::ardupilotmega::{
 use mavlink::Message;
 use tracing::{debug, info};
 
-use crate::codec::{GimbalDeviceAttitudeStatus, Inbound};
+use crate::codec::{GimbalDeviceAttitudeStatus, Inbound, ServoOutputRaw};
 use crate::config::{COMPONENT_ID, GIMBAL_COMPONENT_ID};
 use crate::model::Vehicle;
 use crate::streams::IntervalRequest;
@@ -53,6 +54,8 @@ pub enum Outgoing {
     /// GIMBAL_DEVICE_ATTITUDE_STATUS with its extension fields, from the
     /// autopilot (which drives the mount, as ArduPilot does).
     GimbalStatus(GimbalDeviceAttitudeStatus),
+    /// SERVO_OUTPUT_RAW with servo outputs 9..=16, from the autopilot.
+    ServoOutput(ServoOutputRaw),
 }
 
 impl Outgoing {

@@ -13,6 +13,7 @@ use nalgebra::Vector3;
 
 use crate::model::{FlightMode, VehicleParams};
 
+mod actuators;
 mod home;
 mod payload;
 

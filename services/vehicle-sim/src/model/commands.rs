@@ -35,6 +35,8 @@ pub enum ArmRefusal {
     },
     /// The mode does not allow arming (LAND, RTL, AUTO without mission, CIRCLE).
     ModeNotArmable(FlightMode),
+    /// A ground motor test is running (even a forced arm waits for its end).
+    MotorTesting,
 }
 
 impl ArmRefusal {
@@ -47,12 +49,16 @@ impl ArmRefusal {
                 "PreArm: Battery 1 below minimum arming capacity".to_owned()
             }
             ArmRefusal::ModeNotArmable(_) => "Arm: Mode not armable".to_owned(),
+            ArmRefusal::MotorTesting => "PreArm: Motor Testing".to_owned(),
         }
     }
 
     /// A retry later may succeed without anyone doing anything.
     pub fn is_temporary(&self) -> bool {
-        matches!(self, ArmRefusal::NoGpsFix | ArmRefusal::EkfNotReady)
+        matches!(
+            self,
+            ArmRefusal::NoGpsFix | ArmRefusal::EkfNotReady | ArmRefusal::MotorTesting
+        )
     }
 }
 
@@ -157,6 +163,11 @@ impl Vehicle {
     pub fn arm(&mut self, force: bool) -> Result<(), ArmRefusal> {
         if self.armed {
             return Ok(());
+        }
+        if self.motor_testing() {
+            let refusal = ArmRefusal::MotorTesting;
+            self.say(MavSeverity::MAV_SEVERITY_CRITICAL, &refusal.text());
+            return Err(refusal);
         }
         if !force {
             if let Err(refusal) = self.arming_checks() {

@@ -14,6 +14,7 @@ pub mod gimbal;
 pub mod gopro;
 mod guidance;
 mod mode;
+pub mod motors;
 mod params;
 mod payload;
 mod yaw;
@@ -31,8 +32,11 @@ pub use geo::{GeoPoint, LocalFrame};
 pub use gimbal::{Gimbal, GimbalAttitude, GimbalTarget, YawFrame};
 pub use gopro::{GoPro, GoProHeartbeat, GoProRefusal};
 pub use mode::FlightMode;
+pub use motors::{MotorTestRefusal, MotorTestRequest, TestThrottle};
 pub use params::VehicleParams;
-pub use payload::{MountTarget, Payload};
+pub use payload::{
+    MountTarget, Payload, Zoom, ZoomRefusal, MAX_ZOOM_STEPS, ZOOM_RATE_PCT_S, ZOOM_STEP_PCT,
+};
 pub use yaw::YawMode;
 
 use control::{tilt_for, track_velocity, update_attitude, GRAVITY};
@@ -114,6 +118,8 @@ pub struct Vehicle {
     gimbal: Gimbal,
     /// `None` when no GoPro is fitted (`VehicleParams::gopro` false).
     gopro: Option<GoPro>,
+    /// The ground motor test running, if any.
+    motor_test: Option<motors::MotorTest>,
     events: Vec<Event>,
 }
 
@@ -154,6 +160,7 @@ impl Vehicle {
             payload: Payload::default(),
             gimbal: Gimbal::new(params.gimbal_slew_rate),
             gopro: params.gopro.then(GoPro::default),
+            motor_test: None,
             events: Vec::new(),
             params,
         };
@@ -186,6 +193,8 @@ impl Vehicle {
             .roi
             .map(|roi| gimbal::aim_at(&self.pos, &roi, self.att.yaw));
         self.gimbal.step(self.att.yaw, aim, dt);
+        self.payload.zoom.step(dt);
+        self.step_motor_test();
         if let Some(gopro) = &mut self.gopro {
             if gopro.step(dt) {
                 self.events.push(Event::GoProChanged);

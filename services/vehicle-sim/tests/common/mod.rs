@@ -12,7 +12,7 @@ use mavlink::dialects::ardupilotmega::{
 };
 use mavlink::MavHeader;
 use skymesh_vehicle_sim::codec::{self, FrameDecoder, Inbound};
-use skymesh_vehicle_sim::{bind, run, RawConfig, SimStats};
+use skymesh_vehicle_sim::{bind, bind_all, run, run_all, RawConfig, SimStats};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
@@ -74,6 +74,62 @@ impl Drop for Sim {
     }
 }
 
+/// A simulator in swarm mode: one `run_all` serving every vehicle of `[swarm]`.
+pub struct Swarm {
+    /// Vehicle i's endpoint.
+    pub addrs: Vec<SocketAddr>,
+    pub stats: Arc<SimStats>,
+    shutdown: CancellationToken,
+    task: Option<JoinHandle<anyhow::Result<()>>>,
+}
+
+impl Swarm {
+    /// Start with `raw` (its endpoint port is replaced by 0 on 127.0.0.1, so every
+    /// vehicle gets its own ephemeral port).
+    pub async fn start(mut raw: RawConfig) -> Swarm {
+        let scheme = raw.endpoint.split(':').next().unwrap_or("tcp").to_owned();
+        raw.endpoint = format!("{scheme}:127.0.0.1:0");
+        let settings = raw.validate().expect("valid test config");
+        let listeners = bind_all(&settings).await.expect("bind");
+        let addrs = listeners
+            .iter()
+            .map(|l| l.local_addr().expect("local addr"))
+            .collect();
+        let stats = Arc::new(SimStats::default());
+        let shutdown = CancellationToken::new();
+        let task = tokio::spawn(run_all(
+            settings,
+            listeners,
+            stats.clone(),
+            shutdown.clone(),
+        ));
+        Swarm {
+            addrs,
+            stats,
+            shutdown,
+            task: Some(task),
+        }
+    }
+
+    /// Cancel and wait for `run_all` to return; it must return Ok.
+    pub async fn stop(mut self) {
+        self.shutdown.cancel();
+        if let Some(task) = self.task.take() {
+            timeout(WAIT, task)
+                .await
+                .expect("run_all stops promptly")
+                .expect("run_all task did not panic")
+                .expect("run_all returns Ok");
+        }
+    }
+}
+
+impl Drop for Swarm {
+    fn drop(&mut self) {
+        self.shutdown.cancel();
+    }
+}
+
 /// A ground station over TCP.
 pub struct Gcs {
     stream: TcpStream,
@@ -81,6 +137,8 @@ pub struct Gcs {
     seq: u8,
     /// Frames the codec rejected (e.g. a raw COMMAND_ACK for an unknown command).
     pub bad_frames: usize,
+    /// The system id commands are addressed to (1 unless set).
+    pub target_system: u8,
 }
 
 pub const GCS_HEADER: MavHeader = MavHeader {
@@ -96,6 +154,7 @@ impl Gcs {
             decoder: FrameDecoder::new(),
             seq: 0,
             bad_frames: 0,
+            target_system: 1,
         }
     }
 
@@ -178,7 +237,7 @@ impl Gcs {
         .await
     }
 
-    /// COMMAND_LONG to system 1 / component 1; returns the ACK result and
+    /// COMMAND_LONG to [`Gcs::target_system`] / component 1; returns the ACK result and
     /// every STATUSTEXT seen before it.
     pub async fn command_with_texts(
         &mut self,
@@ -194,7 +253,7 @@ impl Gcs {
             param6: p[5],
             param7: p[6],
             command,
-            target_system: 1,
+            target_system: self.target_system,
             target_component: 1,
             confirmation: 0,
         }))

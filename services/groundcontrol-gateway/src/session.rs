@@ -1,0 +1,194 @@
+//! One state-server connection: a reader that cuts 32-byte records, decides about
+//! each ([`crate::inbound`]) and publishes the commands, and a writer that drains
+//! the connection's bounded outgoing queue.
+//!
+//! Each connection has its own buffer and its own parameter records, so a client
+//! that disconnects inside a record, floods garbage or stops reading affects only
+//! itself: its partial record is dropped and counted, and a full outgoing queue
+//! closes it without ever blocking the hub or another client.
+
+use std::fmt;
+use std::net::SocketAddr;
+
+use bytes::BytesMut;
+use gc_proto::{Record, RecordCodec, RECORD_LEN};
+use skymesh_runtime::IpcError;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::net::TcpStream;
+use tokio::sync::mpsc;
+use tokio_util::codec::Decoder;
+use tokio_util::sync::CancellationToken;
+
+use crate::drops::Drops;
+use crate::inbound::{Inbound, Verdict};
+use crate::ipc::Commands;
+use crate::metrics::DisconnectReason;
+
+/// Bytes asked of the socket per read.
+const READ_CHUNK: usize = 4096;
+/// Records are written in batches of up to this many bytes.
+const WRITE_BATCH: usize = 64 * 1024;
+
+/// How a session ended.
+#[derive(Debug)]
+pub enum End {
+    /// The client closed the connection between records.
+    Closed,
+    /// The client closed it with this many bytes of a record buffered.
+    Truncated(usize),
+    /// The client stopped reading: its outgoing queue filled.
+    Overflow,
+    /// The hub closed it (shutdown, or the hub found the queue full).
+    Cancelled,
+    Io(std::io::Error),
+    /// The bus failed: fatal for the service.
+    Bus(IpcError),
+}
+
+impl End {
+    /// The `reason` label of the disconnect (`None` for a bus failure).
+    pub fn reason(&self) -> DisconnectReason {
+        match self {
+            End::Closed => DisconnectReason::Closed,
+            End::Truncated(_) => DisconnectReason::Truncated,
+            End::Overflow => DisconnectReason::Overflow,
+            End::Cancelled => DisconnectReason::Shutdown,
+            End::Io(_) | End::Bus(_) => DisconnectReason::Io,
+        }
+    }
+}
+
+impl fmt::Display for End {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            End::Closed => f.write_str("closed by the client"),
+            End::Truncated(n) => write!(
+                f,
+                "closed by the client inside a record ({n} of {RECORD_LEN} bytes dropped)"
+            ),
+            End::Overflow => f.write_str("outgoing queue full: the client stopped reading"),
+            End::Cancelled => f.write_str("closed by the gateway"),
+            End::Io(e) => write!(f, "connection error: {e}"),
+            End::Bus(e) => write!(f, "bus error: {e}"),
+        }
+    }
+}
+
+/// What a session needs besides its socket.
+#[derive(Debug, Clone)]
+pub struct SessionCtx {
+    /// The connection id carried in every `SwarmCommand` (`client`).
+    pub client: u16,
+    pub peer: SocketAddr,
+    pub privileged: bool,
+    pub commands: Commands,
+    pub drops: Drops,
+    /// The session's own outgoing queue (PING_RESPONSE goes straight back).
+    pub replies: mpsc::Sender<Record>,
+}
+
+/// Serves one connection until the client leaves, its input or reading forces a
+/// close, or `cancel`.
+pub async fn run(
+    stream: TcpStream,
+    ctx: SessionCtx,
+    outgoing: mpsc::Receiver<Record>,
+    cancel: CancellationToken,
+) -> End {
+    let (read, write) = stream.into_split();
+    tokio::select! {
+        _ = cancel.cancelled() => End::Cancelled,
+        end = read_loop(read, &ctx) => end,
+        end = write_loop(write, outgoing, &ctx) => end,
+    }
+}
+
+async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
+    let mut inbound = Inbound::new(ctx.client, ctx.privileged);
+    let mut codec = RecordCodec::new();
+    let mut buf = BytesMut::with_capacity(READ_CHUNK);
+    loop {
+        loop {
+            let record = match codec.decode(&mut buf) {
+                Ok(Some(r)) => r,
+                Ok(None) => break,
+                Err(e) => return End::Io(std::io::Error::other(e)),
+            };
+            if let Some(end) = handle(&mut inbound, &record, ctx) {
+                return end;
+            }
+        }
+        buf.reserve(READ_CHUNK);
+        match read.read_buf(&mut buf).await {
+            Ok(0) if buf.is_empty() => return End::Closed,
+            Ok(0) => return End::Truncated(buf.len()),
+            Ok(_) => {}
+            Err(e) => return End::Io(e),
+        }
+    }
+}
+
+/// Acts on one record; `Some` ends the session.
+fn handle(inbound: &mut Inbound, record: &Record, ctx: &SessionCtx) -> Option<End> {
+    let metrics = ctx.drops.metrics();
+    metrics.record_in(record.kind);
+    match inbound.on_record(record) {
+        Verdict::Reply(reply) => match ctx.replies.try_send(reply) {
+            Ok(()) => None,
+            Err(mpsc::error::TrySendError::Full(_)) => Some(End::Overflow),
+            Err(mpsc::error::TrySendError::Closed(_)) => Some(End::Cancelled),
+        },
+        Verdict::Publish(cmd) => match ctx.commands.publish(*cmd) {
+            Ok(request_id) => {
+                metrics.commands_published.inc();
+                tracing::debug!(
+                    client = ctx.client,
+                    request_id,
+                    drone = cmd.drone,
+                    kind = cmd.kind().map_or("?", |k| k.as_str()),
+                    "swarm command published"
+                );
+                None
+            }
+            Err(e) => Some(End::Bus(e)),
+        },
+        Verdict::Stored | Verdict::Ignored => None,
+        Verdict::Refused(r) => {
+            ctx.drops.refused(r.reason, ctx.client, ctx.peer, &r.detail);
+            None
+        }
+    }
+}
+
+async fn write_loop(
+    mut write: OwnedWriteHalf,
+    mut outgoing: mpsc::Receiver<Record>,
+    ctx: &SessionCtx,
+) -> End {
+    let metrics = ctx.drops.metrics();
+    let mut batch: Vec<u8> = Vec::with_capacity(WRITE_BATCH);
+    let mut kinds: Vec<i32> = Vec::new();
+    while let Some(first) = outgoing.recv().await {
+        batch.clear();
+        kinds.clear();
+        batch.extend_from_slice(&first.encode());
+        kinds.push(first.kind);
+        while batch.len() < WRITE_BATCH {
+            match outgoing.try_recv() {
+                Ok(next) => {
+                    batch.extend_from_slice(&next.encode());
+                    kinds.push(next.kind);
+                }
+                Err(_) => break,
+            }
+        }
+        if let Err(e) = write.write_all(&batch).await {
+            return End::Io(e);
+        }
+        for k in &kinds {
+            metrics.record_out(*k);
+        }
+    }
+    End::Cancelled
+}

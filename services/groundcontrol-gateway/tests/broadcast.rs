@@ -1,0 +1,128 @@
+//! The pose broadcast in-process: nothing before the first SwarmState, then one
+//! datagram of 84-byte records per tick with the right ids and poses; a pause when
+//! the swarm queue falls silent; 250 drones in one datagram.
+
+mod common;
+
+use std::f32::consts::FRAC_1_SQRT_2;
+use std::time::Duration;
+
+use common::{swarm_state, Gateway, PATIENCE};
+use gc_proto::{PoseRecord, POSE_RECORD_LEN};
+use skymesh_ipc_types::SwarmState;
+
+/// Publishes `state` as the queue does (every 50 ms: a sample published before the
+/// gateway subscribed reaches it only with the publisher's next send) until a
+/// datagram with `n` records arrives.
+async fn publish_until_broadcast(gw: &mut Gateway, state: SwarmState) -> Vec<PoseRecord> {
+    let n = usize::from(state.count);
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    loop {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no datagram of {n} drones"
+        );
+        gw.publish_state(state);
+        if let Some((_, poses)) = gw.poses.recv(Duration::from_millis(50)).await.expect("udp") {
+            let poses = poses.expect("a whole number of 84-byte records");
+            if poses.len() == n {
+                return poses;
+            }
+        }
+    }
+}
+
+async fn next_poses(gw: &mut Gateway) -> Vec<PoseRecord> {
+    let (_, poses) = gw
+        .poses
+        .recv(PATIENCE)
+        .await
+        .expect("udp")
+        .unwrap_or_else(|| panic!("no pose datagram within {PATIENCE:?}"));
+    poses.expect("a whole number of 84-byte records")
+}
+
+#[tokio::test]
+async fn poses_of_every_drone_once_the_queue_publishes() {
+    let mut gw = Gateway::start_with(|s| s.broadcast_period = Duration::from_millis(20)).await;
+    // No SwarmState yet: no datagram.
+    assert!(gw
+        .poses
+        .recv(Duration::from_millis(300))
+        .await
+        .expect("udp")
+        .is_none());
+    gw.wait_metric("skymesh_gc_broadcast_datagrams_total", "", 0.0)
+        .await;
+    assert!(gw
+        .metric("skymesh_gc_broadcast_skipped_total", "reason=no_state")
+        .is_some_and(|n| n >= 1.0));
+
+    let first = publish_until_broadcast(&mut gw, swarm_state(5, 42.5)).await;
+    assert_eq!(first.len(), 5);
+    for (i, p) in first.iter().enumerate() {
+        let f = i as f32;
+        assert_eq!(p.id, 100 + i as u16);
+        assert_eq!((p.object_type, p.liveness), (0, 2), "UAV, simulated");
+        assert_eq!(p.tracking, [f, 2.0 * f, 10.0]);
+        assert_eq!(p.tracking_yaw_deg, 90.0);
+        assert_eq!(p.target, [f + 5.0, 2.0 * f, 10.0]);
+        assert_eq!(p.target_yaw_deg, 180.0);
+        assert_eq!(p.color, [0.0, 1.0, 0.0]);
+        assert_eq!(p.timestamp, 42.5);
+        assert_eq!(p.quaternion, [0.0, 0.0, FRAC_1_SQRT_2, FRAC_1_SQRT_2]);
+        assert_eq!(p.drone_state, 5);
+        assert_eq!(p.flags, 0x03, "idle | active; skymesh's bits masked");
+        assert_eq!(p.frame_count, first[0].frame_count);
+    }
+    let second = next_poses(&mut gw).await;
+    assert!(second[0].frame_count > first[0].frame_count);
+
+    // A newer state replaces the old one.
+    let poses = publish_until_broadcast(&mut gw, swarm_state(2, 43.0)).await;
+    assert_eq!(poses[1].timestamp, 43.0);
+    assert!(gw
+        .metric("skymesh_gc_broadcast_bytes_total", "")
+        .is_some_and(|b| b >= (5 * POSE_RECORD_LEN) as f64));
+    gw.wait_metric("skymesh_gc_broadcast_drones", "", 2.0).await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn the_broadcast_pauses_when_the_queue_falls_silent() {
+    let mut gw = Gateway::start_with(|s| {
+        s.broadcast_period = Duration::from_millis(20);
+        s.state_timeout = Duration::from_millis(300);
+    })
+    .await;
+    publish_until_broadcast(&mut gw, swarm_state(3, 1.0)).await;
+    // Within ~300 ms the datagrams stop.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while gw
+        .metric("skymesh_gc_broadcast_skipped_total", "reason=stale")
+        .is_none()
+    {
+        assert!(tokio::time::Instant::now() < deadline, "never went stale");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    while gw
+        .poses
+        .recv(Duration::from_millis(100))
+        .await
+        .expect("udp")
+        .is_some()
+    {}
+    // A new state resumes it.
+    publish_until_broadcast(&mut gw, swarm_state(4, 2.0)).await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn two_hundred_fifty_drones_fit_one_datagram() {
+    let mut gw = Gateway::start_with(|s| s.broadcast_period = Duration::from_millis(20)).await;
+    let poses = publish_until_broadcast(&mut gw, swarm_state(250, 7.0)).await;
+    assert_eq!(poses.len(), 250);
+    assert_eq!(poses[249].id, 349);
+    assert_eq!(poses[249].tracking, [249.0, 498.0, 10.0]);
+    gw.stop().await;
+}

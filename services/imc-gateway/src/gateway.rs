@@ -1,0 +1,220 @@
+//! The gateway's one loop: the UDP socket, the bus subscriptions and a 100 ms tick
+//! feed the [`Engine`]; what it returns is sent, published, counted and logged here.
+
+use std::collections::HashSet;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context as _;
+use imc_proto::{encode_datagram, Header};
+use skymesh_runtime::Context;
+use tokio::net::UdpSocket;
+
+use crate::config::Settings;
+use crate::describe::{describe, message_name};
+use crate::drops::Drops;
+use crate::engine::{Engine, Outputs, Send};
+use crate::ipc::Ports;
+use crate::metrics::{Direction, Metrics};
+
+/// How often the engine's schedules are looked at.
+const TICK: Duration = Duration::from_millis(100);
+/// Receive buffer: larger than any UDP payload.
+const RECV_BUFFER: usize = 65_536;
+/// Destinations remembered as failing (each logged once).
+const MAX_FAILING: usize = 1024;
+
+/// Seconds since the Unix epoch (IMC header timestamps).
+fn unix_now() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// Writes IMC datagrams: little-endian, our address and entity as source.
+#[derive(Debug)]
+struct Sender {
+    address: u16,
+    entity: u8,
+    metrics: Metrics,
+    /// Destinations whose last send failed (logged once until they work again).
+    failing: HashSet<SocketAddr>,
+}
+
+impl Sender {
+    async fn send(&mut self, socket: &UdpSocket, s: &Send) {
+        let name = message_name(&s.message);
+        let header = Header {
+            mgid: 0,
+            size: 0,
+            timestamp: unix_now(),
+            src: self.address,
+            src_ent: self.entity,
+            dst: s.to.dst,
+            dst_ent: s.to.dst_ent,
+        };
+        let bytes = match encode_datagram(&header, &s.message) {
+            Ok(b) => b,
+            Err(e) => {
+                self.metrics.send_error(name);
+                tracing::error!(message = name, error = %e, "cannot encode an IMC message");
+                return;
+            }
+        };
+        match socket.send_to(&bytes, s.to.addr).await {
+            Ok(_) => {
+                self.metrics.message(Direction::Out, name);
+                if self.failing.remove(&s.to.addr) {
+                    tracing::info!(to = %s.to.addr, "IMC destination reachable again");
+                }
+                tracing::trace!(to = %s.to.addr, message = %describe(&s.message), "sent");
+            }
+            Err(e) => {
+                self.metrics.send_error(name);
+                if self.failing.len() >= MAX_FAILING {
+                    self.failing.clear();
+                }
+                if self.failing.insert(s.to.addr) {
+                    tracing::warn!(
+                        to = %s.to.addr,
+                        message = name,
+                        error = %e,
+                        "cannot send to this IMC destination (logged once until it works again)"
+                    );
+                } else {
+                    tracing::debug!(to = %s.to.addr, message = name, error = %e, "send failed");
+                }
+            }
+        }
+    }
+}
+
+/// Carries out one round of outputs. A bus failure is fatal (the service is
+/// restarted); a socket failure is not.
+async fn execute(
+    out: Outputs,
+    socket: &UdpSocket,
+    ports: &mut Ports,
+    sender: &mut Sender,
+    drops: &mut Drops,
+    metrics: &Metrics,
+    now: Instant,
+) -> anyhow::Result<()> {
+    for name in out.received {
+        metrics.message(Direction::In, name);
+    }
+    for d in &out.drops {
+        drops.record(d, now);
+    }
+    for request in out.hardware {
+        tracing::debug!(id = request.request_id, op = request.op, name = %request.name, "hardware request");
+        ports
+            .hardware_requests
+            .publish(request)
+            .context("publishing a hardware request")?;
+        metrics.published("hardware_request");
+    }
+    for command in out.commands {
+        tracing::debug!(
+            id = command.command_id,
+            kind = command.kind,
+            "vehicle command"
+        );
+        ports
+            .commands
+            .publish(command)
+            .context("publishing a vehicle command")?;
+        metrics.published("command");
+    }
+    for button in out.buttons {
+        tracing::debug!(button = button.button, event = button.event, "button event");
+        ports
+            .buttons
+            .publish(button)
+            .context("publishing a button event")?;
+        metrics.published("button");
+    }
+    for s in &out.sends {
+        sender.send(socket, s).await;
+    }
+    Ok(())
+}
+
+/// Runs the gateway on an already-bound socket until `ctx.shutdown` is cancelled
+/// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once its bus
+/// ports exist.
+pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow::Result<()> {
+    let local = socket.local_addr().context("reading the bound address")?;
+    let mut ports = Ports::open(&ctx.bus, settings.vehicle_id)?;
+    let metrics = Metrics::new(&ctx.stats);
+    let mut drops = Drops::new(metrics.clone());
+    let mut sender = Sender {
+        address: settings.address,
+        entity: settings.entity,
+        metrics: metrics.clone(),
+        failing: HashSet::new(),
+    };
+    tracing::info!(
+        listen = %local,
+        address = format!("{:#06x}", settings.address),
+        entity = settings.entity,
+        system_name = %settings.system_name,
+        vehicle_id = settings.vehicle_id,
+        static_peers = ?settings.static_peers,
+        announce_to = ?settings.announce_destinations,
+        buttons = %crate::engine::button_ids(&settings.buttons),
+        "imc-gateway serving IMC over UDP"
+    );
+    let mut engine = Engine::new(settings, local, ports.origin, Instant::now());
+    metrics.peers.set(engine.peer_count() as f64);
+    ctx.ready();
+
+    let mut buf = vec![0u8; RECV_BUFFER];
+    let mut tick = tokio::time::interval(TICK);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        let mut out = Outputs::default();
+        tokio::select! {
+            _ = ctx.shutdown.cancelled() => break,
+            r = socket.recv_from(&mut buf) => match r {
+                Ok((n, from)) => engine.on_datagram(from, &buf[..n], Instant::now(), &mut out),
+                // Unconnected UDP sockets report little; nothing here is the peer's fault
+                // or fatal. A short pause keeps a persistent error from spinning.
+                Err(e) => {
+                    tracing::debug!(error = %e, "UDP receive failed");
+                    tokio::time::sleep(Duration::from_millis(10)).await;
+                }
+            },
+            r = ports.hardware_replies.recv() => {
+                let reply = r.context("receiving hardware replies")?;
+                engine.on_hardware_reply(&reply, Instant::now(), &mut out);
+            }
+            r = ports.hardware_state.recv() => {
+                engine.on_hardware_state(r.context("receiving the hardware state")?);
+            }
+            r = ports.acks.recv() => {
+                engine.on_command_ack(&r.context("receiving command acks")?, &mut out);
+            }
+            r = ports.vehicle_state.recv() => {
+                engine.on_vehicle_state(r.context("receiving the vehicle state")?);
+            }
+            r = ports.vehicle_status.recv() => {
+                engine.on_vehicle_status(r.context("receiving the vehicle status")?);
+            }
+            _ = tick.tick() => engine.tick(Instant::now(), &mut out),
+        }
+        execute(
+            out,
+            &socket,
+            &mut ports,
+            &mut sender,
+            &mut drops,
+            &metrics,
+            Instant::now(),
+        )
+        .await?;
+        metrics.peers.set(engine.peer_count() as f64);
+    }
+    tracing::info!("imc-gateway stopped");
+    Ok(())
+}

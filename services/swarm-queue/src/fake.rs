@@ -1,0 +1,288 @@
+//! A kinematic stand-in for N vehicles behind their autopilot links, for the unit
+//! tests and the benchmark: it answers `VehicleCommand`s with `CommandAck`s roughly
+//! as ArduCopter behind the arbiter would, moves in straight lines at a capped
+//! speed, and publishes `VehicleState` / `VehicleStatus`. Not a flight model (the
+//! real one is vehicle-sim).
+
+use skymesh_ipc_types::{
+    AckResult, Command, CommandAck, CommandKind, FixedStr, FlightMode, RefusalReason,
+    VehicleCommand, VehicleState, VehicleStatus,
+};
+
+use crate::core::Swarm;
+use crate::site::{heading_of_yaw, SiteFrame};
+
+/// One simulated vehicle; positions in the site frame.
+#[derive(Debug, Clone)]
+pub struct FakeVehicle {
+    pub vehicle_id: u8,
+    pub site: SiteFrame,
+    /// Home, site frame (z = ground height above the site origin).
+    pub home: [f64; 3],
+    pub pos: [f64; 3],
+    pub vel: [f64; 3],
+    pub armed: bool,
+    pub mode: FlightMode,
+    /// Compass heading, degrees.
+    pub heading: f32,
+    pub target: Option<[f64; 3]>,
+    pub speed: f64,
+    /// Kinds answered `Denied` (test hook).
+    pub refuse: Vec<CommandKind>,
+    /// Kinds never answered (test hook).
+    pub ignore: Vec<CommandKind>,
+    /// Every command received, in order.
+    pub received: Vec<Command>,
+    pub link_up: bool,
+    pub emergency: bool,
+}
+
+/// Climb rate, m/s.
+const CLIMB_MPS: f64 = 2.5;
+/// Descent rate in LAND, m/s.
+const LAND_MPS: f64 = 1.0;
+
+impl FakeVehicle {
+    /// Disarmed on the ground at site point `home` (x, y; ground at z).
+    pub fn new(vehicle_id: u8, site: SiteFrame, home: [f64; 3]) -> Self {
+        FakeVehicle {
+            vehicle_id,
+            site,
+            home,
+            pos: home,
+            vel: [0.0; 3],
+            armed: false,
+            mode: FlightMode::Stabilize,
+            heading: 0.0,
+            target: None,
+            speed: 5.0,
+            refuse: Vec::new(),
+            ignore: Vec::new(),
+            received: Vec::new(),
+            link_up: true,
+            emergency: false,
+        }
+    }
+
+    pub fn alt_rel(&self) -> f64 {
+        self.pos[2] - self.home[2]
+    }
+
+    pub fn in_air(&self) -> bool {
+        self.armed && self.alt_rel() > 0.2
+    }
+
+    /// Executes a command; `None` when it is ignored (no acknowledgement).
+    pub fn handle(&mut self, c: &VehicleCommand) -> Option<CommandAck> {
+        let cmd = c.command().ok()?;
+        self.received.push(cmd);
+        let kind = cmd.kind();
+        if self.ignore.contains(&kind) {
+            return None;
+        }
+        let safety = c.source == skymesh_ipc_types::CommandSource::Safety.to_wire();
+        let mut result = Ok(());
+        if self.refuse.contains(&kind) {
+            result = Err((RefusalReason::Denied, "test refusal"));
+        } else if self.emergency && !safety && kind != CommandKind::EmergencyStop {
+            result = Err((RefusalReason::Emergency, "emergency stop"));
+        } else {
+            match cmd {
+                Command::SetMode(m) => self.mode = m,
+                Command::Arm { .. } => self.armed = true,
+                Command::Disarm { .. } => {
+                    if self.in_air() {
+                        result = Err((RefusalReason::Denied, "flying"));
+                    } else {
+                        self.armed = false;
+                    }
+                }
+                Command::Takeoff { alt_rel_m } => {
+                    if self.mode != FlightMode::Guided || !self.armed {
+                        result = Err((RefusalReason::Denied, "not armed in GUIDED"));
+                    } else {
+                        self.target = Some([
+                            self.pos[0],
+                            self.pos[1],
+                            self.home[2] + f64::from(alt_rel_m),
+                        ]);
+                    }
+                }
+                Command::GoTo {
+                    lat_deg,
+                    lon_deg,
+                    alt_rel_m,
+                    yaw_deg,
+                    speed_mps,
+                } => {
+                    let [x, y] = self.site.to_site_xy(lat_deg, lon_deg);
+                    if self.mode == FlightMode::Guided && self.in_air() {
+                        self.target = Some([x, y, self.home[2] + f64::from(alt_rel_m)]);
+                        if let Some(h) = yaw_deg {
+                            self.heading = h;
+                        }
+                        if let Some(s) = speed_mps {
+                            self.speed = f64::from(s).max(0.1);
+                        }
+                    }
+                }
+                Command::Land => self.mode = FlightMode::Land,
+                Command::Brake => self.target = Some(self.pos),
+                Command::EmergencyStop => {
+                    self.emergency = true;
+                    self.target = Some(self.pos);
+                }
+                Command::ReleaseFlightAuthority if safety => self.emergency = false,
+                Command::SetYaw {
+                    yaw_deg, relative, ..
+                } => {
+                    self.heading = if relative {
+                        (self.heading + yaw_deg).rem_euclid(360.0)
+                    } else {
+                        yaw_deg
+                    }
+                }
+                Command::SetHome {
+                    lat_deg, lon_deg, ..
+                } => {
+                    let [x, y] = self.site.to_site_xy(lat_deg, lon_deg);
+                    self.home[0] = x;
+                    self.home[1] = y;
+                }
+                _ => {}
+            }
+        }
+        let (res, reason, detail) = match result {
+            Ok(()) => (AckResult::Accepted, RefusalReason::None, ""),
+            Err((r, d)) => (AckResult::Refused, r, d),
+        };
+        Some(CommandAck {
+            vehicle_id: self.vehicle_id,
+            source: c.source,
+            kind: c.kind,
+            result: res.to_wire(),
+            command_id: c.command_id,
+            reason: reason.to_wire(),
+            mav_result: CommandAck::NO_MAV_RESULT,
+            detail: FixedStr::new(detail),
+            ..CommandAck::default()
+        })
+    }
+
+    /// Moves for `dt` seconds.
+    pub fn step(&mut self, dt: f64) {
+        let before = self.pos;
+        if !self.armed {
+            self.target = None;
+        } else if self.mode == FlightMode::Land {
+            self.target = None;
+            self.pos[2] = (self.pos[2] - LAND_MPS * dt).max(self.home[2]);
+            if self.pos[2] <= self.home[2] {
+                self.armed = false;
+            }
+        } else if let Some(t) = self.target {
+            let d = [t[0] - self.pos[0], t[1] - self.pos[1]];
+            let h = (d[0] * d[0] + d[1] * d[1]).sqrt();
+            let step = self.speed * dt;
+            if h <= step {
+                self.pos[0] = t[0];
+                self.pos[1] = t[1];
+            } else {
+                self.pos[0] += d[0] / h * step;
+                self.pos[1] += d[1] / h * step;
+            }
+            let dz = t[2] - self.pos[2];
+            self.pos[2] += dz.clamp(-CLIMB_MPS * dt, CLIMB_MPS * dt);
+        }
+        self.pos[2] = self.pos[2].max(self.home[2]);
+        if dt > 0.0 {
+            self.vel = [0, 1, 2].map(|i| (self.pos[i] - before[i]) / dt);
+        }
+    }
+
+    pub fn state(&self, now_ns: u64) -> VehicleState {
+        let (lat, lon) = self.site.to_geodetic(self.pos[0], self.pos[1]);
+        let h = self.heading.to_radians();
+        VehicleState {
+            vehicle_id: self.vehicle_id,
+            position_valid: 1,
+            attitude_valid: 1,
+            lat_deg: lat,
+            lon_deg: lon,
+            alt_msl_m: self.site.msl_of_z(self.pos[2]) as f32,
+            alt_rel_m: self.alt_rel() as f32,
+            vel_ned_mps: [self.vel[1] as f32, self.vel[0] as f32, -self.vel[2] as f32],
+            heading_deg: self.heading,
+            attitude_q: [(h / 2.0).cos(), 0.0, 0.0, (h / 2.0).sin()],
+            yaw_rad: h,
+            position_stamp_ns: now_ns,
+            ..VehicleState::default()
+        }
+    }
+
+    pub fn status(&self) -> VehicleStatus {
+        let (lat, lon) = self.site.to_geodetic(self.home[0], self.home[1]);
+        VehicleStatus {
+            vehicle_id: self.vehicle_id,
+            mode: self.mode.to_wire(),
+            armed: u8::from(self.armed),
+            link_up: u8::from(self.link_up),
+            ekf_healthy: 1,
+            home_valid: 1,
+            home_lat_deg: lat,
+            home_lon_deg: lon,
+            home_alt_msl_m: self.site.msl_of_z(self.home[2]) as f32,
+            ..VehicleStatus::default()
+        }
+    }
+}
+
+/// The vehicles of every drone of a [`Swarm`], in its order.
+#[derive(Debug, Clone)]
+pub struct FakeFleet {
+    pub vehicles: Vec<FakeVehicle>,
+}
+
+impl FakeFleet {
+    /// A vehicle per drone of `swarm`, on the ground `spacing` metres apart along x.
+    pub fn for_swarm(swarm: &Swarm, spacing: f64) -> Self {
+        let site = swarm.settings().site;
+        FakeFleet {
+            vehicles: (0..swarm.len())
+                .map(|i| {
+                    FakeVehicle::new(
+                        swarm.drone(i).vehicle_id,
+                        site,
+                        [i as f64 * spacing, 0.0, 0.0],
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// Moves every vehicle by `dt` and hands their states to `swarm`.
+    pub fn step(&mut self, swarm: &mut Swarm, dt: f64, now_ns: u64) {
+        for (i, v) in self.vehicles.iter_mut().enumerate() {
+            v.step(dt);
+            swarm.handle_state(i, &v.state(now_ns), now_ns);
+            swarm.handle_status(i, &v.status(), now_ns);
+        }
+    }
+
+    /// Delivers `commands` to their vehicles and the acknowledgements to `swarm`.
+    pub fn deliver(&mut self, swarm: &mut Swarm, commands: &[VehicleCommand], now_ns: u64) {
+        for c in commands {
+            let Some(i) = swarm.index_of_vehicle(c.vehicle_id) else {
+                continue;
+            };
+            if let Some(ack) = self.vehicles[i].handle(c) {
+                swarm.handle_ack(i, &ack, now_ns);
+            }
+        }
+    }
+
+    /// A compass heading from a GroundControl yaw (for assertions).
+    pub fn heading_of(yaw_ccw: f32) -> f32 {
+        heading_of_yaw(yaw_ccw)
+    }
+}

@@ -1,0 +1,109 @@
+//! The swarm queue's bus ports. All iceoryx2 calls stay in the runtime.
+//!
+//! Per drone: `skymesh/vehicle/{id}/{state,status,command_ack}` subscribed and
+//! `skymesh/vehicle/{id}/command` published, opened at start; the geofence
+//! publisher of a vehicle only when the queue first sets its geofence (a
+//! `GeofenceSet` is 4 KiB and every publisher reserves shared memory for its
+//! subscribers' buffers). The hardware request publisher only exists when a
+//! `hardware_drone` is configured.
+
+use anyhow::Context as _;
+use skymesh_ipc_types::{
+    topics, CommandAck, GeofenceSet, HardwareRequest, SwarmCommand, SwarmReply, SwarmState,
+    VehicleCommand, VehicleState, VehicleStatus,
+};
+use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
+
+use crate::config::Settings;
+
+/// One drone's vehicle topics.
+#[derive(Debug)]
+pub struct DronePorts {
+    pub vehicle_id: u8,
+    pub state: Subscriber<VehicleState>,
+    pub status: Subscriber<VehicleStatus>,
+    pub acks: Subscriber<CommandAck>,
+    pub commands: Publisher<VehicleCommand>,
+    /// Opened on first use.
+    pub geofence: Option<Publisher<GeofenceSet>>,
+}
+
+/// Every topic the queue reads or writes.
+pub struct Ports {
+    /// From groundcontrol-gateway.
+    pub swarm_commands: Subscriber<SwarmCommand>,
+    pub replies: Publisher<SwarmReply>,
+    pub state: Publisher<SwarmState>,
+    pub hardware: Option<Publisher<HardwareRequest>>,
+    /// In the order of `Settings::drones`.
+    pub drones: Vec<DronePorts>,
+    bus: Bus,
+}
+
+impl core::fmt::Debug for Ports {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Ports")
+            .field("drones", &self.drones.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Ports {
+    /// Opens (or creates) every topic of the queue and of its drones' vehicles.
+    pub fn open(bus: &Bus, settings: &Settings) -> anyhow::Result<Ports> {
+        let mut drones = Vec::with_capacity(settings.drones.len());
+        for d in &settings.drones {
+            let id = d.vehicle_id;
+            drones.push(DronePorts {
+                vehicle_id: id,
+                state: bus
+                    .subscriber(&topics::vehicle_state(id))
+                    .with_context(|| format!("opening the state topic of vehicle {id}"))?,
+                status: bus
+                    .subscriber(&topics::vehicle_status(id))
+                    .with_context(|| format!("opening the status topic of vehicle {id}"))?,
+                acks: bus
+                    .subscriber(&topics::vehicle_command_ack(id))
+                    .with_context(|| format!("opening the command ack topic of vehicle {id}"))?,
+                commands: bus
+                    .publisher(&topics::vehicle_command(id))
+                    .with_context(|| format!("opening the command topic of vehicle {id}"))?,
+                geofence: None,
+            });
+        }
+        Ok(Ports {
+            swarm_commands: bus
+                .subscriber(&topics::swarm_command())
+                .context("opening the swarm command topic")?,
+            replies: bus
+                .publisher(&topics::swarm_reply())
+                .context("opening the swarm reply topic")?,
+            state: bus
+                .publisher(&topics::swarm_state())
+                .context("opening the swarm state topic")?,
+            hardware: match settings.hardware_drone {
+                Some(_) => Some(
+                    bus.publisher(&topics::hardware_request())
+                        .context("opening the hardware request topic")?,
+                ),
+                None => None,
+            },
+            drones,
+            bus: bus.clone(),
+        })
+    }
+
+    /// Publishes `g` on its vehicle's geofence topic (opened on first use).
+    pub fn publish_geofence(&mut self, idx: usize, g: GeofenceSet) -> Result<(), IpcError> {
+        let d = &mut self.drones[idx];
+        let publisher = match &mut d.geofence {
+            Some(p) => p,
+            None => d.geofence.insert(
+                self.bus
+                    .publisher(&topics::vehicle_geofence(d.vehicle_id))?,
+            ),
+        };
+        publisher.publish(g)?;
+        Ok(())
+    }
+}
