@@ -10,7 +10,7 @@ use skymesh_hardware::service::run_service;
 use skymesh_ipc_types::hardware::{PowerChannelOp, SystemPowerOp};
 use skymesh_ipc_types::{
     topics, HardwareOp, HardwareReply, HardwareRequest, HardwareResult, HardwareState, HwName,
-    ServiceId, ServiceStats,
+    ServiceId,
 };
 use skymesh_runtime::{
     Bus, CancellationToken, Context, Domain, Publisher, ServiceConfig, Stats, Subscriber,
@@ -158,12 +158,7 @@ impl Rig {
     }
 
     fn metric(&self, name: &str, labels: &str) -> Option<f64> {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map(|e| e.value)
+        self.stats.value(name, labels)
     }
 }
 

@@ -24,9 +24,11 @@ mod service;
 pub mod signals;
 pub mod stats;
 pub mod systemd;
+pub mod warn_limit;
 
 pub use config::{ConfigError, ServiceConfig};
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};
 pub use stats::{Counter, CounterFamily, Gauge, Histogram, Stats};
 pub use tokio_util::sync::CancellationToken;
+pub use warn_limit::{WarnLimiter, WARN_EVERY};

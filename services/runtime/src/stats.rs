@@ -220,6 +220,21 @@ impl Stats {
         }
     }
 
+    /// The current value of one series (`labels` as exported: `k=v,k=v`), the same
+    /// number [`Stats::snapshot_into`] would export (a histogram's sum); `None` if not
+    /// registered. For tests and tools.
+    pub fn value(&self, name: &str, labels: &str) -> Option<f64> {
+        let entries = lock(&self.entries);
+        let e = entries
+            .iter()
+            .find(|e| e.name == name && e.labels == labels)?;
+        Some(match &e.series {
+            Series::Counter(c) => c.get() as f64,
+            Series::Gauge(g) => g.get(),
+            Series::Histogram(h) => lock(&h.0).sum,
+        })
+    }
+
     /// Copies every series into `out` (entries beyond its capacity are counted in `dropped`).
     pub fn snapshot_into(&self, out: &mut ServiceStats) {
         let entries = lock(&self.entries);
@@ -262,6 +277,17 @@ impl Stats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn value_reads_one_series() {
+        let s = Stats::new();
+        s.counter("x_total", &[("topic", "a"), ("dir", "in")])
+            .add(3);
+        s.gauge("g", &[]).set(1.5);
+        assert_eq!(s.value("x_total", "topic=a,dir=in"), Some(3.0));
+        assert_eq!(s.value("g", ""), Some(1.5));
+        assert_eq!(s.value("x_total", "topic=b,dir=in"), None);
+    }
 
     #[test]
     fn same_name_and_labels_is_the_same_series() {

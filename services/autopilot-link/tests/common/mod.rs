@@ -12,7 +12,7 @@ use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::{run_with, Detached, Settings};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, PayloadState, RefusalReason, ServiceId,
-    ServiceStats, VehicleCommand, VehicleState, VehicleStatus,
+    VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, CancellationToken, Domain, Publisher, Stats, Subscriber};
 use tokio::task::JoinHandle;
@@ -233,12 +233,7 @@ impl Mesh {
     }
 
     pub fn metric(&self, name: &str, labels: &str) -> f64 {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map_or(0.0, |e| e.value)
+        self.stats.value(name, labels).unwrap_or(0.0)
     }
 }
 

@@ -12,8 +12,7 @@ use std::time::Duration;
 use skymesh_groundcontrol_gateway::client::PoseListener;
 use skymesh_groundcontrol_gateway::{run, Settings, Sockets};
 use skymesh_ipc_types::{
-    topics, FixedStr, ServiceId, ServiceStats, SwarmCommand, SwarmDrone, SwarmReply, SwarmResult,
-    SwarmState,
+    topics, FixedStr, ServiceId, SwarmCommand, SwarmDrone, SwarmReply, SwarmResult, SwarmState,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use tokio::task::JoinHandle;
@@ -215,12 +214,7 @@ impl Gateway {
 
     /// The current value of a series (`labels` as `k=v,k=v`), if registered.
     pub fn metric(&self, name: &str, labels: &str) -> Option<f64> {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map(|e| e.value)
+        self.stats.value(name, labels)
     }
 
     /// Waits until a series reaches `value` (counters are updated by other tasks).

@@ -6,7 +6,6 @@ use std::time::Duration;
 use skymesh_ipc_types::hardware::{LcdOp, PowerChannelOp, SystemPowerOp};
 use skymesh_ipc_types::{
     FixedStr, HardwareOp, HardwareReply, HardwareRequest, HardwareResult, HwName, SampleHeader,
-    ServiceStats,
 };
 use skymesh_runtime::Stats;
 
@@ -129,12 +128,7 @@ impl Rig {
     }
 
     fn metric(&self, name: &str, labels: &str) -> Option<f64> {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map(|e| e.value)
+        self.stats.value(name, labels)
     }
 }
 

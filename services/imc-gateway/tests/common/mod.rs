@@ -13,8 +13,7 @@ use skymesh_imc_gateway::client::ImcClient;
 use skymesh_imc_gateway::{bind, run, Settings};
 use skymesh_ipc_types::{
     topics, AckResult, ButtonEvent, CommandAck, HardwareReply, HardwareRequest, HardwareResult,
-    HardwareState, RefusalReason, ServiceId, ServiceStats, VehicleCommand, VehicleState,
-    VehicleStatus,
+    HardwareState, RefusalReason, ServiceId, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use tokio::task::JoinHandle;
@@ -241,12 +240,7 @@ impl Gateway {
 
     /// The current value of a series (`labels` as `k=v,k=v`), if registered.
     pub fn metric(&self, name: &str, labels: &str) -> Option<f64> {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map(|e| e.value)
+        self.stats.value(name, labels)
     }
 
     /// Waits until a series reaches `value` (counters are updated by the gateway's task).

@@ -7,7 +7,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, ServiceId, ServiceStats};
+use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, ServiceId};
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use skymesh_solo_gateway::{run, Settings, Sockets};
 use solo_proto::SoloMessage;
@@ -194,12 +194,7 @@ impl Gateway {
 
     /// The current value of a series (`labels` as `k=v,k=v`), if registered.
     pub fn metric(&self, name: &str, labels: &str) -> Option<f64> {
-        let mut out = Box::<ServiceStats>::default();
-        self.stats.snapshot_into(&mut out);
-        out.entries()
-            .iter()
-            .find(|e| e.name.as_str() == name && e.labels.as_str() == labels)
-            .map(|e| e.value)
+        self.stats.value(name, labels)
     }
 
     /// Waits until a series reaches `value` (counters are updated by other tasks).
