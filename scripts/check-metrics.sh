@@ -23,6 +23,8 @@ sed -i "s#^follow_listen = .*#follow_listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#"
 # The IMC gateway's UDP port; the hardware service's simulated devices in the temp dir.
 sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#" "$work/imc-gateway.toml"
 sed -i "s#^state_dir = .*#state_dir = \"$work/hardware\"#" "$work/hardware.toml"
+# The MQTT broker's port.
+sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/mqtt-broker.toml"
 # The GroundControl state server and pose broadcast destination.
 sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/groundcontrol-gateway.toml"
 sed -i "s#^broadcast_destinations = .*#broadcast_destinations = [\"127.0.0.1:$(free SOCK_DGRAM)\"]#" "$work/groundcontrol-gateway.toml"
@@ -39,7 +41,8 @@ for _ in $(seq 1 300); do
      && grep -q 'skymesh_service_up{service="imc-gateway"} 1' "$work/metrics.txt" \
      && grep -q 'skymesh_service_up{service="hardware"} 1' "$work/metrics.txt" \
      && grep -q 'skymesh_service_up{service="swarm-queue"} 1' "$work/metrics.txt" \
-     && grep -q 'skymesh_service_up{service="groundcontrol-gateway"} 1' "$work/metrics.txt"; then
+     && grep -q 'skymesh_service_up{service="groundcontrol-gateway"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="mqtt-broker"} 1' "$work/metrics.txt"; then
     break
   fi
   sleep 0.2

@@ -12,7 +12,7 @@ use bytes::BytesMut;
 use gc_proto::{decode_pose_datagram, PoseDatagramError, PoseRecord, Record, RecordCodec};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
-use tokio::net::{TcpSocket, TcpStream, UdpSocket};
+use tokio::net::{TcpStream, UdpSocket};
 use tokio::time::Instant;
 use tokio_util::codec::Decoder;
 
@@ -44,25 +44,17 @@ pub struct GcClient {
 impl GcClient {
     /// Connects to `addr`.
     pub async fn connect(addr: SocketAddr) -> Result<GcClient, ClientError> {
-        let stream = TcpStream::connect(addr)
-            .await
-            .map_err(|source| ClientError::Connect { addr, source })?;
-        GcClient::from_stream(stream)
+        Self::connect_with(addr, None).await
     }
 
-    /// Connects from the local address `from` (e.g. `127.0.0.2`: a client that is
-    /// not on a privileged list of `127.0.0.1`).
+    /// Connects to `addr` from the local address `from` (port chosen by the system):
+    /// e.g. `127.0.0.2`: a client that is not on a privileged list of `127.0.0.1`.
     pub async fn connect_from(from: IpAddr, addr: SocketAddr) -> Result<GcClient, ClientError> {
-        let connect = async {
-            let socket = if from.is_ipv4() {
-                TcpSocket::new_v4()?
-            } else {
-                TcpSocket::new_v6()?
-            };
-            socket.bind(SocketAddr::new(from, 0))?;
-            socket.connect(addr).await
-        };
-        let stream = connect
+        Self::connect_with(addr, Some(from)).await
+    }
+
+    async fn connect_with(addr: SocketAddr, from: Option<IpAddr>) -> Result<GcClient, ClientError> {
+        let stream = skymesh_runtime::net::connect_tcp(addr, from)
             .await
             .map_err(|source| ClientError::Connect { addr, source })?;
         GcClient::from_stream(stream)

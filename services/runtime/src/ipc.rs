@@ -370,6 +370,18 @@ impl Bus {
 
     /// A publisher on `topic` that stamps headers, sends and wakes subscribers.
     pub fn publisher<T: Sample>(&self, topic: &Topic) -> Result<Publisher<T>, IpcError> {
+        self.publisher_counted_as(topic, &topic.name)
+    }
+
+    /// A publisher whose metrics carry `topic="<family>"` instead of its own name:
+    /// for a process with one port per vehicle of a large swarm, so e.g. 250
+    /// `skymesh/vehicle/{id}/command` ports are one series
+    /// (`skymesh/vehicle/*/command`) and fit the stats sample.
+    pub fn publisher_counted_as<T: Sample>(
+        &self,
+        topic: &Topic,
+        family: &str,
+    ) -> Result<Publisher<T>, IpcError> {
         let pubsub = self.open_pubsub::<T>(topic)?;
         let event = self.open_event(topic)?;
         let port = pubsub
@@ -382,7 +394,7 @@ impl Bus {
             .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
         let published = self.inner.stats.counter(
             "skymesh_topic_samples_published_total",
-            &[("topic", &topic.name)],
+            &[("topic", family)],
         );
         Ok(Publisher {
             port,
@@ -399,6 +411,16 @@ impl Bus {
     /// A subscriber on `topic`: awaited with `recv` (inside a tokio runtime) or
     /// blocked on with [`wait_loop`].
     pub fn subscriber<T: Sample>(&self, topic: &Topic) -> Result<Subscriber<T>, IpcError> {
+        self.subscriber_counted_as(topic, &topic.name)
+    }
+
+    /// A subscriber whose metrics carry `topic="<family>"` (see
+    /// [`Bus::publisher_counted_as`]); gaps are still counted per port.
+    pub fn subscriber_counted_as<T: Sample>(
+        &self,
+        topic: &Topic,
+        family: &str,
+    ) -> Result<Subscriber<T>, IpcError> {
         let pubsub = self.open_pubsub::<T>(topic)?;
         let event = self.open_event(topic)?;
         let port = pubsub
@@ -409,7 +431,7 @@ impl Bus {
             .listener_builder()
             .create()
             .map_err(|e| ipc_err("create listener", &topic.name, e))?;
-        let labels = [("topic", topic.name.as_str())];
+        let labels = [("topic", family)];
         let stats = &self.inner.stats;
         Ok(Subscriber {
             afd: None,

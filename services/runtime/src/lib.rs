@@ -20,6 +20,7 @@ pub mod config;
 pub mod exit;
 pub mod health;
 pub mod ipc;
+pub mod net;
 mod service;
 pub mod signals;
 pub mod stats;

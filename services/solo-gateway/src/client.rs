@@ -11,7 +11,7 @@ use std::time::Duration;
 use solo_proto::{DecodeError, Location, RawFrame, SoloMessage, TlvCodec};
 use tokio::io::AsyncWriteExt;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
-use tokio::net::{TcpSocket, TcpStream, UdpSocket};
+use tokio::net::{TcpStream, UdpSocket};
 use tokio::time::Instant;
 
 use crate::framing::{FrameReader, ReadError};
@@ -44,25 +44,20 @@ pub struct AppClient {
 impl AppClient {
     /// Connects to `addr`.
     pub async fn connect(addr: SocketAddr) -> Result<AppClient, ClientError> {
-        let stream = TcpStream::connect(addr)
-            .await
-            .map_err(|source| ClientError::Connect { addr, source })?;
-        AppClient::from_stream(stream)
+        Self::connect_with(addr, None).await
     }
 
     /// Connects to `addr` from the local address `from` (port chosen by the system):
     /// e.g. `127.0.0.2` to look like a second phone on loopback.
     pub async fn connect_from(from: IpAddr, addr: SocketAddr) -> Result<AppClient, ClientError> {
-        let connect = async {
-            let socket = if from.is_ipv4() {
-                TcpSocket::new_v4()?
-            } else {
-                TcpSocket::new_v6()?
-            };
-            socket.bind(SocketAddr::new(from, 0))?;
-            socket.connect(addr).await
-        };
-        let stream = connect
+        Self::connect_with(addr, Some(from)).await
+    }
+
+    async fn connect_with(
+        addr: SocketAddr,
+        from: Option<IpAddr>,
+    ) -> Result<AppClient, ClientError> {
+        let stream = skymesh_runtime::net::connect_tcp(addr, from)
             .await
             .map_err(|source| ClientError::Connect { addr, source })?;
         AppClient::from_stream(stream)

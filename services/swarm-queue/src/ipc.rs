@@ -49,7 +49,10 @@ impl core::fmt::Debug for Ports {
 }
 
 impl Ports {
-    /// Opens (or creates) every topic of the queue and of its drones' vehicles.
+    /// Opens (or creates) every topic of the queue and of its drones' vehicles. The
+    /// per-vehicle ports are counted as one topic family each
+    /// (`skymesh/vehicle/*/state`, …) so 250 drones keep the stats sample small
+    /// enough for every swarm series.
     pub fn open(bus: &Bus, settings: &Settings) -> anyhow::Result<Ports> {
         let mut drones = Vec::with_capacity(settings.drones.len());
         for d in &settings.drones {
@@ -57,16 +60,19 @@ impl Ports {
             drones.push(DronePorts {
                 vehicle_id: id,
                 state: bus
-                    .subscriber(&topics::vehicle_state(id))
+                    .subscriber_counted_as(&topics::vehicle_state(id), "skymesh/vehicle/*/state")
                     .with_context(|| format!("opening the state topic of vehicle {id}"))?,
                 status: bus
-                    .subscriber(&topics::vehicle_status(id))
+                    .subscriber_counted_as(&topics::vehicle_status(id), "skymesh/vehicle/*/status")
                     .with_context(|| format!("opening the status topic of vehicle {id}"))?,
                 acks: bus
-                    .subscriber(&topics::vehicle_command_ack(id))
+                    .subscriber_counted_as(
+                        &topics::vehicle_command_ack(id),
+                        "skymesh/vehicle/*/command_ack",
+                    )
                     .with_context(|| format!("opening the command ack topic of vehicle {id}"))?,
                 commands: bus
-                    .publisher(&topics::vehicle_command(id))
+                    .publisher_counted_as(&topics::vehicle_command(id), "skymesh/vehicle/*/command")
                     .with_context(|| format!("opening the command topic of vehicle {id}"))?,
                 geofence: None,
             });
@@ -98,10 +104,10 @@ impl Ports {
         let d = &mut self.drones[idx];
         let publisher = match &mut d.geofence {
             Some(p) => p,
-            None => d.geofence.insert(
-                self.bus
-                    .publisher(&topics::vehicle_geofence(d.vehicle_id))?,
-            ),
+            None => d.geofence.insert(self.bus.publisher_counted_as(
+                &topics::vehicle_geofence(d.vehicle_id),
+                "skymesh/vehicle/*/geofence",
+            )?),
         };
         publisher.publish(g)?;
         Ok(())

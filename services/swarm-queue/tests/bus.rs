@@ -293,6 +293,8 @@ fn file_descriptors_for_250_drones() {
         exported("skymesh_swarm_queue_depth", "drone=250"),
         exported("skymesh_swarm_tick_seconds", "")
     );
+    assert_eq!(sample.dropped, 0, "every series fits the stats sample");
+    assert!(exported("skymesh_swarm_queue_depth", "drone=250"));
     if std::env::var_os("SWARM_FD_DETAIL").is_some() {
         let mut kinds = std::collections::BTreeMap::<String, usize>::new();
         for e in std::fs::read_dir("/proc/self/fd").unwrap().flatten() {

@@ -1,0 +1,210 @@
+//! Configuration: the raw TOML shape ([`RawConfig`]) and the validated [`Settings`]
+//! the rest of the crate sees. The shipped, commented defaults are
+//! `deploy/mqtt-broker.toml` (embedded as [`ServiceConfig::DEFAULT_TOML`]).
+
+use std::collections::{BTreeMap, HashSet};
+use std::fmt;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use serde::Deserialize;
+use skymesh_runtime::config::{in_range, socket_addr};
+use skymesh_runtime::{ConfigError, ServiceConfig};
+
+/// The shipped default configuration, with every option commented.
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../deploy/mqtt-broker.toml");
+
+/// The largest "remaining length" MQTT can encode.
+pub const MQTT_MAX_PACKET: usize = 268_435_455;
+
+/// The validated configuration.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Settings {
+    /// Plain TCP MQTT 3.1.1 listener.
+    pub listen: SocketAddr,
+    pub max_connections: usize,
+    /// Largest packet (remaining length) a client may send, bytes.
+    pub max_payload_size: usize,
+    pub max_inflight: usize,
+    /// Time to receive CONNECT on a new connection.
+    pub connection_timeout: Duration,
+    /// How often rumqttd's meters are pushed into the service's metrics.
+    pub meters_interval: Duration,
+    /// username → password; empty = no authentication.
+    pub users: BTreeMap<String, String>,
+}
+
+impl fmt::Debug for Settings {
+    /// Passwords are not printed.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Settings")
+            .field("listen", &self.listen)
+            .field("max_connections", &self.max_connections)
+            .field("max_payload_size", &self.max_payload_size)
+            .field("max_inflight", &self.max_inflight)
+            .field("connection_timeout", &self.connection_timeout)
+            .field("meters_interval", &self.meters_interval)
+            .field("users", &self.users.keys().collect::<Vec<_>>())
+            .finish()
+    }
+}
+
+/// One `[[user]]` entry.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawUser {
+    pub name: String,
+    pub password: String,
+}
+
+/// The TOML file as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    #[serde(default = "d_listen")]
+    pub listen: String,
+    #[serde(default = "d_max_connections")]
+    pub max_connections: u32,
+    #[serde(default = "d_max_payload_size")]
+    pub max_payload_size: u64,
+    #[serde(default = "d_max_inflight")]
+    pub max_inflight: u32,
+    #[serde(default = "d_connection_timeout_ms")]
+    pub connection_timeout_ms: u32,
+    #[serde(default = "d_meters_interval_s")]
+    pub meters_interval_s: u32,
+    #[serde(default)]
+    pub user: Vec<RawUser>,
+}
+
+fn d_listen() -> String {
+    "127.0.0.1:1883".into()
+}
+fn d_max_connections() -> u32 {
+    100
+}
+fn d_max_payload_size() -> u64 {
+    1_048_576
+}
+fn d_max_inflight() -> u32 {
+    100
+}
+fn d_connection_timeout_ms() -> u32 {
+    5000
+}
+fn d_meters_interval_s() -> u32 {
+    1
+}
+
+impl ServiceConfig for RawConfig {
+    type Settings = Settings;
+    const DEFAULT_TOML: &'static str = DEFAULT_CONFIG_TOML;
+
+    fn validate(self) -> Result<Settings, ConfigError> {
+        let listen = socket_addr("listen", &self.listen)?;
+        if listen.port() == 0 {
+            return Err(ConfigError::invalid(
+                "listen",
+                "port 0 is not allowed: clients need a fixed port",
+            ));
+        }
+        let max_connections = in_range("max_connections", self.max_connections, 1, 10_000)?;
+        let max_payload_size = in_range(
+            "max_payload_size",
+            self.max_payload_size,
+            1,
+            MQTT_MAX_PACKET as u64,
+        )?;
+        let max_inflight = in_range("max_inflight", self.max_inflight, 1, 65_535)?;
+        let timeout_ms = in_range(
+            "connection_timeout_ms",
+            self.connection_timeout_ms,
+            1,
+            u32::from(u16::MAX),
+        )?;
+        let meters_s = in_range("meters_interval_s", self.meters_interval_s, 1, 60)?;
+        let mut users = BTreeMap::new();
+        let mut seen = HashSet::new();
+        for (i, u) in self.user.into_iter().enumerate() {
+            let field = format!("user[{i}]");
+            if u.name.is_empty() || u.name.len() > 256 {
+                return Err(ConfigError::invalid(
+                    format!("{field}.name"),
+                    "must be 1-256 bytes",
+                ));
+            }
+            if u.password.is_empty() || u.password.len() > 256 {
+                return Err(ConfigError::invalid(
+                    format!("{field}.password"),
+                    "must be 1-256 bytes",
+                ));
+            }
+            if !seen.insert(u.name.clone()) {
+                return Err(ConfigError::invalid(
+                    format!("{field}.name"),
+                    format!("user `{}` is listed twice", u.name),
+                ));
+            }
+            users.insert(u.name, u.password);
+        }
+        Ok(Settings {
+            listen,
+            max_connections: max_connections as usize,
+            max_payload_size: usize::try_from(max_payload_size).unwrap_or(MQTT_MAX_PACKET),
+            max_inflight: max_inflight as usize,
+            connection_timeout: Duration::from_millis(u64::from(timeout_ms)),
+            meters_interval: Duration::from_secs(u64::from(meters_s)),
+            users,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skymesh_runtime::config::parse;
+
+    #[test]
+    fn the_shipped_defaults_parse() {
+        let s = parse::<RawConfig>(DEFAULT_CONFIG_TOML, "default").expect("defaults");
+        assert_eq!(s.listen, "127.0.0.1:1883".parse().expect("addr"));
+        assert_eq!(s.max_connections, 100);
+        assert_eq!(s.max_payload_size, 1_048_576);
+        assert_eq!(s.max_inflight, 100);
+        assert_eq!(s.connection_timeout, Duration::from_secs(5));
+        assert!(s.users.is_empty());
+    }
+
+    #[test]
+    fn users_are_read_and_passwords_not_printed() {
+        let s = parse::<RawConfig>("[[user]]\nname = \"cloud\"\npassword = \"secret\"\n", "t")
+            .expect("users");
+        assert_eq!(s.users.get("cloud").map(String::as_str), Some("secret"));
+        assert!(!format!("{s:?}").contains("secret"));
+    }
+
+    #[test]
+    fn bad_values_name_the_field() {
+        for (text, field) in [
+            ("listen = \"localhost\"", "listen"),
+            ("listen = \"127.0.0.1:0\"", "listen"),
+            ("max_connections = 0", "max_connections"),
+            ("max_payload_size = 0", "max_payload_size"),
+            ("max_payload_size = 268435456", "max_payload_size"),
+            ("max_inflight = 70000", "max_inflight"),
+            ("connection_timeout_ms = 70000", "connection_timeout_ms"),
+            ("meters_interval_s = 0", "meters_interval_s"),
+            ("[[user]]\nname = \"\"\npassword = \"p\"", "user[0].name"),
+            ("[[user]]\nname = \"a\"\npassword = \"\"", "user[0].password"),
+            (
+                "[[user]]\nname = \"a\"\npassword = \"p\"\n[[user]]\nname = \"a\"\npassword = \"q\"",
+                "user[1].name",
+            ),
+        ] {
+            let e = parse::<RawConfig>(text, "t").expect_err(text);
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
+        let e = parse::<RawConfig>("bogus = 1", "t").expect_err("unknown key");
+        assert!(matches!(e, ConfigError::Parse { .. }), "{e}");
+    }
+}

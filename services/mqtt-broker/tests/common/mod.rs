@@ -1,0 +1,105 @@
+//! Helpers shared by the broker tests: free ports, configs, `rumqttc` clients.
+
+#![allow(dead_code)]
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, MqttOptions, Packet, Publish};
+
+/// How long a test waits for something that should happen (never a timing claim).
+pub const PATIENCE: Duration = Duration::from_secs(20);
+
+/// A 127.0.0.1 port that was free a moment ago (bind port 0, read it, release it).
+pub fn free_addr() -> SocketAddr {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind port 0");
+    l.local_addr().expect("local addr")
+}
+
+/// A broker config listening on `addr` with `extra` TOML appended.
+pub fn config_toml(addr: SocketAddr, extra: &str) -> String {
+    format!("listen = \"{addr}\"\nmeters_interval_s = 1\n{extra}\n")
+}
+
+pub fn options(addr: SocketAddr, id: &str, login: Option<(&str, &str)>) -> MqttOptions {
+    let mut o = MqttOptions::new(id, addr.ip().to_string(), addr.port());
+    o.set_keep_alive(Duration::from_secs(30));
+    // Large enough to try sending packets the broker must refuse.
+    o.set_max_packet_size(1 << 20, 1 << 20);
+    if let Some((u, p)) = login {
+        o.set_credentials(u, p);
+    }
+    o
+}
+
+/// Connects a client, retrying while the broker is not listening yet (connection
+/// refused), and returns once the broker has accepted it (CONNACK).
+pub async fn connect(
+    addr: SocketAddr,
+    id: &str,
+    login: Option<(&str, &str)>,
+) -> (AsyncClient, EventLoop) {
+    let (client, mut ev) = AsyncClient::new(options(addr, id, login), 16);
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            match ev.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => return,
+                Ok(_) => {}
+                Err(ConnectionError::Io(e))
+                    if e.kind() == std::io::ErrorKind::ConnectionRefused =>
+                {
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                Err(e) => panic!("{id}: connection failed: {e}"),
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("{id}: no CONNACK within {PATIENCE:?}"));
+    (client, ev)
+}
+
+/// Polls until the connection fails; returns the error (panics if it does not).
+pub async fn until_error(ev: &mut EventLoop, what: &str) -> ConnectionError {
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            if let Err(e) = ev.poll().await {
+                return e;
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("{what}: the connection was not closed within {PATIENCE:?}"))
+}
+
+/// Polls until `pred` holds for an incoming packet.
+pub async fn until_incoming(
+    ev: &mut EventLoop,
+    what: &str,
+    pred: impl Fn(&Packet) -> bool,
+) -> Packet {
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            match ev.poll().await {
+                Ok(Event::Incoming(p)) if pred(&p) => return p,
+                Ok(_) => {}
+                Err(e) => panic!("{what}: connection failed: {e}"),
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("{what}: not seen within {PATIENCE:?}"))
+}
+
+/// Polls until a PUBLISH arrives.
+pub async fn next_publish(ev: &mut EventLoop, what: &str) -> Publish {
+    match until_incoming(ev, what, |p| matches!(p, Packet::Publish(_))).await {
+        Packet::Publish(p) => p,
+        _ => unreachable!("filtered above"),
+    }
+}
+
+/// Polls in the background so a client's requests go out and pings are answered.
+pub fn drive(mut ev: EventLoop) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move { while ev.poll().await.is_ok() {} })
+}
