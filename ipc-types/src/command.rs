@@ -62,6 +62,10 @@ wire_enum! {
         SetHome = 25 => "set_home",
         MotorTest = 26 => "motor_test",
         CameraZoom = 27 => "camera_zoom",
+        CameraMode = 28 => "camera_mode",
+        CameraCaptureStop = 29 => "camera_capture_stop",
+        GimbalRate = 30 => "gimbal_rate",
+        CameraFocus = 31 => "camera_focus",
     }
 }
 
@@ -74,6 +78,48 @@ wire_enum! {
         Continuous = 1 => "continuous",
         /// Zoom to `value` percent of the camera's range (0 = widest).
         Range = 2 => "range",
+    }
+}
+
+wire_enum! {
+    /// What [`Command::CameraMode`] switches a camera to, numbered as MAVLink CAMERA_MODE.
+    pub enum CameraModeKind: u8 {
+        /// Still photos.
+        Image = 0 => "image",
+        /// Video recording.
+        Video = 1 => "video",
+        /// Still photos with the camera's survey settings.
+        ImageSurvey = 2 => "image_survey",
+    }
+}
+
+wire_enum! {
+    /// How [`Command::CameraFocus`]'s value is read, numbered as MAVLink SET_FOCUS_TYPE.
+    pub enum FocusMode: u8 {
+        /// One focus step in (−1) or out towards infinity (+1); 0 does nothing.
+        Step = 0 => "step",
+        /// Keep focusing in (−1), out (+1), or stop (0).
+        Continuous = 1 => "continuous",
+        /// Focus to `value` percent of the camera's focus range (0..=100).
+        Range = 2 => "range",
+        /// Focus at `value` metres (≥ 0).
+        Meters = 3 => "meters",
+        /// Automatic focus; `value` is ignored.
+        Auto = 4 => "auto",
+        /// Focus once automatically (AF-S); `value` is ignored.
+        AutoSingle = 5 => "auto_single",
+        /// Keep focusing automatically (AF-C); `value` is ignored.
+        AutoContinuous = 6 => "auto_continuous",
+    }
+}
+
+impl FocusMode {
+    /// The automatic modes, whose value is ignored.
+    pub const fn is_auto(self) -> bool {
+        matches!(
+            self,
+            FocusMode::Auto | FocusMode::AutoSingle | FocusMode::AutoContinuous
+        )
     }
 }
 
@@ -168,6 +214,10 @@ impl CommandKind {
             | CommandKind::RecordStop
             | CommandKind::Servo
             | CommandKind::CameraZoom
+            | CommandKind::CameraMode
+            | CommandKind::CameraCaptureStop
+            | CommandKind::GimbalRate
+            | CommandKind::CameraFocus
             | CommandKind::GoProSet
             | CommandKind::GrabPayloadAuthority
             | CommandKind::ReleasePayloadAuthority => Some(AuthorityDomain::Payload),
@@ -228,6 +278,10 @@ pub mod limits {
     pub const MAX_MOTOR_TEST_S: f32 = 10.0;
     /// Most zoom steps in one command.
     pub const MAX_ZOOM_STEPS: f32 = 100.0;
+    /// Fastest commanded gimbal rate, deg/s, either axis.
+    pub const MAX_GIMBAL_RATE_DPS: f32 = 360.0;
+    /// Farthest focus distance a command may name (metres; beyond is infinity).
+    pub const MAX_FOCUS_M: f32 = 100_000.0;
 }
 
 /// A typed command. Build a [`VehicleCommand`] from it with [`VehicleCommand::new`].
@@ -328,6 +382,31 @@ pub enum Command {
         mode: ZoomMode,
         value: f32,
     },
+    /// Switch camera `camera` (0 = every camera) to photo, video or survey mode
+    /// (MAVLink `MAV_CMD_SET_CAMERA_MODE`).
+    CameraMode {
+        camera: u8,
+        mode: CameraModeKind,
+    },
+    /// Stop an interval or continuous photo sequence of camera `camera` (0 = every
+    /// camera; MAVLink `MAV_CMD_IMAGE_STOP_CAPTURE`).
+    CameraCaptureStop {
+        camera: u8,
+    },
+    /// Turn the gimbal at these rates (deg/s, pitch up and yaw right positive,
+    /// |rate| ≤ 360) until the next gimbal command or a rate of 0; the gimbal stops
+    /// at its limits. MAVLink `MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW` with the angles unset.
+    GimbalRate {
+        pitch_rate_dps: f32,
+        yaw_rate_dps: f32,
+    },
+    /// Focus camera `camera` (0 = every camera; MAVLink `MAV_CMD_SET_CAMERA_FOCUS`):
+    /// see [`FocusMode`] for how `value` is read.
+    CameraFocus {
+        camera: u8,
+        mode: FocusMode,
+        value: f32,
+    },
 }
 
 /// Why a command could not be converted.
@@ -413,6 +492,10 @@ impl Command {
             Command::SetHome { .. } => CommandKind::SetHome,
             Command::MotorTest { .. } => CommandKind::MotorTest,
             Command::CameraZoom { .. } => CommandKind::CameraZoom,
+            Command::CameraMode { .. } => CommandKind::CameraMode,
+            Command::CameraCaptureStop { .. } => CommandKind::CameraCaptureStop,
+            Command::GimbalRate { .. } => CommandKind::GimbalRate,
+            Command::CameraFocus { .. } => CommandKind::CameraFocus,
         }
     }
 
@@ -547,6 +630,36 @@ impl Command {
                 ZoomMode::Continuous => check("zoom_direction", value.into(), -1.0, 1.0)?,
                 ZoomMode::Range => check("zoom_pct", value.into(), 0.0, 100.0)?,
             },
+            Command::GimbalRate {
+                pitch_rate_dps,
+                yaw_rate_dps,
+            } => {
+                for (name, r) in [
+                    ("pitch_rate_dps", pitch_rate_dps),
+                    ("yaw_rate_dps", yaw_rate_dps),
+                ] {
+                    check(
+                        name,
+                        r.into(),
+                        (-MAX_GIMBAL_RATE_DPS).into(),
+                        MAX_GIMBAL_RATE_DPS.into(),
+                    )?;
+                }
+            }
+            Command::CameraFocus { mode, value, .. } => match mode {
+                FocusMode::Step => check("focus_steps", value.into(), -1.0, 1.0)?,
+                FocusMode::Continuous => check("focus_direction", value.into(), -1.0, 1.0)?,
+                FocusMode::Range => check("focus_pct", value.into(), 0.0, 100.0)?,
+                FocusMode::Meters => check("focus_m", value.into(), 0.0, MAX_FOCUS_M.into())?,
+                // Ignored, but still a number: nothing non-finite travels.
+                FocusMode::Auto | FocusMode::AutoSingle | FocusMode::AutoContinuous => {
+                    if !value.is_finite() {
+                        return Err(CommandError::NotFinite {
+                            name: "focus_value",
+                        });
+                    }
+                }
+            },
             Command::Arm { .. }
             | Command::Disarm { .. }
             | Command::Land
@@ -561,7 +674,9 @@ impl Command {
             | Command::ReleaseFlightAuthority
             | Command::GrabPayloadAuthority
             | Command::ReleasePayloadAuthority
-            | Command::MotorKill { .. } => {}
+            | Command::MotorKill { .. }
+            | Command::CameraMode { .. }
+            | Command::CameraCaptureStop { .. } => {}
         }
         Ok(())
     }
@@ -575,7 +690,10 @@ impl Command {
 /// `i[0]` [`FlightMode`]; `Servo`: `i[0]` channel, `i[1]` pwm; `GoProSet`: `i[0]`
 /// command, `i[1]` the four value bytes little-endian; `SetHome`: lat/lon, `f[0]`
 /// altitude above mean sea level; `MotorTest`: `i[0]` motor, `f[0]` throttle %, `f[1]`
-/// duration; `CameraZoom`: `i[0]` camera, `i[1]` [`ZoomMode`], `f[0]` value.
+/// duration; `CameraZoom`: `i[0]` camera, `i[1]` [`ZoomMode`], `f[0]` value;
+/// `CameraMode`: `i[0]` camera, `i[1]` [`CameraModeKind`]; `CameraCaptureStop`: `i[0]`
+/// camera; `GimbalRate`: `f[0]` pitch rate, `f[1]` yaw rate; `CameraFocus`: `i[0]`
+/// camera, `i[1]` [`FocusMode`], `f[0]` value.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
@@ -730,6 +848,27 @@ impl VehicleCommand {
                 c.i[1] = mode.to_wire().into();
                 c.f[0] = value;
             }
+            Command::CameraMode { camera, mode } => {
+                c.i[0] = camera.into();
+                c.i[1] = mode.to_wire().into();
+            }
+            Command::CameraCaptureStop { camera } => c.i[0] = camera.into(),
+            Command::GimbalRate {
+                pitch_rate_dps,
+                yaw_rate_dps,
+            } => {
+                c.f[0] = pitch_rate_dps;
+                c.f[1] = yaw_rate_dps;
+            }
+            Command::CameraFocus {
+                camera,
+                mode,
+                value,
+            } => {
+                c.i[0] = camera.into();
+                c.i[1] = mode.to_wire().into();
+                c.f[0] = value;
+            }
         }
         Ok(c)
     }
@@ -838,6 +977,38 @@ impl VehicleCommand {
                         value: raw.into(),
                         min: 0.0,
                         max: 2.0,
+                    })?,
+                    value: self.f[0],
+                }
+            }
+            CommandKind::CameraMode => {
+                let raw = int_param(1, "camera_mode", u8::MAX.into())? as u8;
+                Command::CameraMode {
+                    camera: int_param(0, "camera", u8::MAX.into())? as u8,
+                    mode: CameraModeKind::try_from(raw).map_err(|_| CommandError::OutOfRange {
+                        name: "camera_mode",
+                        value: raw.into(),
+                        min: 0.0,
+                        max: 2.0,
+                    })?,
+                }
+            }
+            CommandKind::CameraCaptureStop => Command::CameraCaptureStop {
+                camera: int_param(0, "camera", u8::MAX.into())? as u8,
+            },
+            CommandKind::GimbalRate => Command::GimbalRate {
+                pitch_rate_dps: self.f[0],
+                yaw_rate_dps: self.f[1],
+            },
+            CommandKind::CameraFocus => {
+                let raw = int_param(1, "focus_mode", u8::MAX.into())? as u8;
+                Command::CameraFocus {
+                    camera: int_param(0, "camera", u8::MAX.into())? as u8,
+                    mode: FocusMode::try_from(raw).map_err(|_| CommandError::OutOfRange {
+                        name: "focus_mode",
+                        value: raw.into(),
+                        min: 0.0,
+                        max: 6.0,
                     })?,
                     value: self.f[0],
                 }
@@ -969,7 +1140,185 @@ mod tests {
                 mode: ZoomMode::Continuous,
                 value: -1.0,
             },
+            Command::CameraMode {
+                camera: 0,
+                mode: CameraModeKind::ImageSurvey,
+            },
+            Command::CameraCaptureStop { camera: 255 },
+            Command::GimbalRate {
+                pitch_rate_dps: -360.0,
+                yaw_rate_dps: 12.5,
+            },
+            Command::CameraFocus {
+                camera: 2,
+                mode: FocusMode::Meters,
+                value: 35.5,
+            },
         ]
+    }
+
+    #[test]
+    fn payload_additions_are_payload_commands_with_stable_numbers() {
+        for (kind, wire, label) in [
+            (CommandKind::CameraMode, 28, "camera_mode"),
+            (CommandKind::CameraCaptureStop, 29, "camera_capture_stop"),
+            (CommandKind::GimbalRate, 30, "gimbal_rate"),
+            (CommandKind::CameraFocus, 31, "camera_focus"),
+        ] {
+            assert_eq!(kind.to_wire(), wire);
+            assert_eq!(kind.to_string(), label);
+            assert_eq!(kind.authority(), Some(AuthorityDomain::Payload), "{kind}");
+            assert!(!kind.is_setpoint() && !kind.is_authority_request());
+        }
+        // The numbering is MAVLink's CAMERA_MODE and SET_FOCUS_TYPE.
+        assert_eq!(
+            CameraModeKind::ALL
+                .iter()
+                .map(|m| (m.to_wire(), m.as_str()))
+                .collect::<Vec<_>>(),
+            [(0, "image"), (1, "video"), (2, "image_survey")]
+        );
+        assert_eq!(
+            FocusMode::ALL
+                .iter()
+                .map(|m| (m.to_wire(), m.as_str()))
+                .collect::<Vec<_>>(),
+            [
+                (0, "step"),
+                (1, "continuous"),
+                (2, "range"),
+                (3, "meters"),
+                (4, "auto"),
+                (5, "auto_single"),
+                (6, "auto_continuous")
+            ]
+        );
+        assert!(FocusMode::AutoSingle.is_auto() && !FocusMode::Meters.is_auto());
+    }
+
+    #[test]
+    fn payload_additions_lay_out_as_documented() {
+        let w = |c: &Command| VehicleCommand::new(1, CommandSource::DjiDrc, 1, c).unwrap();
+        let m = w(&Command::CameraMode {
+            camera: 3,
+            mode: CameraModeKind::Video,
+        });
+        assert_eq!((m.kind, m.i), (28, [3, 1]));
+        let s = w(&Command::CameraCaptureStop { camera: 7 });
+        assert_eq!((s.kind, s.i[0]), (29, 7));
+        let r = w(&Command::GimbalRate {
+            pitch_rate_dps: -10.0,
+            yaw_rate_dps: 20.0,
+        });
+        assert_eq!((r.kind, r.f[0], r.f[1]), (30, -10.0, 20.0));
+        let f = w(&Command::CameraFocus {
+            camera: 1,
+            mode: FocusMode::Range,
+            value: 40.0,
+        });
+        assert_eq!((f.kind, f.i, f.f[0]), (31, [1, 2], 40.0));
+    }
+
+    #[test]
+    fn gimbal_rate_and_focus_ranges_are_checked_both_ways() {
+        let rate = |p, y| Command::GimbalRate {
+            pitch_rate_dps: p,
+            yaw_rate_dps: y,
+        };
+        let focus = |mode, value| Command::CameraFocus {
+            camera: 0,
+            mode,
+            value,
+        };
+        for good in [
+            rate(360.0, -360.0),
+            rate(0.0, 0.0),
+            focus(FocusMode::Step, -1.0),
+            focus(FocusMode::Continuous, 0.0),
+            focus(FocusMode::Range, 100.0),
+            focus(FocusMode::Meters, 0.0),
+            focus(FocusMode::Auto, 12345.0),
+            focus(FocusMode::AutoContinuous, -7.0),
+        ] {
+            assert!(good.validate().is_ok(), "{good:?} refused");
+        }
+        for (bad, name) in [
+            (rate(360.5, 0.0), "pitch_rate_dps"),
+            (rate(0.0, -361.0), "yaw_rate_dps"),
+            (focus(FocusMode::Step, 2.0), "focus_steps"),
+            (focus(FocusMode::Continuous, -1.5), "focus_direction"),
+            (focus(FocusMode::Range, 100.5), "focus_pct"),
+            (focus(FocusMode::Range, -0.5), "focus_pct"),
+            (focus(FocusMode::Meters, -1.0), "focus_m"),
+        ] {
+            match bad.validate() {
+                Err(CommandError::OutOfRange { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{bad:?}: {other:?}"),
+            }
+        }
+        for bad in [f32::NAN, f32::INFINITY] {
+            assert!(matches!(
+                rate(bad, 0.0).validate(),
+                Err(CommandError::NotFinite { .. })
+            ));
+            assert_eq!(
+                focus(FocusMode::AutoSingle, bad).validate(),
+                Err(CommandError::NotFinite {
+                    name: "focus_value"
+                })
+            );
+        }
+        // Hostile wire samples: bad enums, negative or too large camera ids, NaN rates.
+        let good_focus =
+            VehicleCommand::new(1, CommandSource::DjiDrc, 1, &focus(FocusMode::Meters, 3.0))
+                .unwrap();
+        let mut w = good_focus;
+        w.i[1] = 7;
+        assert!(matches!(
+            w.command(),
+            Err(CommandError::OutOfRange {
+                name: "focus_mode",
+                ..
+            })
+        ));
+        let mut w = good_focus;
+        w.i[0] = 256;
+        assert!(w.command().is_err(), "camera id above 255 read back");
+        let mut w = VehicleCommand::new(
+            1,
+            CommandSource::DjiDrc,
+            1,
+            &Command::CameraMode {
+                camera: 0,
+                mode: CameraModeKind::Image,
+            },
+        )
+        .unwrap();
+        w.i[1] = 3;
+        assert!(matches!(
+            w.command(),
+            Err(CommandError::OutOfRange {
+                name: "camera_mode",
+                ..
+            })
+        ));
+        let mut w = VehicleCommand::new(
+            1,
+            CommandSource::DjiDrc,
+            1,
+            &Command::CameraCaptureStop { camera: 0 },
+        )
+        .unwrap();
+        w.i[0] = -1;
+        assert!(w.command().is_err(), "negative camera id read back");
+        let mut w = VehicleCommand::new(1, CommandSource::DjiDrc, 1, &rate(1.0, 1.0)).unwrap();
+        w.f[1] = f32::NAN;
+        assert_eq!(
+            w.command(),
+            Err(CommandError::NotFinite {
+                name: "yaw_rate_dps"
+            })
+        );
     }
 
     #[test]

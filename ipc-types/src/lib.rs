@@ -28,8 +28,8 @@ pub use arbiter::{
     FencePolygon, GeofenceSet, NO_HOLDER,
 };
 pub use command::{
-    AckResult, AuthorityDomain, Command, CommandAck, CommandError, CommandKind, CommandSource,
-    RefusalReason, VehicleCommand, ZoomMode,
+    AckResult, AuthorityDomain, CameraModeKind, Command, CommandAck, CommandError, CommandKind,
+    CommandSource, FocusMode, RefusalReason, VehicleCommand, ZoomMode,
 };
 pub use fixed::FixedStr;
 pub use hardware::{

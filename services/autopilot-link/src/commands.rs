@@ -25,6 +25,10 @@
 //! | `Servo` | COMMAND_LONG `DO_SET_SERVO` p1 = channel, p2 = PWM µs | COMMAND_ACK |
 //! | `MotorTest { motor, throttle_pct, duration_s }` | COMMAND_LONG `DO_MOTOR_TEST` p1 = motor, p2 = 0 (`MOTOR_TEST_THROTTLE_PERCENT`), p3 = throttle %, p4 = duration s, p5 = 1 motor | COMMAND_ACK (ArduCopter: only landed) |
 //! | `CameraZoom { camera, mode, value }` | COMMAND_LONG `SET_CAMERA_ZOOM` p1 = `CAMERA_ZOOM_TYPE` (0 step, 1 continuous, 2 range), p2 = value, p3 = camera id (0 = all) | COMMAND_ACK |
+//! | `CameraMode { camera, mode }` | COMMAND_LONG `SET_CAMERA_MODE` p1 = camera id (0 = all), p2 = `CAMERA_MODE` (0 image, 1 video, 2 image survey), p3, p4, p7 NaN (reserved) | COMMAND_ACK |
+//! | `CameraCaptureStop { camera }` | COMMAND_LONG `IMAGE_STOP_CAPTURE` p1 = camera id (0 = all), p2–p4, p7 NaN (reserved) | COMMAND_ACK |
+//! | `GimbalRate { pitch_rate_dps, yaw_rate_dps }` | COMMAND_LONG `DO_GIMBAL_MANAGER_PITCHYAW` p1 = p2 = NaN (no angle), p3 = pitch rate, p4 = yaw rate (deg/s), p5 = vehicle-frame yaw flag, p7 = 0 (all gimbals); turns until the next gimbal command, a rate of 0 stops it | COMMAND_ACK |
+//! | `CameraFocus { camera, mode, value }` | COMMAND_LONG `SET_CAMERA_FOCUS` p1 = `SET_FOCUS_TYPE` (0 step, 1 continuous, 2 range, 3 metres, 4 auto, 5 auto single, 6 auto continuous), p2 = value (0 for the auto types, which ignore it), p3 = camera id (0 = all), p4 NaN (reserved) | COMMAND_ACK (ArduPilot denies step and metres) |
 //! | `Brake` in GUIDED | SET_POSITION_TARGET_LOCAL_NED zero velocity (stays GUIDED, so setpoints resume at once) | accepted when written |
 //! | `Brake` otherwise | COMMAND_LONG `DO_SET_MODE` BRAKE (17) | COMMAND_ACK |
 //! | `EmergencyStop` | as `Brake`: brake and hover (motors keep running) | as `Brake` |
@@ -52,6 +56,9 @@
 //! | SetServoPosition, SetControlSurfaceDeflection, SetPWM | `Servo { channel, pwm_us }` | `DO_SET_SERVO` | payload |
 //! | SetThrusterActuation | `MotorTest { motor, throttle_pct, duration_s }` | `DO_MOTOR_TEST` | flight |
 //! | CameraZoom | `CameraZoom { camera, mode, value }` | `SET_CAMERA_ZOOM` | payload |
+//!
+//! The DJI Cloud API gateway's payload methods add `CameraMode`, `CameraCaptureStop`,
+//! `GimbalRate` and `CameraFocus` (payload authority, never restricted in the air).
 //!
 //! In the air (the arbiter's notion: armed and high, fast or of unknown position)
 //! the arbiter refuses every `MotorTest` (`in_air`, whatever the source) and every
@@ -187,6 +194,10 @@ pub struct PlanContext {
     /// Sequence number for `CameraCapture` (prevents a double capture on retransmit).
     pub capture_seq: u32,
 }
+
+/// `GIMBAL_MANAGER_FLAGS_YAW_IN_VEHICLE_FRAME` as a DO_GIMBAL_MANAGER_PITCHYAW param5:
+/// yaw angles and rates relative to the nose.
+const GIMBAL_YAW_IN_VEHICLE_FRAME: f32 = 32.0;
 
 fn long(t: Target, command: MavCmd, p: [f32; 7]) -> MavCommand {
     MavCommand::Long(COMMAND_LONG_DATA {
@@ -404,15 +415,19 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 ..Default::default()
             }))
         }
-        Command::Gimbal { pitch_deg, yaw_deg } => {
-            // GIMBAL_MANAGER_FLAGS_YAW_IN_VEHICLE_FRAME: yaw relative to the nose.
-            let flags = 32.0;
-            only(long(
-                t,
-                MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
-                [pitch_deg, yaw_deg, f32::NAN, f32::NAN, flags, 0.0, 0.0],
-            ))
-        }
+        Command::Gimbal { pitch_deg, yaw_deg } => only(long(
+            t,
+            MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+            [
+                pitch_deg,
+                yaw_deg,
+                f32::NAN,
+                f32::NAN,
+                GIMBAL_YAW_IN_VEHICLE_FRAME,
+                0.0,
+                0.0,
+            ],
+        )),
         Command::CameraCapture => only(long(
             t,
             MavCmd::MAV_CMD_IMAGE_START_CAPTURE,
@@ -465,6 +480,66 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 value,
                 f32::from(camera),
                 0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        )),
+        Command::CameraMode { camera, mode } => only(long(
+            t,
+            MavCmd::MAV_CMD_SET_CAMERA_MODE,
+            [
+                f32::from(camera),
+                f32::from(mode.to_wire()),
+                f32::NAN,
+                f32::NAN,
+                0.0,
+                0.0,
+                f32::NAN,
+            ],
+        )),
+        Command::CameraCaptureStop { camera } => only(long(
+            t,
+            MavCmd::MAV_CMD_IMAGE_STOP_CAPTURE,
+            [
+                f32::from(camera),
+                f32::NAN,
+                f32::NAN,
+                f32::NAN,
+                0.0,
+                0.0,
+                f32::NAN,
+            ],
+        )),
+        Command::GimbalRate {
+            pitch_rate_dps,
+            yaw_rate_dps,
+        } => only(long(
+            t,
+            MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+            // No angle (NaN): the gimbal turns at the rates until told otherwise.
+            [
+                f32::NAN,
+                f32::NAN,
+                pitch_rate_dps,
+                yaw_rate_dps,
+                GIMBAL_YAW_IN_VEHICLE_FRAME,
+                0.0,
+                0.0,
+            ],
+        )),
+        Command::CameraFocus {
+            camera,
+            mode,
+            value,
+        } => only(long(
+            t,
+            MavCmd::MAV_CMD_SET_CAMERA_FOCUS,
+            [
+                f32::from(mode.to_wire()),
+                if mode.is_auto() { 0.0 } else { value },
+                f32::from(camera),
+                f32::NAN,
                 0.0,
                 0.0,
                 0.0,
@@ -533,7 +608,7 @@ pub fn admit(sample: &VehicleCommand, vehicle_id: u8, link_up: bool) -> Result<C
 mod tests {
     use super::*;
     use crate::acks::Origin;
-    use skymesh_ipc_types::{CommandKind, CommandSource, ZoomMode};
+    use skymesh_ipc_types::{CameraModeKind, CommandKind, CommandSource, FocusMode, ZoomMode};
 
     const T: Target = Target {
         system: 1,
@@ -860,6 +935,113 @@ mod tests {
             assert_eq!([c.param1, c.param2, c.param3], [p1, value, 2.0], "{mode}");
             assert_eq!([c.param4, c.param5, c.param6, c.param7], [0.0; 4]);
         }
+    }
+
+    #[test]
+    fn camera_mode_and_capture_stop_carry_the_camera_id_in_param1() {
+        for (mode, p2) in [
+            (CameraModeKind::Image, 0.0),
+            (CameraModeKind::Video, 1.0),
+            (CameraModeKind::ImageSurvey, 2.0),
+        ] {
+            let p = plan_of(Command::CameraMode { camera: 3, mode });
+            assert!(p.setpoint.is_none());
+            let c = long_of(&p);
+            assert_eq!((c.target_system, c.target_component), (1, 1));
+            assert_eq!(c.command, MavCmd::MAV_CMD_SET_CAMERA_MODE);
+            assert_eq!((c.param1, c.param2), (3.0, p2), "{mode}");
+            assert!(c.param3.is_nan() && c.param4.is_nan() && c.param7.is_nan());
+            assert_eq!((c.param5, c.param6), (0.0, 0.0));
+        }
+        let p = plan_of(Command::CameraCaptureStop { camera: 0 });
+        let c = long_of(&p);
+        assert_eq!(c.command, MavCmd::MAV_CMD_IMAGE_STOP_CAPTURE);
+        assert_eq!(c.param1, 0.0, "every camera");
+        assert!(c.param2.is_nan() && c.param3.is_nan() && c.param4.is_nan());
+        assert_eq!(
+            p.command.unwrap().key(),
+            AnswerKey::CommandAck(MavCmd::MAV_CMD_IMAGE_STOP_CAPTURE as u32)
+        );
+        let c = plan_of(Command::CameraCaptureStop { camera: 200 });
+        assert_eq!(long_of(&c).param1, 200.0);
+    }
+
+    #[test]
+    fn gimbal_rate_is_pitchyaw_with_unset_angles_and_the_rates() {
+        let p = plan_of(Command::GimbalRate {
+            pitch_rate_dps: -15.0,
+            yaw_rate_dps: 30.0,
+        });
+        let g = long_of(&p);
+        assert_eq!(g.command, MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW);
+        assert!(g.param1.is_nan() && g.param2.is_nan(), "no angle");
+        assert_eq!(
+            [g.param3, g.param4, g.param5, g.param6, g.param7],
+            [-15.0, 30.0, 32.0, 0.0, 0.0]
+        );
+        // Same MAV_CMD as an angle command: a rate supersedes a pending angle.
+        let angle = plan_of(Command::Gimbal {
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+        });
+        assert_eq!(p.command.unwrap().key(), angle.command.unwrap().key());
+    }
+
+    #[test]
+    fn camera_focus_maps_type_value_and_camera() {
+        for (mode, value, p1, p2) in [
+            (FocusMode::Step, 1.0, 0.0, 1.0),
+            (FocusMode::Continuous, -1.0, 1.0, -1.0),
+            (FocusMode::Range, 42.5, 2.0, 42.5),
+            (FocusMode::Meters, 12.0, 3.0, 12.0),
+            (FocusMode::Auto, 99.0, 4.0, 0.0),
+            (FocusMode::AutoSingle, 0.0, 5.0, 0.0),
+            (FocusMode::AutoContinuous, -3.0, 6.0, 0.0),
+        ] {
+            let p = plan_of(Command::CameraFocus {
+                camera: 2,
+                mode,
+                value,
+            });
+            let c = long_of(&p);
+            assert_eq!(c.command, MavCmd::MAV_CMD_SET_CAMERA_FOCUS);
+            // param1 SET_FOCUS_TYPE, param2 the value (0 when ignored), param3 camera.
+            assert_eq!([c.param1, c.param2, c.param3], [p1, p2, 2.0], "{mode}");
+            assert!(c.param4.is_nan());
+        }
+    }
+
+    #[test]
+    fn new_payload_commands_pass_intake_from_the_wire() {
+        for cmd in [
+            Command::CameraMode {
+                camera: 0,
+                mode: CameraModeKind::Video,
+            },
+            Command::CameraCaptureStop { camera: 1 },
+            Command::GimbalRate {
+                pitch_rate_dps: 0.0,
+                yaw_rate_dps: 0.0,
+            },
+            Command::CameraFocus {
+                camera: 0,
+                mode: FocusMode::Auto,
+                value: 0.0,
+            },
+        ] {
+            assert_eq!(admit(&sample(&cmd, 3), 1, true), Ok(cmd));
+        }
+        let mut bad = sample(
+            &Command::GimbalRate {
+                pitch_rate_dps: 1.0,
+                yaw_rate_dps: 1.0,
+            },
+            4,
+        );
+        bad.f[0] = 400.0;
+        let r = admit(&bad, 1, true).unwrap_err();
+        assert_eq!(r.reason, RefusalReason::InvalidParameter);
+        assert!(r.detail.contains("pitch_rate_dps"), "{}", r.detail);
     }
 
     fn sample(kind_cmd: &Command, id: u32) -> VehicleCommand {

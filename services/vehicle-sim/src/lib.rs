@@ -5,8 +5,8 @@
 //! Layers, each usable on its own:
 //! - [`model`]: the vehicle, a pure point-mass simulation stepped with an
 //!   explicit `dt` (modes, arming, guidance, battery, motor outputs and the
-//!   ground motor test), its gimbal, the camera's zoom and the GoPro behind the
-//!   gimbal's MAVLink bridge.
+//!   ground motor test), its gimbal, the camera (mode, zoom, focus, image
+//!   sequences) and the GoPro behind the gimbal's MAVLink bridge.
 //! - [`handler`]: MAVLink message in → vehicle change + replies out (pure).
 //! - [`telemetry`] / [`streams`]: state → messages, and which are due when.
 //! - [`codec`]: MAVLink 1/2 framing over byte buffers (pure).

@@ -14,7 +14,7 @@ use nalgebra::Vector3;
 use tracing::{debug, info, warn};
 
 use super::setpoint::global_to_ned;
-use super::{actuators, gimbal};
+use super::{actuators, camera, gimbal};
 use super::{set_mode, Outgoing, Response, StreamRequest};
 use crate::model::{FlightMode, SpeedKind, Vehicle};
 use crate::streams::IntervalRequest;
@@ -194,22 +194,10 @@ fn run(
         MavCmd::MAV_CMD_DO_SET_HOME => set_home(v, cmd),
         MavCmd::MAV_CMD_DO_MOUNT_CONTROL => gimbal::mount_control(v, cmd),
         MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => gimbal::manager_pitchyaw(v, cmd),
-        MavCmd::MAV_CMD_IMAGE_START_CAPTURE => {
-            // param3 = total images (0 = until stopped), param2 = interval.
-            let payload = v.payload_mut();
-            if p3 >= 1.0 {
-                payload.images_captured += p3 as u64;
-                payload.image_interval_s = None;
-            } else {
-                payload.images_captured += 1;
-                payload.image_interval_s = Some(f64::from(p2));
-            }
-            MAV_RESULT_ACCEPTED
-        }
-        MavCmd::MAV_CMD_IMAGE_STOP_CAPTURE => {
-            v.payload_mut().image_interval_s = None;
-            MAV_RESULT_ACCEPTED
-        }
+        MavCmd::MAV_CMD_IMAGE_START_CAPTURE => camera::start_capture(v, cmd),
+        MavCmd::MAV_CMD_IMAGE_STOP_CAPTURE => camera::stop_capture(v, cmd),
+        MavCmd::MAV_CMD_SET_CAMERA_MODE => camera::set_mode(v, cmd),
+        MavCmd::MAV_CMD_SET_CAMERA_FOCUS => camera::focus(v, cmd),
         MavCmd::MAV_CMD_VIDEO_START_CAPTURE => {
             let payload = v.payload_mut();
             payload.video_recording = true;

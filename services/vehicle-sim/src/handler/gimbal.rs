@@ -74,9 +74,19 @@ pub(super) fn mount_control(v: &mut Vehicle, cmd: &Cmd) -> MavResult {
     MAV_RESULT_ACCEPTED
 }
 
+/// Fastest rate DO_GIMBAL_MANAGER_PITCHYAW may ask for, deg/s (one turn a second);
+/// the gimbal itself turns at most at its slew rate.
+const MAX_RATE_DPS: f32 = 360.0;
+
 /// DO_GIMBAL_MANAGER_PITCHYAW: param1 pitch, param2 yaw (degrees), param3/4
 /// pitch/yaw rates (deg/s, used when an angle is NaN), param5
 /// GIMBAL_MANAGER_FLAGS, param7 gimbal device id.
+///
+/// Rates turn the gimbal (no faster than its slew rate, stopping at the ends of
+/// its travel) until the next angle or rate command; rates of 0 hold it where it
+/// is. As ArduPilot: FAILED for another gimbal device or when neither both
+/// angles nor both rates are given. Beyond ArduPilot: a rate that is infinite or
+/// faster than 360 deg/s is DENIED.
 pub(super) fn manager_pitchyaw(v: &mut Vehicle, cmd: &Cmd) -> MavResult {
     use MavResult::*;
     let [pitch, yaw, pitch_rate, yaw_rate] = cmd.p;
@@ -104,7 +114,10 @@ pub(super) fn manager_pitchyaw(v: &mut Vehicle, cmd: &Cmd) -> MavResult {
             yaw: f64::from(yaw).to_radians(),
             yaw_frame,
         }
-    } else if pitch_rate.is_finite() && yaw_rate.is_finite() {
+    } else if !(pitch_rate.is_nan() || yaw_rate.is_nan()) {
+        if !(pitch_rate.abs() <= MAX_RATE_DPS && yaw_rate.abs() <= MAX_RATE_DPS) {
+            return MAV_RESULT_DENIED;
+        }
         GimbalTarget::Rates {
             pitch: f64::from(pitch_rate).to_radians(),
             yaw: f64::from(yaw_rate).to_radians(),

@@ -6,6 +6,7 @@
 #![allow(deprecated)]
 
 mod actuators;
+mod camera;
 mod command;
 mod gimbal;
 mod gopro;

@@ -14,6 +14,7 @@ use nalgebra::Vector3;
 use crate::model::{FlightMode, VehicleParams};
 
 mod actuators;
+mod camera;
 mod home;
 mod payload;
 

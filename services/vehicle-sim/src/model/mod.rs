@@ -9,6 +9,7 @@
 mod battery;
 mod commands;
 pub mod control;
+mod focus;
 pub mod geo;
 pub mod gimbal;
 pub mod gopro;
@@ -28,6 +29,7 @@ pub use commands::{
     TakeoffRefusal, HOME_MAX_FROM_ORIGIN_M,
 };
 pub use control::Attitude;
+pub use focus::{Focus, FocusControl, FocusRefusal, FOCUS_RATE_PCT_S, FOCUS_STEP_PCT, MIN_FOCUS_M};
 pub use geo::{GeoPoint, LocalFrame};
 pub use gimbal::{Gimbal, GimbalAttitude, GimbalTarget, YawFrame};
 pub use gopro::{GoPro, GoProHeartbeat, GoProRefusal};
@@ -35,7 +37,8 @@ pub use mode::FlightMode;
 pub use motors::{MotorTestRefusal, MotorTestRequest, TestThrottle};
 pub use params::VehicleParams;
 pub use payload::{
-    MountTarget, Payload, Zoom, ZoomRefusal, MAX_ZOOM_STEPS, ZOOM_RATE_PCT_S, ZOOM_STEP_PCT,
+    CameraMode, CaptureRefusal, ImageSequence, MountTarget, Payload, Zoom, ZoomRefusal, MAX_IMAGES,
+    MAX_ZOOM_STEPS, ZOOM_RATE_PCT_S, ZOOM_STEP_PCT,
 };
 pub use yaw::YawMode;
 
@@ -193,7 +196,7 @@ impl Vehicle {
             .roi
             .map(|roi| gimbal::aim_at(&self.pos, &roi, self.att.yaw));
         self.gimbal.step(self.att.yaw, aim, dt);
-        self.payload.zoom.step(dt);
+        self.payload.step(dt);
         self.step_motor_test();
         if let Some(gopro) = &mut self.gopro {
             if gopro.step(dt) {
