@@ -7,7 +7,15 @@ cd "$(dirname "$0")/.."
 bin=target/debug
 domain="ci$$"
 work=$(mktemp -d)
-trap 'kill -KILL "${pid:-0}" 2>/dev/null || true; rm -rf "$work"' EXIT
+# On any failure: stop the mesh gracefully (the supervisor stops its services), and
+# only then force it; SIGKILL first would orphan the services.
+stop_mesh() {
+  [ -n "${pid:-}" ] || return 0
+  kill -TERM "$pid" 2>/dev/null || return 0
+  for _ in $(seq 1 50); do kill -0 "$pid" 2>/dev/null || return 0; sleep 0.2; done
+  kill -KILL "$pid" 2>/dev/null || true
+}
+trap 'stop_mesh; rm -rf "$work"' EXIT
 
 # The default configs (binaries are found next to `skymesh`), but on a free MAVLink
 # port so CI never collides with a mesh already running on this machine.
@@ -23,8 +31,10 @@ sed -i "s#^follow_listen = .*#follow_listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#"
 # The IMC gateway's UDP port; the hardware service's simulated devices in the temp dir.
 sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_DGRAM)\"#" "$work/imc-gateway.toml"
 sed -i "s#^state_dir = .*#state_dir = \"$work/hardware\"#" "$work/hardware.toml"
-# The MQTT broker's port.
-sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/mqtt-broker.toml"
+# The MQTT broker's port, and the DJI gateway pointed at it.
+mqtt_port=$(free SOCK_STREAM)
+sed -i "s#^listen = .*#listen = \"127.0.0.1:$mqtt_port\"#" "$work/mqtt-broker.toml"
+sed -i "s#^address = .*#address = \"127.0.0.1:$mqtt_port\"#" "$work/dji-gateway.toml"
 # The GroundControl state server and pose broadcast destination.
 sed -i "s#^listen = .*#listen = \"127.0.0.1:$(free SOCK_STREAM)\"#" "$work/groundcontrol-gateway.toml"
 sed -i "s#^broadcast_destinations = .*#broadcast_destinations = [\"127.0.0.1:$(free SOCK_DGRAM)\"]#" "$work/groundcontrol-gateway.toml"
@@ -42,7 +52,9 @@ for _ in $(seq 1 300); do
      && grep -q 'skymesh_service_up{service="hardware"} 1' "$work/metrics.txt" \
      && grep -q 'skymesh_service_up{service="swarm-queue"} 1' "$work/metrics.txt" \
      && grep -q 'skymesh_service_up{service="groundcontrol-gateway"} 1' "$work/metrics.txt" \
-     && grep -q 'skymesh_service_up{service="mqtt-broker"} 1' "$work/metrics.txt"; then
+     && grep -q 'skymesh_service_up{service="mqtt-broker"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_service_up{service="dji-gateway"} 1' "$work/metrics.txt" \
+     && grep -q 'skymesh_dji_broker_connected{service="dji-gateway"} 1' "$work/metrics.txt"; then
     break
   fi
   sleep 0.2

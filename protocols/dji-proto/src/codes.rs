@@ -24,6 +24,7 @@
 //! | 314016 | `DRC_STATE` | DRC mode required (`drc_mode_enter` first) or already in the requested state |
 //! | 314017 | `DRC_BROKER_UNREACHABLE` | the broker named in `drc_mode_enter` cannot be reached |
 //! | 314018 | `NO_TASK` | no flyto / takeoff task to stop or update |
+//! | 314030 | `DRC_HEARTBEAT_TIMEOUT` | DRC mode left: no `heart_beat` for `heartbeat_timeout_s` (in `drc_status_notify`) |
 //! | 314099 | `INTERNAL` | internal error (bus unavailable); logged |
 //!
 //! Payloads that are not an envelope at all (not JSON, over 64 KiB, missing or
@@ -90,5 +91,8 @@ pub const DRC_STATE: u32 = 314016;
 pub const DRC_BROKER_UNREACHABLE: u32 = 314017;
 /// No flyto / takeoff task to stop or update.
 pub const NO_TASK: u32 = 314018;
+/// DRC mode was left because no `heart_beat` arrived within the configured timeout
+/// (the `result` of that `drc_status_notify` with `drc_state` 0).
+pub const DRC_HEARTBEAT_TIMEOUT: u32 = 314030;
 /// Internal error (bus unavailable); logged.
 pub const INTERNAL: u32 = 314099;

@@ -143,6 +143,9 @@ impl Gimbal {
     /// Set an explicit target; it takes effect once no ROI is set.
     pub fn set_target(&mut self, target: GimbalTarget) {
         self.target = target;
+        // A command after an ROI was cleared (before the next step noticed) is the
+        // newer intent: the step must not replace it with `Hold`.
+        self.tracking_roi = false;
     }
 
     /// Advance by `dt` seconds. `roi_aim` is [`aim_at`]'s answer while the
@@ -254,6 +257,25 @@ mod tests {
         let a = g.attitude();
         assert!((deg(a.pitch) + 60.0).abs() < 1e-9);
         assert_eq!((a.pitch_rate, a.yaw_rate), (0.0, 0.0));
+    }
+
+    #[test]
+    fn a_target_set_right_after_an_roi_clear_is_kept() {
+        let mut g = Gimbal::new(PI);
+        // Tracking an ROI below and to the right.
+        run(&mut g, 0.0, Some((-0.5, Some(0.5))), 1.0);
+        // The ROI is cleared and a new angle arrives before the next step.
+        g.set_target(GimbalTarget::Angles {
+            pitch: 0.0,
+            yaw: 0.0,
+            yaw_frame: YawFrame::Vehicle,
+        });
+        run(&mut g, 0.0, None, 1.0);
+        let a = g.attitude();
+        assert!(
+            deg(a.pitch).abs() < 1e-6 && deg(a.yaw).abs() < 1e-6,
+            "{a:?}"
+        );
     }
 
     #[test]

@@ -1,0 +1,49 @@
+//! skymesh dji-gateway: the device side of the DJI Cloud API live flight controls
+//! (`../shared/specs/dji-cloud-live-flight-controls.md` with `specs/FACTS.md`). A
+//! cloud written for the DJI Cloud API talks MQTT to "the dock" `gateway_sn`; this
+//! gateway answers as that dock and flies a MAVLink aircraft through skymesh's
+//! arbiter (source `dji_drc`).
+//!
+//! | module | role |
+//! |---|---|
+//! | [`config`] | TOML → [`Settings`] |
+//! | [`mqtt`], [`tls`], [`backoff`] | the cloud broker connection: credentials, TLS (rustls/ring), reconnect with jittered backoff |
+//! | [`outbox`], [`ratelimit`] | outbound queue kept across reconnects, need_reply re-sends; inbound rate limit (pure) |
+//! | [`inbound`] | the checks of one inbound message, in order (pure) |
+//! | `gateway` | the one loop: MQTT in/out, replies and events, authority keep-alive |
+//! | [`dispatch`] | the checks every service shares (gateway, payload_index, authority) and each method's execution |
+//! | [`progress`], [`flight_task`] | takeoff_to_point / fly_to_point: pure progress rules, and the running task |
+//! | [`poi`], [`poi_task`] | POI orbit (the shot engine's `Orbit`): pure rules, and the 25 Hz task |
+//! | [`payload`] | payload methods → camera/gimbal commands (pure) |
+//! | [`shared`] | what tasks share: settings, vehicle link, reply/event emitter, result-code mapping |
+//! | [`link`] | the bus: vehicle samples and commands with their acks |
+//! | [`drc`] | the DRC link (drc/down, drc/up on the broker `drc_mode_enter` names) |
+//! | [`metrics`] | `skymesh_dji_*` series |
+//! | [`cloud`] | a test "cloud" client |
+//!
+//! Entry point: [`run`].
+#![forbid(unsafe_code)]
+
+pub mod backoff;
+pub mod cloud;
+pub mod config;
+pub mod dispatch;
+pub mod drc;
+pub mod flight_task;
+mod gateway;
+pub mod inbound;
+pub mod link;
+pub mod metrics;
+pub mod mqtt;
+pub mod outbox;
+pub mod payload;
+pub mod poi;
+pub mod poi_task;
+pub mod progress;
+pub mod ratelimit;
+pub mod service;
+pub mod shared;
+pub mod tls;
+
+pub use config::{RawConfig, Settings};
+pub use gateway::{now_ms, run, uuid};

@@ -1,0 +1,126 @@
+//! TLS for MQTT connections: rustls with the `ring` provider (no aws-lc-rs C build),
+//! server certificates checked against a PEM CA bundle from the config. Shared by the
+//! cloud connection and the DRC link.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use tokio_rustls::rustls::{self, ClientConfig, RootCertStore};
+
+/// Why a CA bundle cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum TlsError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a PEM file: {source}")]
+    Pem {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{0}: no certificate in the file (expected PEM `BEGIN CERTIFICATE` blocks)")]
+    NoCertificate(PathBuf),
+    #[error("{path}: no usable CA certificate ({rejected} rejected)")]
+    NoUsableCertificate { path: PathBuf, rejected: usize },
+    #[error("TLS setup: {0}")]
+    Rustls(#[from] rustls::Error),
+}
+
+/// The trust anchors of a PEM bundle.
+pub fn load_roots(path: &Path) -> Result<RootCertStore, TlsError> {
+    let text = std::fs::read(path).map_err(|source| TlsError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let certs = rustls_pemfile::certs(&mut std::io::Cursor::new(text))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|source| TlsError::Pem {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if certs.is_empty() {
+        return Err(TlsError::NoCertificate(path.to_path_buf()));
+    }
+    let mut roots = RootCertStore::empty();
+    let (_, rejected) = roots.add_parsable_certificates(certs);
+    if roots.is_empty() {
+        return Err(TlsError::NoUsableCertificate {
+            path: path.to_path_buf(),
+            rejected,
+        });
+    }
+    Ok(roots)
+}
+
+/// A client config trusting the bundle at `ca_file` (TLS 1.2 and 1.3, ring).
+pub fn client_config(ca_file: &Path) -> Result<Arc<ClientConfig>, TlsError> {
+    let roots = load_roots(ca_file)?;
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    let config = ClientConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()?
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    Ok(Arc::new(config))
+}
+
+/// The rumqttc transport for a TLS connection trusting `ca_file`.
+pub fn transport(ca_file: &Path) -> Result<rumqttc::Transport, TlsError> {
+    Ok(rumqttc::Transport::Tls(rumqttc::TlsConfiguration::Rustls(
+        client_config(ca_file)?,
+    )))
+}
+
+/// A self-signed P-256 CA (CN "skymesh test CA", valid until 2126) for tests.
+#[cfg(test)]
+pub(crate) const TEST_CA_PEM: &str = "-----BEGIN CERTIFICATE-----
+MIIBijCCATGgAwIBAgIUOGRiXEWG6aoJXItbbzk13SWuhAwwCgYIKoZIzj0EAwIw
+GjEYMBYGA1UEAwwPc2t5bWVzaCB0ZXN0IENBMCAXDTI2MTEyNTE0NDczN1oYDzIx
+MjYxMTAxMTQ0NzM3WjAaMRgwFgYDVQQDDA9za3ltZXNoIHRlc3QgQ0EwWTATBgcq
+hkjOPQIBBggqhkjOPQMBBwNCAAQLQCCbYWPVzap9el5ymUY3ETFYXdrH6QvG37Nx
+ULAGbrljV7W60HtN7C1Js1SVxxgxJrtH8msNEEmtvSJggz6ao1MwUTAdBgNVHQ4E
+FgQUHGSHceXsKxrW+X+EHKC37U3hwdEwHwYDVR0jBBgwFoAUHGSHceXsKxrW+X+E
+HKC37U3hwdEwDwYDVR0TAQH/BAUwAwEB/zAKBggqhkjOPQQDAgNHADBEAiBpUede
+8HALQuezTG8YyLNZUZRXlLoSacjkH72e2bIPLQIgWORhrV0Ud2kq1V/zlH4b/3mR
+zMOvWrNhSWaLzXG478E=
+-----END CERTIFICATE-----
+";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pem_ca_becomes_a_client_config() {
+        let dir = tempfile::tempdir().unwrap();
+        let ca = dir.path().join("ca.pem");
+        std::fs::write(&ca, TEST_CA_PEM).unwrap();
+        assert_eq!(load_roots(&ca).unwrap().len(), 1);
+        client_config(&ca).unwrap();
+        assert!(matches!(transport(&ca), Ok(rumqttc::Transport::Tls(_))));
+    }
+
+    #[test]
+    fn unusable_bundles_are_refused_with_the_reason() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing.pem");
+        assert!(matches!(load_roots(&missing), Err(TlsError::Read { .. })));
+        let empty = dir.path().join("empty.pem");
+        std::fs::write(&empty, "").unwrap();
+        assert!(matches!(
+            load_roots(&empty),
+            Err(TlsError::NoCertificate(_))
+        ));
+        let garbage = dir.path().join("garbage.pem");
+        std::fs::write(
+            &garbage,
+            "-----BEGIN CERTIFICATE-----\nAAAA\n-----END CERTIFICATE-----\n",
+        )
+        .unwrap();
+        assert!(matches!(
+            load_roots(&garbage),
+            Err(TlsError::NoUsableCertificate { rejected: 1, .. })
+        ));
+    }
+}
