@@ -142,6 +142,18 @@ pub struct MeshOptions {
     pub swarm_queue_extra: String,
     /// Extra TOML appended to the GroundControl gateway's config.
     pub gc_gateway_extra: String,
+    /// Also run the embedded MQTT broker (service `mqtt-broker`, on a free
+    /// 127.0.0.1 port: [`Mesh::mqtt_addr`]) and the DJI Cloud API gateway (service
+    /// `dji-gateway`, for vehicle 1, serial number [`Mesh::gateway_sn`], connected
+    /// to that broker). The broker restarts 1.5 s after it dies (a test can take it
+    /// away with [`Mesh::kill_service`]).
+    pub dji: bool,
+    /// Extra TOML appended to the DJI gateway's config. It is written after the
+    /// `[broker]` table: lines before the first table header of their own land in
+    /// `[broker]` (e.g. `reconnect_max_ms = 500`), then e.g. `[drc]` tables.
+    pub dji_gateway_extra: String,
+    /// Extra TOML appended to the MQTT broker's config (e.g. `[[user]]` entries).
+    pub mqtt_broker_extra: String,
 }
 
 impl Default for MeshOptions {
@@ -167,6 +179,9 @@ impl Default for MeshOptions {
             gc_privileged: vec!["127.0.0.1".to_string()],
             swarm_queue_extra: String::new(),
             gc_gateway_extra: String::new(),
+            dji: false,
+            dji_gateway_extra: String::new(),
+            mqtt_broker_extra: String::new(),
         }
     }
 }
@@ -198,6 +213,10 @@ pub struct Mesh {
     pub pose_port: u16,
     /// The swarm queue's animations (`drone_<id>.csv`, with `MeshOptions::swarm`).
     pub animations_dir: PathBuf,
+    /// The embedded MQTT broker's address (with `MeshOptions::dji`; port 0 without).
+    pub mqtt_addr: SocketAddr,
+    /// The DJI gateway's serial number, unique per mesh (with `MeshOptions::dji`).
+    pub gateway_sn: String,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
     _serial: MutexGuard<'static, ()>,
@@ -468,6 +487,53 @@ after = ["{link}", "hardware"]
             );
         }
 
+        let mut mqtt_addr = SocketAddr::from(([127, 0, 0, 1], 0));
+        let gateway_sn = format!("E2E-{}-{n}", std::process::id());
+        if opts.dji {
+            mqtt_addr.set_port(free_port());
+            std::fs::write(
+                d.join("mqtt-broker.toml"),
+                format!(
+                    "listen = \"{mqtt_addr}\"\nmeters_interval_s = 1\n{}\n",
+                    opts.mqtt_broker_extra
+                ),
+            )?;
+            // Fast reconnection (the shipped default backs off up to 10 s) so a broker
+            // outage costs a test seconds, not tens of seconds.
+            std::fs::write(
+                d.join("dji-gateway.toml"),
+                format!(
+                    "gateway_sn = \"{gateway_sn}\"\nvehicle_id = 1\n\
+                     [broker]\naddress = \"{mqtt_addr}\"\nreconnect_initial_ms = 200\nreconnect_max_ms = 1000\n{}\n",
+                    opts.dji_gateway_extra
+                ),
+            )?;
+            let link = if opts.vehicles > 1 {
+                "autopilot-link-1"
+            } else {
+                "autopilot-link"
+            };
+            // The broker comes back 1.5 s after it dies: long enough that its clients
+            // notice the outage and retry, short enough for a test.
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "mqtt-broker"
+binary = "{bins}/skymesh-mqtt-broker"
+config = "mqtt-broker.toml"
+restart = {{ initial_backoff_ms = 1500, jitter = 0.0 }}
+
+[[service]]
+name = "dji-gateway"
+binary = "{bins}/skymesh-dji-gateway"
+config = "dji-gateway.toml"
+after = ["{link}", "mqtt-broker"]
+"#,
+                bins = bins.display(),
+            );
+        }
+
         std::fs::write(
             d.join("skymesh.toml"),
             format!(
@@ -517,6 +583,8 @@ grace_period_ms = 3000
             gc_port,
             pose_port,
             animations_dir,
+            mqtt_addr,
+            gateway_sn,
             supervisor: Some(child),
             metrics_addr: None,
             _serial: serial,
@@ -638,6 +706,23 @@ grace_period_ms = 3000
                 .then(|| s["pid"].as_u64())
                 .flatten()
                 .map(|p| p as u32)
+        })
+    }
+
+    /// SIGKILLs service `name` (the supervisor restarts it by its policy) and
+    /// returns the killed pid.
+    pub fn kill_service(&mut self, name: &str) -> Result<u32> {
+        let pid = self.wait_running(name, Duration::from_secs(10))?;
+        signal(pid, Signal::SIGKILL)?;
+        Ok(pid)
+    }
+
+    /// Waits until `name` runs again with a pid other than `old_pid`; returns it.
+    pub fn wait_restarted(&mut self, name: &str, old_pid: u32, timeout: Duration) -> Result<u32> {
+        self.wait_for(timeout, &format!("{name} restarted"), |m| {
+            let s = m.service(name).ok()?;
+            let pid = s["pid"].as_u64()? as u32;
+            (s["state"] == "running" && pid != old_pid).then_some(pid)
         })
     }
 
