@@ -21,6 +21,8 @@ use nix::unistd::Pid;
 use skymesh_ipc_types::ServiceId;
 use skymesh_runtime::{Bus, Domain, Stats};
 
+pub mod bench;
+
 /// Meshes are heavy for a 2-core machine: run one at a time so timing-sensitive
 /// behaviour (heartbeats, backoff) is tested, not the scheduler.
 static ONE_MESH_AT_A_TIME: Mutex<()> = Mutex::new(());

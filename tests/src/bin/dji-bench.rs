@@ -19,8 +19,7 @@
 //! `cargo run --release -p skymesh-e2e --bin dji-bench -- --commands 300`
 
 use std::collections::HashMap;
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -30,6 +29,7 @@ use mavlink::dialects::ardupilotmega::MavMessage;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
+use skymesh_e2e::bench::{arg, mavlink_tap, percentile};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
@@ -48,75 +48,19 @@ struct Seen {
     vel: [f32; 3],
 }
 
-fn arg(name: &str, default: u64) -> u64 {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
+/// Reports every SET_POSITION_TARGET_* that autopilot-link sends, with its velocity.
+fn scan_setpoints(parser: &mut FrameParser, now: Instant, out: &mpsc::Sender<Seen>) {
+    while let Some(frame) = parser.next_frame() {
+        if !matches!(frame.message_id(), 84 | 86) {
+            continue;
+        }
+        let vel = match frame.decode() {
+            Ok(MavMessage::SET_POSITION_TARGET_LOCAL_NED(m)) => [m.vx, m.vy, m.vz],
+            Ok(MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m)) => [m.vx, m.vy, m.vz],
+            _ => continue,
+        };
+        let _ = out.send(Seen { at: now, vel });
     }
-    let idx = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[idx]
-}
-
-/// Forwards bytes both ways between autopilot-link (`listener`) and vehicle-sim and
-/// reports every SET_POSITION_TARGET_* that autopilot-link sends (its own CRC-checked
-/// frame parser, then the mavlink crate's decoder).
-fn tap(listener: TcpListener, sim_port: u16, out: mpsc::Sender<Seen>) {
-    std::thread::spawn(move || loop {
-        let Ok((link, _)) = listener.accept() else {
-            return;
-        };
-        let Ok(sim) = TcpStream::connect(("127.0.0.1", sim_port)) else {
-            continue;
-        };
-        let _ = link.set_nodelay(true);
-        let _ = sim.set_nodelay(true);
-        let (Ok(mut link_r), Ok(mut sim_w)) = (link.try_clone(), sim.try_clone()) else {
-            continue;
-        };
-        let (mut sim_r, mut link_w) = (sim, link);
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 4096];
-            while let Ok(n) = sim_r.read(&mut buf) {
-                if n == 0 || link_w.write_all(&buf[..n]).is_err() {
-                    break;
-                }
-            }
-        });
-        let out = out.clone();
-        std::thread::spawn(move || {
-            let mut parser = FrameParser::new();
-            let mut buf = [0u8; 4096];
-            while let Ok(n) = link_r.read(&mut buf) {
-                if n == 0 {
-                    break;
-                }
-                let now = Instant::now();
-                if sim_w.write_all(&buf[..n]).is_err() {
-                    break;
-                }
-                parser.push(&buf[..n]);
-                while let Some(frame) = parser.next_frame() {
-                    if !matches!(frame.message_id(), 84 | 86) {
-                        continue;
-                    }
-                    let vel = match frame.decode() {
-                        Ok(MavMessage::SET_POSITION_TARGET_LOCAL_NED(m)) => [m.vx, m.vy, m.vz],
-                        Ok(MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m)) => [m.vx, m.vy, m.vz],
-                        _ => continue,
-                    };
-                    let _ = out.send(Seen { at: now, vel });
-                }
-            }
-        });
-    });
 }
 
 /// Operator: GUIDED, arm, take off to 10 m, then give flight authority back.
@@ -460,7 +404,9 @@ fn main() -> Result<()> {
     };
     let mut mesh = Mesh::start(opts)?;
     let (seen_tx, seen_rx) = mpsc::channel();
-    tap(tap_listener, mesh.mavlink_port, seen_tx);
+    mavlink_tap(tap_listener, mesh.mavlink_port, move |parser, now| {
+        scan_setpoints(parser, now, &seen_tx)
+    });
     for name in [
         "vehicle-sim",
         "autopilot-link",

@@ -10,25 +10,10 @@
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
+use skymesh_e2e::bench::{arg, percentile};
 use skymesh_e2e::{signal, Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-
-fn arg(name: &str, default: u64) -> u64 {
-    let args: Vec<String> = std::env::args().collect();
-    args.windows(2)
-        .find(|w| w[0] == name)
-        .and_then(|w| w[1].parse().ok())
-        .unwrap_or(default)
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let idx = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[idx.min(sorted.len() - 1)]
-}
 
 /// utime + stime in clock ticks and resident pages of a process.
 fn proc_usage(pid: u32) -> Option<(u64, u64)> {

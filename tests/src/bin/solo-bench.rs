@@ -25,6 +25,7 @@ use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::{MavMessage, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use mavlink::MavHeader;
 use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
+use skymesh_e2e::bench::{arg, mavlink_tap, percentile};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
@@ -43,23 +44,6 @@ struct Seen {
 
 fn is_setpoint(s: &Seen) -> bool {
     s.msgid == 84 || s.msgid == 86
-}
-
-fn arg(name: &str, default: u64) -> u64 {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let idx = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[idx]
 }
 
 /// Reports every frame `parser` has whole: SET_POSITION_TARGET_* with their velocity,
@@ -83,50 +67,6 @@ fn scan_frames(parser: &mut FrameParser, now: Instant, out: &mpsc::Sender<Seen>)
             vel,
         });
     }
-}
-
-/// Forwards bytes both ways between autopilot-link (`listener`) and vehicle-sim,
-/// reporting setpoints that autopilot-link sends.
-fn tap(listener: TcpListener, sim_port: u16, out: mpsc::Sender<Seen>) {
-    std::thread::spawn(move || loop {
-        let Ok((link, _)) = listener.accept() else {
-            return;
-        };
-        let Ok(sim) = TcpStream::connect(("127.0.0.1", sim_port)) else {
-            continue;
-        };
-        let _ = link.set_nodelay(true);
-        let _ = sim.set_nodelay(true);
-        let (mut link_r, mut sim_w) = (
-            link.try_clone().expect("clone"),
-            sim.try_clone().expect("clone"),
-        );
-        let (mut sim_r, mut link_w) = (sim, link);
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 4096];
-            while let Ok(n) = sim_r.read(&mut buf) {
-                if n == 0 || link_w.write_all(&buf[..n]).is_err() {
-                    break;
-                }
-            }
-        });
-        let out = out.clone();
-        std::thread::spawn(move || {
-            let mut parser = FrameParser::new();
-            let mut buf = [0u8; 4096];
-            while let Ok(n) = link_r.read(&mut buf) {
-                if n == 0 {
-                    break;
-                }
-                let now = Instant::now();
-                if sim_w.write_all(&buf[..n]).is_err() {
-                    break;
-                }
-                parser.push(&buf[..n]);
-                scan_frames(&mut parser, now, &out);
-            }
-        });
-    });
 }
 
 /// Reads TLV frames from the app connection into a channel.
@@ -356,7 +296,9 @@ fn main() -> Result<()> {
     };
     let mut mesh = Mesh::start(opts)?;
     let (seen_tx, seen_rx) = mpsc::channel();
-    tap(tap_listener, mesh.mavlink_port, seen_tx);
+    mavlink_tap(tap_listener, mesh.mavlink_port, move |parser, now| {
+        scan_frames(parser, now, &seen_tx)
+    });
     for name in [
         "vehicle-sim",
         "autopilot-link",

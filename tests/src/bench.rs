@@ -1,0 +1,75 @@
+//! What the benchmark binaries (`src/bin/*-bench.rs`) share: command-line numbers,
+//! percentiles, and the MAVLink tap that sits between autopilot-link and vehicle-sim.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::time::Instant;
+
+use skymesh_autopilot_link::frame::FrameParser;
+
+/// `--name N` from the command line, else `default`.
+pub fn arg(name: &str, default: u64) -> u64 {
+    let args: Vec<String> = std::env::args().collect();
+    args.windows(2)
+        .find(|w| w[0] == name)
+        .and_then(|w| w[1].parse().ok())
+        .unwrap_or(default)
+}
+
+/// The `p` quantile (0..=1, nearest rank) of ascending `sorted`; NaN when empty.
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let idx = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[idx.min(sorted.len() - 1)]
+}
+
+/// Forwards bytes both ways between autopilot-link (connecting to `listener`) and
+/// vehicle-sim on `sim_port`, and hands every chunk autopilot-link writes to
+/// `on_link_bytes` (a clone per connection) through autopilot-link's own
+/// CRC-checked frame parser, with the time the chunk was read — after it has been
+/// forwarded, so the tap adds no latency to what it measures.
+pub fn mavlink_tap<F>(listener: TcpListener, sim_port: u16, on_link_bytes: F)
+where
+    F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+{
+    std::thread::spawn(move || loop {
+        let Ok((link, _)) = listener.accept() else {
+            return;
+        };
+        let Ok(sim) = TcpStream::connect(("127.0.0.1", sim_port)) else {
+            continue;
+        };
+        let _ = link.set_nodelay(true);
+        let _ = sim.set_nodelay(true);
+        let (Ok(mut link_r), Ok(mut sim_w)) = (link.try_clone(), sim.try_clone()) else {
+            continue;
+        };
+        let (mut sim_r, mut link_w) = (sim, link);
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = sim_r.read(&mut buf) {
+                if n == 0 || link_w.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut on_bytes = on_link_bytes.clone();
+        std::thread::spawn(move || {
+            let mut parser = FrameParser::new();
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = link_r.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                let now = Instant::now();
+                if sim_w.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+                parser.push(&buf[..n]);
+                on_bytes(&mut parser, now);
+            }
+        });
+    });
+}
