@@ -40,25 +40,7 @@ pub mod reason {
 pub fn view(s: &Snapshot, now_ns: u64) -> Option<VehicleView> {
     let position = position(s, now_ns)?;
     let st = s.state?;
-    let heading = if st.heading_deg.is_finite() {
-        st.heading_deg.rem_euclid(360.0)
-    } else {
-        0.0
-    };
-    let (pitch, yaw) = match s.payload.filter(|p| p.is_gimbal_valid()) {
-        Some(p) => (
-            p.gimbal_pitch_deg,
-            (heading + p.gimbal_yaw_deg).rem_euclid(360.0),
-        ),
-        None => (0.0, heading),
-    };
-    Some(VehicleView {
-        position,
-        vel_ned_mps: st.vel_ned_mps,
-        heading_deg: heading,
-        camera_pitch_deg: pitch,
-        camera_yaw_deg: yaw,
-    })
+    Some(VehicleView::from_samples(position, &st, s.payload.as_ref()))
 }
 
 /// Modes in which POI cannot run (the vehicle returns, lands or flies manually).

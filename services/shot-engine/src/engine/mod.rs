@@ -153,21 +153,11 @@ impl Inputs {
             lon_deg: s.lon_deg,
             alt_rel_m: s.alt_rel_m,
         };
-        let heading = s.heading_deg.rem_euclid(360.0);
-        let (pitch, yaw) = match self.payload.as_ref().filter(|p| p.is_gimbal_valid()) {
-            Some(p) => (
-                p.gimbal_pitch_deg,
-                (heading + p.gimbal_yaw_deg).rem_euclid(360.0),
-            ),
-            None => (0.0, heading),
-        };
-        Some(VehicleView {
+        Some(VehicleView::from_samples(
             position,
-            vel_ned_mps: s.vel_ned_mps,
-            heading_deg: heading,
-            camera_pitch_deg: pitch,
-            camera_yaw_deg: yaw,
-        })
+            s,
+            self.payload.as_ref(),
+        ))
     }
 }
 

@@ -80,6 +80,36 @@ pub struct VehicleView {
     pub camera_yaw_deg: f32,
 }
 
+impl VehicleView {
+    /// The view from the latest vehicle state (at `position`, already checked for
+    /// freshness by the caller) and, when the gimbal reports, its attitude.
+    pub fn from_samples(
+        position: GeoPoint,
+        state: &skymesh_ipc_types::VehicleState,
+        payload: Option<&skymesh_ipc_types::PayloadState>,
+    ) -> VehicleView {
+        let heading = if state.heading_deg.is_finite() {
+            state.heading_deg.rem_euclid(360.0)
+        } else {
+            0.0
+        };
+        let (pitch, yaw) = match payload.filter(|p| p.is_gimbal_valid()) {
+            Some(p) => (
+                p.gimbal_pitch_deg,
+                (heading + p.gimbal_yaw_deg).rem_euclid(360.0),
+            ),
+            None => (0.0, heading),
+        };
+        VehicleView {
+            position,
+            vel_ned_mps: state.vel_ned_mps,
+            heading_deg: heading,
+            camera_pitch_deg: pitch,
+            camera_yaw_deg: yaw,
+        }
+    }
+}
+
 /// What a shot asks for this tick. The engine turns it into VehicleCommands (a
 /// VelocityNed setpoint every tick; SetRoi/ClearRoi, SetYaw and Gimbal only when they
 /// change meaningfully).
