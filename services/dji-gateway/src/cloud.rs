@@ -457,23 +457,14 @@ impl Cloud {
     ) -> Result<Received> {
         self.shared
             .wait(timeout, &format!("event {method}"), |i| {
-                let at = i
-                    .events
-                    .iter()
-                    .position(|e| e.method() == method && pred(&e.msg["data"]))?;
-                i.events.remove(at)
+                take_first(&mut i.events, method, &mut pred)
             })
             .await
     }
 
     /// Takes every event `method` received so far, oldest first.
     pub fn take_events(&self, method: &str) -> Vec<Received> {
-        let mut inbox = self.shared.lock();
-        let (taken, kept): (Vec<_>, Vec<_>) = std::mem::take(&mut inbox.events)
-            .into_iter()
-            .partition(|e| e.method() == method);
-        inbox.events = kept.into();
-        taken
+        take_all(&mut self.shared.lock().events, method)
     }
 
     /// Received payloads that were not JSON objects.
@@ -595,22 +586,14 @@ impl DrcCloud {
     ) -> Result<Received> {
         self.shared
             .wait(timeout, &format!("drc/up {method}"), |i| {
-                let at =
-                    i.up.iter()
-                        .position(|m| m.method() == method && pred(&m.msg["data"]))?;
-                i.up.remove(at)
+                take_first(&mut i.up, method, &mut pred)
             })
             .await
     }
 
     /// Takes every `drc/up` message `method` received so far, oldest first.
     pub fn take_up(&self, method: &str) -> Vec<Received> {
-        let mut inbox = self.shared.lock();
-        let (taken, kept): (Vec<_>, Vec<_>) = std::mem::take(&mut inbox.up)
-            .into_iter()
-            .partition(|m| m.method() == method);
-        inbox.up = kept.into();
-        taken
+        take_all(&mut self.shared.lock().up, method)
     }
 
     /// How many `drc/up` messages `method` (taken or not: counts what is still kept)
@@ -691,4 +674,25 @@ impl Drop for DrcCloud {
         self.stop_heartbeat();
         self.task.abort();
     }
+}
+
+/// Removes and returns the oldest message `method` whose `data` satisfies `pred`.
+fn take_first(
+    queue: &mut VecDeque<Received>,
+    method: &str,
+    pred: &mut impl FnMut(&Value) -> bool,
+) -> Option<Received> {
+    let at = queue
+        .iter()
+        .position(|m| m.method() == method && pred(&m.msg["data"]))?;
+    queue.remove(at)
+}
+
+/// Removes and returns every message `method`, oldest first.
+fn take_all(queue: &mut VecDeque<Received>, method: &str) -> Vec<Received> {
+    let (taken, kept): (Vec<_>, Vec<_>) = std::mem::take(queue)
+        .into_iter()
+        .partition(|m| m.method() == method);
+    *queue = kept.into();
+    taken
 }
