@@ -20,7 +20,7 @@ use dji_proto::{codes, TopicKind};
 use serde_json::{json, Value};
 use skymesh_dji_gateway::cloud::{Cloud, DrcCloud};
 use skymesh_e2e::{Mesh, MeshOptions};
-use skymesh_ipc_types::{PayloadState, VehicleState};
+use skymesh_ipc_types::{Command, CommandKind, CommandSource, PayloadState, VehicleState};
 use solo_common::{metric, ne, offset, runtime, speed, Vehicle, STARTUP};
 
 /// The payload the gateway is configured with (`[payload] payload_index`).
@@ -270,6 +270,8 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
         lap("refused_without_flight_authority");
         payload_methods_answer(&mut x).await;
         lap("payload_methods_answer");
+        panorama_sweeps_the_gimbal(&mut x).await;
+        lap("panorama_sweeps_the_gimbal");
         hostile_input_is_answered_or_counted(&mut x).await;
         lap("hostile_input_is_answered_or_counted");
         takeoff_to_point_flies_to_the_target(&mut x).await;
@@ -286,13 +288,19 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
         lap("drc_live_flight_control");
 
         // Acknowledged need_reply events are not sent again.
-        for method in ["takeoff_to_point_progress", "fly_to_point_progress"] {
+        for method in [
+            "takeoff_to_point_progress",
+            "fly_to_point_progress",
+            "camera_photo_take_progress",
+        ] {
             let again: Vec<Value> = x
                 .cloud
                 .take_events(method)
                 .into_iter()
                 .map(|e| e.msg["data"].clone())
-                .filter(|d| d["status"] != "wayline_progress")
+                .filter(|d| {
+                    d["status"] != "wayline_progress" && d["output"]["status"] != "in_progress"
+                })
                 .collect();
             assert!(
                 again.is_empty(),
@@ -596,6 +604,229 @@ async fn payload_methods_answer(x: &mut Ctx) {
         codes::OUT_OF_RANGE,
     )
     .await;
+}
+
+/// `output.status` of a camera_photo_take_progress event's data.
+fn pano_status(d: &Value) -> &str {
+    d["output"]["status"].as_str().unwrap_or("")
+}
+
+/// The gateway's `CameraCapture` commands vehicle-sim acknowledged (MAV_RESULT
+/// ACCEPTED: it counted the photo) among the acks received since the last call.
+fn captures_acked(x: &mut Ctx) -> usize {
+    let mut n = 0;
+    while let Some(a) = x.v.acks.try_recv().unwrap() {
+        if a.source == CommandSource::DjiDrc.to_wire()
+            && a.kind == CommandKind::CameraCapture.to_wire()
+        {
+            assert!(
+                a.is_accepted() && a.mav_result == 0,
+                "capture refused: {a:?}"
+            );
+            n += 1;
+        }
+    }
+    n
+}
+
+/// Panorama (on the ground, payload authority only): camera_mode_switch 3, then
+/// camera_photo_take answers 0 with `output.status` in_progress; the gimbal turns
+/// through the 8 stations 45° apart at pitch 0, starting where it points, and
+/// vehicle-sim takes one photo at each; camera_photo_take_progress climbs
+/// (current_step 3002, need_reply 0) to ok at 100 (3000, need_reply 1), and the
+/// gimbal is back where it started. A second camera_photo_take meanwhile is refused
+/// 314013. camera_photo_stop ends the next panorama (fail, result 0) and the gimbal
+/// returns; camera_mode_switch 0 leaves panorama mode.
+async fn panorama_sweeps_the_gimbal(x: &mut Ctx) {
+    const STATIONS: usize = 8;
+    let p = |extra: Value| {
+        let mut d = json!({ "payload_index": PAYLOAD });
+        if let (Some(d), Some(e)) = (d.as_object_mut(), extra.as_object()) {
+            d.extend(e.clone());
+        }
+        d
+    };
+    captures_acked(x);
+    x.cloud.take_events("camera_photo_take_progress");
+    x.expect(
+        "camera_mode_switch",
+        p(json!({ "camera_mode": 3 })),
+        codes::OK,
+    )
+    .await;
+    let heading = x.state().await.heading_deg;
+    let start = x
+        .wait_gimbal("the gimbal before the panorama", |_| true)
+        .await;
+    let (pitch0, yaw0) = (
+        f64::from(start.gimbal_pitch_deg),
+        f64::from(start.gimbal_yaw_deg),
+    );
+    assert!(
+        pitch0 < -20.0,
+        "the payload phase left the camera down: {pitch0}"
+    );
+    let reply = x
+        .cloud
+        .call("camera_photo_take", p(json!({})))
+        .await
+        .unwrap();
+    assert_eq!(reply["data"]["result"], 0, "{reply}");
+    assert_eq!(reply["data"]["output"]["status"], "in_progress", "{reply}");
+    x.expect("camera_photo_take", p(json!({})), codes::WRONG_STATE)
+        .await;
+
+    // Follow the gimbal, the photos and the events until the end.
+    let deadline = Instant::now() + Duration::from_secs(40);
+    let mut gimbal: Vec<(f64, f64)> = Vec::new();
+    let mut events: Vec<Value> = Vec::new();
+    let mut captures = 0;
+    while !events
+        .iter()
+        .any(|e| pano_status(&e["data"]) != "in_progress")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the panorama never ended: {captures} photos, events {:?}",
+            events.iter().map(|e| &e["data"]).collect::<Vec<_>>()
+        );
+        if let Some(g) =
+            x.v.payload
+                .recv_timeout(Duration::from_millis(200))
+                .await
+                .unwrap()
+        {
+            if g.is_gimbal_valid() {
+                gimbal.push((f64::from(g.gimbal_pitch_deg), f64::from(g.gimbal_yaw_deg)));
+            }
+        }
+        captures += captures_acked(x);
+        events.extend(
+            x.cloud
+                .take_events("camera_photo_take_progress")
+                .into_iter()
+                .map(|e| e.msg),
+        );
+    }
+    captures += captures_acked(x);
+    let (progress, end) = events.split_at(events.len() - 1);
+    let end = &end[0];
+    let d = &end["data"];
+    assert_eq!(pano_status(d), "ok", "{end}");
+    assert_eq!(d["result"], 0, "{end}");
+    assert_eq!(d["output"]["progress"]["percent"], 100, "{end}");
+    assert_eq!(d["output"]["progress"]["current_step"], 3000, "{end}");
+    assert_eq!(d["output"]["ext"]["camera_mode"], 3, "{end}");
+    assert_eq!(end["need_reply"], 1, "{end}");
+    let percents: Vec<i64> = progress
+        .iter()
+        .map(|e| {
+            assert_eq!(e["need_reply"], 0, "{e}");
+            assert_eq!(e["data"]["output"]["progress"]["current_step"], 3002, "{e}");
+            assert_eq!(e["data"]["output"]["ext"]["camera_mode"], 3, "{e}");
+            e["data"]["output"]["progress"]["percent"]
+                .as_i64()
+                .unwrap_or(-1)
+        })
+        .collect();
+    eprintln!("dji e2e: panorama progress {percents:?} → 100, {captures} photos");
+    assert_eq!(
+        percents.len(),
+        STATIONS + 1,
+        "once started and after each photo: {percents:?}"
+    );
+    assert!(
+        percents[0] == 0 && percents.windows(2).all(|w| w[0] < w[1]) && percents[STATIONS] < 100,
+        "{percents:?}"
+    );
+    assert_eq!(captures, STATIONS, "photos vehicle-sim took");
+    // Every station was visited: yaw0 + 45°·k at the horizon (within a few degrees:
+    // the gimbal stops there for the photo).
+    for k in 0..STATIONS {
+        let want = wrap(yaw0 + 45.0 * k as f64);
+        assert!(
+            gimbal
+                .iter()
+                .any(|(p, y)| p.abs() < 4.0 && wrap(y - want).abs() < 4.0),
+            "station {k} (yaw {want:.0}°) never reached; gimbal went {:.0}..{:.0}° yaw",
+            gimbal.iter().map(|g| g.1).fold(f64::INFINITY, f64::min),
+            gimbal.iter().map(|g| g.1).fold(f64::NEG_INFINITY, f64::max),
+        );
+    }
+    let span = gimbal.iter().map(|g| g.1).fold(f64::NEG_INFINITY, f64::max)
+        - gimbal.iter().map(|g| g.1).fold(f64::INFINITY, f64::min);
+    assert!(span >= 270.0, "the gimbal covered only {span:.0}° of yaw");
+    // Back where it started (the gateway waits for that before `ok`); the aircraft
+    // never turned.
+    let back = x
+        .wait_gimbal("gimbal state after the panorama", |_| true)
+        .await;
+    assert!(
+        (f64::from(back.gimbal_pitch_deg) - pitch0).abs() < 3.0
+            && wrap(f64::from(back.gimbal_yaw_deg) - yaw0).abs() < 3.0,
+        "not back at ({pitch0:.0}, {yaw0:.0}): {back:?}"
+    );
+    let now = x.state().await.heading_deg;
+    assert!(
+        wrap(f64::from(now - heading)).abs() < 2.0,
+        "the aircraft turned: {heading} → {now}"
+    );
+
+    // Stopped by the cloud after the first photo.
+    let reply = x
+        .cloud
+        .call("camera_photo_take", p(json!({})))
+        .await
+        .unwrap();
+    assert_eq!(reply["data"]["output"]["status"], "in_progress", "{reply}");
+    x.event("camera_photo_take_progress", "the first photo", |d| {
+        d["output"]["progress"]["percent"].as_i64().unwrap_or(0) > 0
+    })
+    .await;
+    x.expect("camera_photo_stop", p(json!({})), codes::OK).await;
+    let stopped = x
+        .event(
+            "camera_photo_take_progress",
+            "the stopped panorama's end",
+            |d| pano_status(d) != "in_progress",
+        )
+        .await;
+    let d = &stopped["data"];
+    assert_eq!(pano_status(d), "fail", "{stopped}");
+    assert_eq!(d["result"], 0, "stopped on request: {stopped}");
+    assert_eq!(stopped["need_reply"], 1, "{stopped}");
+    assert!(
+        d["output"]["progress"]["percent"].as_i64().unwrap_or(100) < 100,
+        "{stopped}"
+    );
+    x.wait_gimbal("the gimbal back at its start after the stop", |g| {
+        (f64::from(g.gimbal_pitch_deg) - pitch0).abs() < 3.0
+            && wrap(f64::from(g.gimbal_yaw_deg) - yaw0).abs() < 3.0
+    })
+    .await;
+
+    // Out of panorama mode: a photo is one capture again, without progress events.
+    x.expect(
+        "camera_mode_switch",
+        p(json!({ "camera_mode": 0 })),
+        codes::OK,
+    )
+    .await;
+    x.cloud.take_events("camera_photo_take_progress");
+    captures_acked(x);
+    let reply = x
+        .cloud
+        .call("camera_photo_take", p(json!({})))
+        .await
+        .unwrap();
+    assert_eq!(reply["data"]["result"], 0, "{reply}");
+    assert!(reply["data"].get("output").is_none(), "{reply}");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(captures_acked(x), 1, "a single photo");
+    assert!(
+        x.cloud.take_events("camera_photo_take_progress").is_empty(),
+        "progress events outside panorama mode"
+    );
 }
 
 /// Malformed JSON, wrong types, out-of-range values (one per kind: the documented
@@ -1297,6 +1528,37 @@ async fn drc_live_flight_control(x: &mut Ctx) {
         r.msg
     );
     x.drc.publish_raw(b"{\"method\": ".to_vec()).await.unwrap();
+
+    // The local operator takes the flight authority: the cloud hears
+    // joystick_invalid_notify reason 4 (RC takeover) and sticks are refused 319030;
+    // once the operator lets go, the cloud grabs it again and DRC flies on.
+    x.cloud.take_events("joystick_invalid_notify");
+    x.v.operator(Command::GrabFlightAuthority).await;
+    let n = x
+        .event(
+            "joystick_invalid_notify",
+            "authority taken by the operator",
+            |d| d["reason"] == 4,
+        )
+        .await;
+    assert_eq!(n["need_reply"], 1, "{n}");
+    let r = x
+        .drc
+        .drone_control(seq, 0.0, 3.0, 0.0, 0.0, PATIENCE)
+        .await
+        .unwrap();
+    assert_eq!(r["result"], c(codes::NO_FLIGHT_AUTHORITY), "{r}");
+    seq += 1;
+    x.v.operator(Command::ReleaseFlightAuthority).await;
+    x.expect("flight_authority_grab", json!({}), codes::OK)
+        .await;
+    let r = x
+        .drc
+        .drone_control(seq, 0.0, 0.0, 0.0, 0.0, PATIENCE)
+        .await
+        .unwrap();
+    assert_eq!(r["result"], 0, "sticks after the cloud grabbed again: {r}");
+    seq += 1;
 
     // Emergency stop while moving: the vehicle brakes and hovers, in the air.
     forward_sticks(x, &mut seq, 15).await;

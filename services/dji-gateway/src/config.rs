@@ -99,6 +99,12 @@ pub struct PayloadSettings {
     pub vfov_deg: f64,
     /// zoom_factor 2..=this maps to CameraZoom Range 0..=100 %.
     pub zoom_max_factor: f64,
+    /// Panorama: photos per full circle (stations `360/n`° apart in yaw).
+    pub pano_stations: usize,
+    /// Panorama: the stations' gimbal pitch, degrees (down negative).
+    pub pano_pitch_deg: f64,
+    /// Panorama: the gimbal must reach each station within this, else it fails.
+    pub pano_settle_timeout: Duration,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -209,6 +215,9 @@ pub struct RawPayload {
     pub hfov_deg: f64,
     pub vfov_deg: f64,
     pub zoom_max_factor: f64,
+    pub pano_stations: i64,
+    pub pano_pitch_deg: f64,
+    pub pano_settle_timeout_ms: i64,
 }
 
 impl Default for RawPayload {
@@ -219,6 +228,9 @@ impl Default for RawPayload {
             hfov_deg: 82.0,
             vfov_deg: 52.0,
             zoom_max_factor: 10.0,
+            pano_stations: 8,
+            pano_pitch_deg: 0.0,
+            pano_settle_timeout_ms: 10_000,
         }
     }
 }
@@ -477,6 +489,14 @@ impl ServiceConfig for RawConfig {
             hfov_deg: number("payload.hfov_deg", pl.hfov_deg, 1.0, 179.0)?,
             vfov_deg: number("payload.vfov_deg", pl.vfov_deg, 1.0, 179.0)?,
             zoom_max_factor: number("payload.zoom_max_factor", pl.zoom_max_factor, 2.1, 200.0)?,
+            pano_stations: in_range("payload.pano_stations", pl.pano_stations, 2, 72)? as usize,
+            pano_pitch_deg: number("payload.pano_pitch_deg", pl.pano_pitch_deg, -80.0, 30.0)?,
+            pano_settle_timeout: millis(
+                "payload.pano_settle_timeout_ms",
+                pl.pano_settle_timeout_ms,
+                500,
+                120_000,
+            )?,
         };
         self.drc
             .validate()
@@ -525,6 +545,8 @@ mod tests {
         assert_eq!(shipped.limits.max_payload_bytes, 65_536);
         assert_eq!(shipped.commands.ack_timeout, Duration::from_secs(3));
         assert_eq!(shipped.payload.payload_index, "39-0-7");
+        assert_eq!(shipped.payload.pano_stations, 8);
+        assert_eq!(shipped.payload.pano_pitch_deg, 0.0);
         assert_eq!(shipped.drc, DrcConfig::default());
     }
 
@@ -560,6 +582,9 @@ camera = 0
 hfov_deg = 60.0
 vfov_deg = 40.0
 zoom_max_factor = 5.0
+pano_stations = 6
+pano_pitch_deg = -20.0
+pano_settle_timeout_ms = 4000
 [drc]
 "#);
         assert_eq!((s.broker.host.as_str(), s.broker.port), ("::1", 1884));
@@ -568,6 +593,9 @@ zoom_max_factor = 5.0
         assert_eq!(s.flight.geoid_undulation_m, 20.5);
         assert_eq!(s.poi.initial_circle_speed_mps, 2.0);
         assert_eq!(s.payload.camera, 0);
+        assert_eq!(s.payload.pano_stations, 6);
+        assert_eq!(s.payload.pano_pitch_deg, -20.0);
+        assert_eq!(s.payload.pano_settle_timeout, Duration::from_secs(4));
     }
 
     #[test]
@@ -606,6 +634,9 @@ zoom_max_factor = 5.0
         assert!(err("[payload]\npayload_index = \"39-0\"").contains("payload_index"));
         assert!(err("[payload]\nzoom_max_factor = 2").contains("zoom_max_factor"));
         assert!(err("[payload]\nhfov_deg = 180").contains("hfov_deg"));
+        assert!(err("[payload]\npano_stations = 1").contains("pano_stations"));
+        assert!(err("[payload]\npano_pitch_deg = -90").contains("pano_pitch_deg"));
+        assert!(err("[payload]\npano_settle_timeout_ms = 0").contains("pano_settle_timeout_ms"));
         // Unknown keys anywhere are refused.
         assert!(err("bogus = 1").contains("bogus"));
         assert!(err("[flight]\nbogus = 1").contains("bogus"));

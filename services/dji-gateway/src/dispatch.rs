@@ -11,8 +11,12 @@
 //!    cloud grabbed → else `FLIGHT_AUTHORITY_REQUIRED` (319030); payload methods
 //!    need payload authority → else `PAYLOAD_AUTHORITY_REQUIRED`. Payload methods
 //!    that turn the aircraft (camera_look_at, locked aim and drag) need both.
+//!
+//! While a panorama runs ([`crate::pano_task`]) it owns the camera and gimbal:
+//! camera_photo_stop ends it, every other payload method (a second
+//! camera_photo_take too) is refused `WRONG_STATE`.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex as StdMutex};
 use std::time::Duration;
 
 use dji_proto::{codes, Envelope, ServiceRequest};
@@ -25,6 +29,7 @@ use crate::config::Settings;
 use crate::drc::Drc;
 use crate::flight_task::{self, Control, TaskHandle, TaskKind, TaskSpec};
 use crate::link::Snapshot;
+use crate::pano_task::{self, PanoControl, PanoHandle};
 use crate::payload::{self, PayloadMemory, Plan};
 use crate::poi;
 use crate::poi_task::{self, PoiControl, PoiHandle};
@@ -89,14 +94,18 @@ pub fn precheck(
     }
 }
 
-/// The services side's state: running tasks, POI, the DRC link, payload memory.
+/// The services side's state: running tasks, POI, panorama, the DRC link, payload
+/// memory.
 #[derive(Debug)]
 pub struct Dispatcher {
     shared: Shared,
     drc: Arc<Mutex<Drc>>,
     task: Option<TaskHandle>,
     poi: Option<PoiHandle>,
-    memory: PayloadMemory,
+    pano: Option<PanoHandle>,
+    /// Locked briefly by `handle` and by a camera_mode_switch once acknowledged
+    /// (never across an await).
+    memory: Arc<StdMutex<PayloadMemory>>,
 }
 
 impl Dispatcher {
@@ -106,7 +115,8 @@ impl Dispatcher {
             drc: Arc::new(Mutex::new(drc)),
             task: None,
             poi: None,
-            memory: PayloadMemory::default(),
+            pano: None,
+            memory: Arc::default(),
         }
     }
 
@@ -116,6 +126,10 @@ impl Dispatcher {
 
     pub fn poi_active(&self) -> bool {
         self.poi.as_ref().is_some_and(PoiHandle::is_running)
+    }
+
+    pub fn pano_active(&self) -> bool {
+        self.pano.as_ref().is_some_and(PanoHandle::is_running)
     }
 
     fn reply(&self, env: Envelope, code: u32) {
@@ -360,14 +374,36 @@ impl Dispatcher {
     }
 
     fn payload(&mut self, env: Envelope, req: &ServiceRequest, snap: &Snapshot) {
+        let env = match self.pano.as_ref().filter(|p| p.is_running()) {
+            None => env,
+            Some(p) => match req {
+                ServiceRequest::CameraPhotoStop { .. } => {
+                    match p.control.send(PanoControl::Stop { request: env }) {
+                        // The panorama replies once stopped.
+                        Ok(()) => return,
+                        // It ended meanwhile: an ordinary capture stop.
+                        Err(e) => match e.0 {
+                            PanoControl::Stop { request } => request,
+                        },
+                    }
+                }
+                _ => {
+                    tracing::info!(method = %env.method, "a panorama is running (camera_photo_stop ends it): refused");
+                    return self.reply(env, codes::WRONG_STATE);
+                }
+            },
+        };
         let heights = self.heights(snap);
-        let plan = payload::plan(
-            req,
-            &self.shared.settings.payload,
-            snap,
-            heights,
-            &mut self.memory,
-        );
+        let plan = {
+            let mut memory = self.memory.lock().unwrap_or_else(|p| p.into_inner());
+            payload::plan(
+                req,
+                &self.shared.settings.payload,
+                snap,
+                heights,
+                &mut memory,
+            )
+        };
         match plan {
             Plan::Unsupported(why) => {
                 tracing::info!(method = %env.method, reason = why, "payload method has no MAVLink equivalent here: unsupported");
@@ -376,6 +412,20 @@ impl Dispatcher {
             Plan::Reject(code, why) => {
                 tracing::info!(method = %env.method, result = code, reason = %why, "payload request refused");
                 self.reply(env, code);
+            }
+            Plan::SwitchMode { command, panorama } => {
+                let (shared, memory) = (self.shared.clone(), self.memory.clone());
+                tokio::spawn(async move {
+                    let code = run_commands(&shared.link, &env.method, &[command]).await;
+                    if code == codes::OK {
+                        memory.lock().unwrap_or_else(|p| p.into_inner()).panorama = panorama;
+                        tracing::info!(panorama, "camera mode switched");
+                    }
+                    shared.emit.reply(env, code);
+                });
+            }
+            Plan::Panorama { pano, clear_roi } => {
+                self.pano = Some(pano_task::spawn(self.shared.clone(), pano, clear_roi, env));
             }
             Plan::Commands {
                 needs_flight,

@@ -12,6 +12,7 @@ use dji_proto::{
     encode_event, encode_services_reply, topic, DrcStatusNotify, JoystickInvalidNotify, TopicKind,
 };
 use rumqttc::{AsyncClient, QoS};
+use serde_json::Value;
 use skymesh_ipc_types::{AuthorityDomain, Command, ServiceState};
 use skymesh_runtime::{Context, WarnLimiter};
 use tokio::sync::mpsc;
@@ -95,7 +96,7 @@ impl Gateway {
             }
             Inbound::Request(env, Err(reject)) => {
                 tracing::info!(method = %env.method, tid = %env.tid, result = reject.code, field = %reject.field, reason = %reject.reason, "request refused");
-                self.push_reply(&env, reject.code);
+                self.push_reply(&env, reject.code, None);
             }
             Inbound::EventReply(Ok(r)) => match self.outbox.on_reply(&r.tid, &r.bid) {
                 Some(method) => {
@@ -142,10 +143,10 @@ impl Gateway {
         }
     }
 
-    fn push_reply(&mut self, request: &dji_proto::Envelope, result: u32) {
+    fn push_reply(&mut self, request: &dji_proto::Envelope, result: u32, output: Option<Value>) {
         self.metrics.request(&request.method, result);
         let payload =
-            encode_services_reply(request, &self.settings.gateway_sn, result, None, now_ms());
+            encode_services_reply(request, &self.settings.gateway_sn, result, output, now_ms());
         self.push(OutMessage {
             topic: TopicKind::ServicesReply,
             method: crate::metrics::method_label(&request.method),
@@ -155,7 +156,11 @@ impl Gateway {
 
     fn on_outgoing(&mut self, o: Outgoing, now: Instant) {
         match o {
-            Outgoing::Reply { request, result } => self.push_reply(&request, result),
+            Outgoing::Reply {
+                request,
+                result,
+                output,
+            } => self.push_reply(&request, result, output),
             Outgoing::Event {
                 method,
                 data,
@@ -255,6 +260,9 @@ impl Gateway {
         self.metrics
             .poi_active
             .set(f64::from(u8::from(self.dispatcher.poi_active())));
+        self.metrics
+            .panorama_active
+            .set(f64::from(u8::from(self.dispatcher.pano_active())));
     }
 
     /// Re-sends the grabs of authorities the cloud holds when no other command of

@@ -15,6 +15,7 @@
 //! | [`progress`], [`flight_task`] | takeoff_to_point / fly_to_point: pure progress rules, and the running task |
 //! | [`poi`], [`poi_task`] | POI orbit (the shot engine's `Orbit`): pure rules, and the 25 Hz task |
 //! | [`payload`] | payload methods → camera/gimbal commands (pure) |
+//! | [`pano`], [`pano_task`] | panorama capture (camera_mode_switch 3 + camera_photo_take): pure station plan and progress, and the running gimbal sweep |
 //! | [`shared`] | what tasks share: settings, vehicle link, reply/event emitter, result-code mapping |
 //! | [`link`] | the bus: vehicle samples and commands with their acks |
 //! | [`drc`] | the DRC link (drc/down, drc/up on the broker `drc_mode_enter` names) |
@@ -36,6 +37,8 @@ pub mod link;
 pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
+pub mod pano;
+pub mod pano_task;
 pub mod payload;
 pub mod poi;
 pub mod poi_task;

@@ -77,6 +77,8 @@ pub struct Metrics {
     pub task_active: Gauge,
     /// `skymesh_dji_poi_active`: 1 while POI mode orbits.
     pub poi_active: Gauge,
+    /// `skymesh_dji_panorama_active`: 1 while a panorama capture runs.
+    pub panorama_active: Gauge,
 }
 
 impl Metrics {
@@ -91,6 +93,7 @@ impl Metrics {
             event_resends: stats.counter("skymesh_dji_event_resends_total", &[]),
             task_active: stats.gauge("skymesh_dji_flight_task_active", &[]),
             poi_active: stats.gauge("skymesh_dji_poi_active", &[]),
+            panorama_active: stats.gauge("skymesh_dji_panorama_active", &[]),
         }
     }
 

@@ -4,8 +4,8 @@
 //!
 //! | method | commands |
 //! |---|---|
-//! | camera_mode_switch | 0 → `CameraMode Image`, 1 → `CameraMode Video`; 2 (low light), 3 (panorama) unsupported |
-//! | camera_photo_take / camera_photo_stop | `CameraCapture` / `CameraCaptureStop` |
+//! | camera_mode_switch | 0 → `CameraMode Image`, 1 → `CameraMode Video`, 3 (panorama) → `CameraMode Image` and the gateway's panorama mode (remembered once acknowledged; 0/1 leave it); 2 (low light) unsupported |
+//! | camera_photo_take / camera_photo_stop | `CameraCapture` / `CameraCaptureStop`; in panorama mode a panorama ([`crate::pano`]; photo_stop ends a running one) |
 //! | camera_recording_start / _stop | `RecordStart` / `RecordStop` |
 //! | camera_screen_drag | `GimbalRate` (pitch, yaw); locked: the gimbal only pitches and the aircraft turns (`SetYaw` relative, yaw_speed × [`DRAG_STEP_S`]) |
 //! | camera_aim | pinhole angles from hfov/vfov → `Gimbal` = current gimbal + offset; locked: `Gimbal` pitch and the aircraft yaws by the offset |
@@ -21,6 +21,7 @@ use skymesh_ipc_types::{CameraModeKind, Command, FocusMode, ZoomMode};
 
 use crate::config::PayloadSettings;
 use crate::link::Snapshot;
+use crate::pano::{Aim, Panorama};
 use crate::progress::Heights;
 
 /// A locked screen drag turns the aircraft by `yaw_speed × DRAG_STEP_S` per message:
@@ -40,6 +41,9 @@ pub struct PayloadMemory {
     /// method (reset, aim, drag) clears it first (`ClearRoi`, when the cloud holds
     /// flight authority), else the ROI would keep overriding the gimbal.
     pub look_at_active: bool,
+    /// camera_mode_switch 3 was acknowledged (and no 0/1 since): camera_photo_take
+    /// takes a panorama. Set by the dispatcher once the mode command succeeded.
+    pub panorama: bool,
 }
 
 impl Default for PayloadMemory {
@@ -47,6 +51,7 @@ impl Default for PayloadMemory {
         PayloadMemory {
             manual_focus_pct: DEFAULT_MANUAL_FOCUS_PCT,
             look_at_active: false,
+            panorama: false,
         }
     }
 }
@@ -59,6 +64,12 @@ pub enum Plan {
         commands: Vec<Command>,
         needs_flight: bool,
     },
+    /// camera_mode_switch: send `command`; once it succeeded the gateway's payload
+    /// is in panorama mode or not ([`PayloadMemory::panorama`]).
+    SwitchMode { command: Command, panorama: bool },
+    /// camera_photo_take in panorama mode: run `pano` (after `ClearRoi` when
+    /// `clear_roi`: camera_look_at's ROI would hold the gimbal).
+    Panorama { pano: Panorama, clear_roi: bool },
     /// No MAVLink equivalent on this aircraft: `PAYLOAD_UNSUPPORTED`, with why.
     Unsupported(&'static str),
     /// Refused with this code and reason.
@@ -82,7 +93,7 @@ pub fn aim_offsets(x: f64, y: f64, hfov_deg: f64, vfov_deg: f64) -> (f64, f64) {
 }
 
 /// Degrees into (−180, 180].
-fn wrap180(deg: f64) -> f64 {
+pub fn wrap180(deg: f64) -> f64 {
     let w = (deg + 180.0).rem_euclid(360.0) - 180.0;
     if w <= -180.0 {
         w + 360.0
@@ -96,7 +107,7 @@ fn clamp_pitch(p: f64) -> f32 {
 }
 
 /// The current gimbal (pitch, yaw relative to the nose), if it reports.
-fn gimbal(s: &Snapshot) -> Option<(f64, f64)> {
+pub fn gimbal(s: &Snapshot) -> Option<(f64, f64)> {
     s.payload
         .filter(|p| p.is_gimbal_valid())
         .map(|p| (f64::from(p.gimbal_pitch_deg), f64::from(p.gimbal_yaw_deg)))
@@ -128,12 +139,15 @@ pub fn plan(
         req,
         S::GimbalReset { .. } | S::CameraAim { .. } | S::CameraScreenDrag { .. }
     );
+    let clear = mem.look_at_active && snap.holds_flight();
     match (&mut plan, req) {
         (Plan::Commands { .. }, S::CameraLookAt { .. }) => mem.look_at_active = true,
-        (Plan::Commands { commands, .. }, _)
-            if moves_gimbal && mem.look_at_active && snap.holds_flight() =>
-        {
+        (Plan::Commands { commands, .. }, _) if moves_gimbal && clear => {
             commands.insert(0, Command::ClearRoi);
+            mem.look_at_active = false;
+        }
+        (Plan::Panorama { clear_roi, .. }, _) if clear => {
+            *clear_roi = true;
             mem.look_at_active = false;
         }
         _ => {}
@@ -151,18 +165,37 @@ fn plan_one(
     use ServiceRequest as S;
     let camera = p.camera;
     match req {
-        S::CameraModeSwitch { camera_mode, .. } => match camera_mode {
-            CameraMode::Photo => cmds(vec![Command::CameraMode {
-                camera,
-                mode: CameraModeKind::Image,
-            }]),
-            CameraMode::Video => cmds(vec![Command::CameraMode {
-                camera,
-                mode: CameraModeKind::Video,
-            }]),
-            CameraMode::LowLight => Plan::Unsupported("no smart low-light mode in MAVLink"),
-            CameraMode::Panorama => Plan::Unsupported("panorama capture is not implemented"),
-        },
+        S::CameraModeSwitch { camera_mode, .. } => {
+            let (mode, panorama) = match camera_mode {
+                CameraMode::Photo => (CameraModeKind::Image, false),
+                CameraMode::Video => (CameraModeKind::Video, false),
+                // The gimbal sweep is the gateway's; the camera takes single photos.
+                CameraMode::Panorama => (CameraModeKind::Image, true),
+                CameraMode::LowLight => {
+                    return Plan::Unsupported("no smart low-light mode in MAVLink")
+                }
+            };
+            Plan::SwitchMode {
+                command: Command::CameraMode { camera, mode },
+                panorama,
+            }
+        }
+        S::CameraPhotoTake { .. } if mem.panorama => {
+            let Some((pitch, yaw)) = gimbal(snap) else {
+                return Plan::Reject(
+                    codes::WRONG_STATE,
+                    "the gimbal attitude is unknown: a panorama cannot check its stations".into(),
+                );
+            };
+            let start = Aim {
+                pitch_deg: pitch,
+                yaw_deg: yaw,
+            };
+            Plan::Panorama {
+                pano: Panorama::new(start, p.pano_stations, p.pano_pitch_deg),
+                clear_roi: false,
+            }
+        }
         S::CameraPhotoTake { .. } => cmds(vec![Command::CameraCapture]),
         S::CameraPhotoStop { .. } => cmds(vec![Command::CameraCaptureStop { camera }]),
         S::CameraRecordingStart { .. } => cmds(vec![Command::RecordStart]),
@@ -349,6 +382,9 @@ mod tests {
             hfov_deg: 90.0,
             vfov_deg: 60.0,
             zoom_max_factor: 10.0,
+            pano_stations: 8,
+            pano_pitch_deg: 0.0,
+            pano_settle_timeout: std::time::Duration::from_secs(10),
         }
     }
 
@@ -376,31 +412,31 @@ mod tests {
     #[test]
     fn camera_modes_and_captures() {
         let s = Snapshot::default();
-        assert_eq!(
-            run(
-                ServiceRequest::CameraModeSwitch {
-                    payload_index: pi(),
-                    camera_mode: CameraMode::Video
-                },
-                &s
-            ),
-            cmds(vec![Command::CameraMode {
-                camera: 1,
-                mode: CameraModeKind::Video
-            }])
-        );
-        for mode in [CameraMode::LowLight, CameraMode::Panorama] {
-            assert!(matches!(
-                run(
-                    ServiceRequest::CameraModeSwitch {
-                        payload_index: pi(),
-                        camera_mode: mode
+        let switch = |camera_mode| ServiceRequest::CameraModeSwitch {
+            payload_index: pi(),
+            camera_mode,
+        };
+        for (mode, kind, panorama) in [
+            (CameraMode::Photo, CameraModeKind::Image, false),
+            (CameraMode::Video, CameraModeKind::Video, false),
+            (CameraMode::Panorama, CameraModeKind::Image, true),
+        ] {
+            assert_eq!(
+                run(switch(mode), &s),
+                Plan::SwitchMode {
+                    command: Command::CameraMode {
+                        camera: 1,
+                        mode: kind
                     },
-                    &s
-                ),
-                Plan::Unsupported(_)
-            ));
+                    panorama
+                },
+                "{mode:?}"
+            );
         }
+        assert!(matches!(
+            run(switch(CameraMode::LowLight), &s),
+            Plan::Unsupported(_)
+        ));
         assert_eq!(
             run(
                 ServiceRequest::CameraPhotoStop {
@@ -419,6 +455,51 @@ mod tests {
             ),
             cmds(vec![Command::RecordStart])
         );
+    }
+
+    #[test]
+    fn photo_take_in_panorama_mode_plans_a_panorama_from_the_gimbal() {
+        use skymesh_ipc_types::{AuthorityState, CommandSource};
+        let take = ServiceRequest::CameraPhotoTake {
+            payload_index: pi(),
+        };
+        let mut s = snap_with_gimbal(-30.0, 20.0);
+        let mut mem = PayloadMemory::default();
+        assert_eq!(
+            plan(&take, &settings(), &s, None, &mut mem),
+            cmds(vec![Command::CameraCapture]),
+            "not in panorama mode"
+        );
+        mem.panorama = true;
+        match plan(&take, &settings(), &s, None, &mut mem) {
+            Plan::Panorama { pano, clear_roi } => {
+                assert!(!clear_roi);
+                let start = pano.start();
+                assert_eq!((start.pitch_deg, start.yaw_deg), (-30.0, 20.0));
+                assert_eq!(pano.stations().len(), 8);
+                assert_eq!(pano.stations()[0].yaw_deg, 20.0);
+                assert!(pano.stations().iter().all(|a| a.pitch_deg == 0.0));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            plan(&take, &settings(), &Snapshot::default(), None, &mut mem),
+            Plan::Reject(codes::WRONG_STATE, _)
+        ));
+        // An ROI from camera_look_at would hold the gimbal: cleared first.
+        s.authority = Some(AuthorityState {
+            flight_holder: CommandSource::DjiDrc.to_wire(),
+            ..Default::default()
+        });
+        mem.look_at_active = true;
+        assert!(matches!(
+            plan(&take, &settings(), &s, None, &mut mem),
+            Plan::Panorama {
+                clear_roi: true,
+                ..
+            }
+        ));
+        assert!(!mem.look_at_active);
     }
 
     #[test]

@@ -17,8 +17,13 @@ use crate::link::{CommandFailure, VehicleLink};
 /// A message for the cloud, produced anywhere, published by the loop.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Outgoing {
-    /// `services_reply` to `request` with `data.result`.
-    Reply { request: Envelope, result: u32 },
+    /// `services_reply` to `request` with `data.result` (and `data.output` when
+    /// given: camera_photo_take's `{"status": "in_progress"}` of a panorama).
+    Reply {
+        request: Envelope,
+        result: u32,
+        output: Option<Value>,
+    },
     /// An `events` message with fresh tid/bid.
     Event {
         method: &'static str,
@@ -40,7 +45,20 @@ impl Emitter {
 
     pub fn reply(&self, request: Envelope, result: u32) {
         // The loop outlives every task; a closed channel means we are shutting down.
-        let _ = self.0.send(Outgoing::Reply { request, result });
+        let _ = self.0.send(Outgoing::Reply {
+            request,
+            result,
+            output: None,
+        });
+    }
+
+    /// A reply carrying `data.output` too.
+    pub fn reply_with_output(&self, request: Envelope, result: u32, output: Value) {
+        let _ = self.0.send(Outgoing::Reply {
+            request,
+            result,
+            output: Some(output),
+        });
     }
 
     pub fn event(&self, method: &'static str, data: impl Serialize, need_reply: bool) {
