@@ -83,10 +83,16 @@ async fn bad_configs_exit_64_naming_the_key() {
         ("gateway_sn = \"dock 1/#\"\n", "gateway_sn"),
         ("[broker]\naddress = \"no-port\"\n", "address"),
         ("[broker]\ntls = true\n", "ca_file"),
-        ("[broker]\nreconnect_initial_ms = 5000\nreconnect_max_ms = 100\n", "reconnect"),
+        (
+            "[broker]\nreconnect_initial_ms = 5000\nreconnect_max_ms = 100\n",
+            "reconnect",
+        ),
         ("[drc]\nstick_max_age_ms = 5\n", "stick_max_age_ms"),
         ("[drc]\nheartbeat_timeout_s = 0\n", "heartbeat_timeout_s"),
-        ("[poi]\nmax_circle_speed_mps = -1.0\n", "max_circle_speed_mps"),
+        (
+            "[poi]\nmax_circle_speed_mps = -1.0\n",
+            "max_circle_speed_mps",
+        ),
         ("[payload]\npayload_index = \"camera\"\n", "payload_index"),
         ("unknown_key = 1\n", "unknown_key"),
     ];
