@@ -3,9 +3,13 @@
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::time::Instant;
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
 
 use skymesh_autopilot_link::frame::FrameParser;
+
+use crate::{Mesh, MeshOptions};
 
 /// `--name N` from the command line, else `default`.
 pub fn arg(name: &str, default: u64) -> u64 {
@@ -72,4 +76,23 @@ where
             }
         });
     });
+}
+
+/// Starts a mesh whose vehicle 1 autopilot-link reaches its vehicle-sim through a
+/// [`mavlink_tap`] feeding `on_link_bytes`, and waits until `services` run.
+pub fn start_tapped_mesh<F>(opts: MeshOptions, services: &[&str], on_link_bytes: F) -> Result<Mesh>
+where
+    F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+{
+    let tap_listener = TcpListener::bind("127.0.0.1:0")?;
+    let opts = MeshOptions {
+        link_via: Some(tap_listener.local_addr()?.port()),
+        ..opts
+    };
+    let mut mesh = Mesh::start(opts)?;
+    mavlink_tap(tap_listener, mesh.mavlink_port, on_link_bytes);
+    for name in services {
+        mesh.wait_running(name, Duration::from_secs(40))?;
+    }
+    Ok(mesh)
 }

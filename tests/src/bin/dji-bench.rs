@@ -19,7 +19,6 @@
 //! `cargo run --release -p skymesh-e2e --bin dji-bench -- --commands 300`
 
 use std::collections::HashMap;
-use std::net::TcpListener;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -29,7 +28,7 @@ use mavlink::dialects::ardupilotmega::MavMessage;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
-use skymesh_e2e::bench::{arg, mavlink_tap, percentile};
+use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
@@ -394,27 +393,21 @@ fn main() -> Result<()> {
     if commands < 1 {
         bail!("--commands must be at least 1");
     }
-    let tap_listener = TcpListener::bind("127.0.0.1:0")?;
-    let tap_port = tap_listener.local_addr()?.port();
-    let opts = MeshOptions {
-        dji: true,
-        link_via: Some(tap_port),
-        attitude_hz: 25.0,
-        ..Default::default()
-    };
-    let mut mesh = Mesh::start(opts)?;
     let (seen_tx, seen_rx) = mpsc::channel();
-    mavlink_tap(tap_listener, mesh.mavlink_port, move |parser, now| {
-        scan_setpoints(parser, now, &seen_tx)
-    });
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "mqtt-broker",
-        "dji-gateway",
-    ] {
-        mesh.wait_running(name, Duration::from_secs(40))?;
-    }
+    let mut mesh = start_tapped_mesh(
+        MeshOptions {
+            dji: true,
+            attitude_hz: 25.0,
+            ..Default::default()
+        },
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "mqtt-broker",
+            "dji-gateway",
+        ],
+        move |parser, now| scan_setpoints(parser, now, &seen_tx),
+    )?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

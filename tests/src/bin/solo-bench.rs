@@ -25,7 +25,7 @@ use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::{MavMessage, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use mavlink::MavHeader;
 use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
-use skymesh_e2e::bench::{arg, mavlink_tap, percentile};
+use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
@@ -286,27 +286,21 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: f64) {
 
 fn main() -> Result<()> {
     let rounds = arg("--rounds", 20) as usize;
-    let tap_listener = TcpListener::bind("127.0.0.1:0")?;
-    let tap_port = tap_listener.local_addr()?.port();
-    let opts = MeshOptions {
-        solo: true,
-        link_via: Some(tap_port),
-        attitude_hz: 25.0,
-        ..Default::default()
-    };
-    let mut mesh = Mesh::start(opts)?;
     let (seen_tx, seen_rx) = mpsc::channel();
-    mavlink_tap(tap_listener, mesh.mavlink_port, move |parser, now| {
-        scan_frames(parser, now, &seen_tx)
-    });
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "solo-gateway",
-        "shot-engine",
-    ] {
-        mesh.wait_running(name, Duration::from_secs(40))?;
-    }
+    let mut mesh = start_tapped_mesh(
+        MeshOptions {
+            solo: true,
+            attitude_hz: 25.0,
+            ..Default::default()
+        },
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "solo-gateway",
+            "shot-engine",
+        ],
+        move |parser, now| scan_frames(parser, now, &seen_tx),
+    )?;
     take_off(&mesh)?;
 
     let app = TcpStream::connect(("127.0.0.1", mesh.solo_port))?;
