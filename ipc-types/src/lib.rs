@@ -13,6 +13,7 @@
 pub mod arbiter;
 pub mod command;
 pub mod fixed;
+pub mod frame;
 pub mod hardware;
 pub mod header;
 pub mod payload;
@@ -32,6 +33,10 @@ pub use command::{
     CommandSource, FocusMode, RefusalReason, VehicleCommand, ZoomMode,
 };
 pub use fixed::FixedStr;
+pub use frame::{
+    CameraIntrinsics, CapturePose, FrameHeader, FrameHeaderError, LensModel, PixelFormat,
+    MAX_FRAME_LEN,
+};
 pub use hardware::{
     GpioEntry, HardwareOp, HardwareReply, HardwareRequest, HardwareResult, HardwareState, HwName,
     LcdOp, LedEntry, PowerChannelEntry, PowerChannelOp, SystemPowerOp, HW_MAX_ENTRIES,

@@ -80,6 +80,17 @@ impl TopicQos {
         history: 0,
         buffer: 1024,
     };
+    /// Camera frames (megabytes each, iceoryx2 slice samples): one camera, a few
+    /// consumers that want the newest frame. Shared memory is reserved per publisher
+    /// for about subscribers × buffer + history + loans frames of the largest size,
+    /// so every number here is small (≈ 12 × 6.2 MB for 1080p RGB).
+    pub const FRAMES: TopicQos = TopicQos {
+        max_publishers: 2,
+        max_subscribers: 4,
+        max_nodes: 8,
+        history: 1,
+        buffer: 2,
+    };
     /// Per-service health and stats: one writer (two while a restart overlaps), the supervisor and tools read.
     pub const SERVICE: TopicQos = TopicQos {
         max_publishers: 2,
@@ -229,6 +240,12 @@ pub fn swarm_reply() -> Topic {
 /// [`crate::SwarmState`]: every drone of the swarm queue (about 20 KiB, latest value).
 pub fn swarm_state() -> Topic {
     Topic::new("skymesh/swarm/state".into(), TopicQos::BULK_STATE)
+}
+
+/// Frames of camera stream `stream` ([`crate::FrameHeader`] + pixels), published by
+/// the camera service in place in shared memory.
+pub fn camera_frames(stream: &str) -> Topic {
+    Topic::new(format!("skymesh/camera/{stream}/frames"), TopicQos::FRAMES)
 }
 
 /// [`crate::ServiceHealth`] heartbeats of the service instance `name`.

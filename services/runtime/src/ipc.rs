@@ -54,7 +54,7 @@ pub enum IpcError {
     },
 }
 
-fn ipc_err(op: &'static str, what: &str, e: impl core::fmt::Debug) -> IpcError {
+pub(crate) fn ipc_err(op: &'static str, what: &str, e: impl core::fmt::Debug) -> IpcError {
     IpcError::Iceoryx {
         op,
         what: what.to_string(),
@@ -253,7 +253,7 @@ impl core::fmt::Debug for Bus {
 
 /// Retries `open` a few times, cleaning dead nodes in between: many processes
 /// restarting at once can race stale-resource cleanup (iceoryx2 issue #1578).
-fn with_retry<T, E: core::fmt::Debug>(
+pub(crate) fn with_retry<T, E: core::fmt::Debug>(
     node: &Node<Svc>,
     what: &str,
     op: &'static str,
@@ -307,6 +307,11 @@ impl Bus {
         &self.inner.name
     }
 
+    /// The iceoryx2 node, for the other port kinds of this crate (frames).
+    pub(crate) fn node(&self) -> &Node<Svc> {
+        &self.inner.node
+    }
+
     pub fn stats(&self) -> &Stats {
         &self.inner.stats
     }
@@ -322,7 +327,7 @@ impl Bus {
         }
     }
 
-    fn open_event(
+    pub(crate) fn open_event(
         &self,
         topic: &Topic,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
@@ -457,7 +462,7 @@ impl Bus {
 /// registration because [`Subscriber`] declares `afd` before `listener` (fields drop
 /// in declaration order, so epoll deregistration happens before the fd closes).
 #[derive(Debug)]
-struct ListenerFd(RawFd);
+pub(crate) struct ListenerFd(RawFd);
 
 impl AsRawFd for ListenerFd {
     fn as_raw_fd(&self) -> RawFd {
@@ -467,7 +472,7 @@ impl AsRawFd for ListenerFd {
 
 /// Registers the listener's fd with tokio's reactor.
 #[allow(unsafe_code)]
-fn register_listener(listener: &Listener<Svc>) -> std::io::Result<AsyncFd<ListenerFd>> {
+pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<AsyncFd<ListenerFd>> {
     // SAFETY: both calls require the fd to stay open, and not be closed by us, for as
     // long as the number is used. We never close it, and the `AsyncFd` holding it is
     // dropped before the `Listener` that owns the fd (see `Subscriber` field order).
@@ -478,6 +483,33 @@ fn register_listener(listener: &Listener<Svc>) -> std::io::Result<AsyncFd<Listen
             tokio::io::Interest::READABLE,
         )?)
     }
+}
+
+/// Waits until `listener`'s event fires, registering it with tokio (in `afd`) on first
+/// use. The owner must declare `afd` before `listener` (see [`ListenerFd`]).
+pub(crate) async fn wait_listener(
+    afd: &mut Option<AsyncFd<ListenerFd>>,
+    listener: &Listener<Svc>,
+    topic: &str,
+) -> Result<(), IpcError> {
+    let wait_err = |source| IpcError::Wait {
+        topic: topic.to_string(),
+        source,
+    };
+    let afd = match afd {
+        Some(afd) => afd,
+        None => afd.insert(register_listener(listener).map_err(wait_err)?),
+    };
+    let mut guard = afd.readable().await.map_err(wait_err)?;
+    let woken = listener
+        .try_wait(|_| {})
+        .map_err(|e| ipc_err("listener wait", topic, e))?;
+    if woken == 0 {
+        // Readiness was spurious or already consumed; tokio only clears it if
+        // nothing new arrived since `readable()` returned.
+        guard.clear_ready();
+    }
+    Ok(())
 }
 
 /// Sends samples of one type on one topic.
@@ -647,28 +679,7 @@ impl<T: Sample> Subscriber<T> {
 
     /// Waits until the topic's event fires (a publisher notified).
     async fn wait_readable(&mut self) -> Result<(), IpcError> {
-        let topic = &self.topic;
-        let wait_err = |source| IpcError::Wait {
-            topic: topic.clone(),
-            source,
-        };
-        let afd = match &mut self.afd {
-            Some(afd) => afd,
-            None => self
-                .afd
-                .insert(register_listener(&self.listener).map_err(wait_err)?),
-        };
-        let mut guard = afd.readable().await.map_err(wait_err)?;
-        let woken = self
-            .listener
-            .try_wait(|_| {})
-            .map_err(|e| ipc_err("listener wait", &self.topic, e))?;
-        if woken == 0 {
-            // Readiness was spurious or already consumed; tokio only clears it if
-            // nothing new arrived since `readable()` returned.
-            guard.clear_ready();
-        }
-        Ok(())
+        wait_listener(&mut self.afd, &self.listener, &self.topic).await
     }
 
     /// Drains everything pending and returns the newest sample, if any.

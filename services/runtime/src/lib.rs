@@ -18,6 +18,7 @@
 pub mod clock;
 pub mod config;
 pub mod exit;
+pub mod frames;
 pub mod health;
 pub mod ipc;
 pub mod net;
@@ -28,6 +29,7 @@ pub mod systemd;
 pub mod warn_limit;
 
 pub use config::{ConfigError, ServiceConfig};
+pub use frames::{FrameError, FramePublisher, FrameSubscriber};
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};
 pub use stats::{Counter, CounterFamily, Gauge, Histogram, Stats};
