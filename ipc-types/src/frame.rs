@@ -62,7 +62,10 @@ crate::assert_layout!(CameraIntrinsics, size = 36, align = 4);
 pub struct CapturePose {
     pub lat_deg: f64,
     pub lon_deg: f64,
-    /// Vehicle attitude, NED body → earth, as a unit quaternion `[w, x, y, z]`.
+    /// The **camera's** orientation at capture (vehicle attitude × gimbal/mount): a
+    /// unit quaternion `[w, x, y, z]` rotating camera-frame vectors (x along the
+    /// optical axis, y image right, z image down) into NED. What geolocation needs;
+    /// the vehicle's heading is [`FrameHeader::vehicle_heading_deg`].
     pub attitude_q: [f32; 4],
     /// Altitude above mean sea level, metres.
     pub alt_m: f32,
@@ -97,7 +100,9 @@ pub struct FrameHeader {
     pub pixel_format: u8,
     pub reserved: [u8; 7],
     pub intrinsics: CameraIntrinsics,
-    pub reserved2: u32,
+    /// The vehicle's heading at capture, degrees from true north (0..360), for angles
+    /// relative to the nose; meaningful when `pose.valid` is 1.
+    pub vehicle_heading_deg: f32,
     pub pose: CapturePose,
 }
 crate::assert_layout!(FrameHeader, size = 24 + 48 + 36 + 4 + 40, align = 8);

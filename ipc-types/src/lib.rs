@@ -11,6 +11,7 @@
 #![deny(unsafe_code)]
 
 pub mod arbiter;
+pub mod camera;
 pub mod command;
 pub mod fixed;
 pub mod frame;
@@ -28,6 +29,7 @@ pub use arbiter::{
     ArbiterEvent, ArbiterEventKind, AuthorityChange, AuthorityState, FenceError, FenceKind,
     FencePolygon, GeofenceSet, NO_HOLDER,
 };
+pub use camera::{SceneTruth, TargetTruth, SCENE_MAX_TARGETS};
 pub use command::{
     AckResult, AuthorityDomain, CameraModeKind, Command, CommandAck, CommandError, CommandKind,
     CommandSource, FocusMode, RefusalReason, VehicleCommand, ZoomMode,

@@ -248,6 +248,12 @@ pub fn camera_frames(stream: &str) -> Topic {
     Topic::new(format!("skymesh/camera/{stream}/frames"), TopicQos::FRAMES)
 }
 
+/// [`crate::SceneTruth`] of camera stream `stream`'s synthetic scene: the true target
+/// positions, one per rendered frame.
+pub fn camera_truth(stream: &str) -> Topic {
+    Topic::new(format!("skymesh/camera/{stream}/truth"), TopicQos::STATE)
+}
+
 /// [`crate::ServiceHealth`] heartbeats of the service instance `name`.
 pub fn service_health(name: &str) -> Topic {
     Topic::new(format!("skymesh/service/{name}/health"), TopicQos::SERVICE)

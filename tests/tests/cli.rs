@@ -5,7 +5,15 @@ use std::process::Command;
 
 use skymesh_e2e::{binary, repo_root};
 
-const SERVICES: &[&str] = &["skymesh-vehicle-sim", "skymesh-autopilot-link"];
+/// Services whose binaries `cargo test --workspace` builds (their packages have
+/// integration tests of their own).
+const SERVICES: &[&str] = &[
+    "skymesh-vehicle-sim",
+    "skymesh-autopilot-link",
+    "skymesh-dji-gateway",
+    "skymesh-camera",
+    "skymesh-mqtt-broker",
+];
 
 fn run(bin: &str, args: &[&str]) -> std::process::Output {
     Command::new(binary(bin))

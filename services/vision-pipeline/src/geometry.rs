@@ -7,10 +7,12 @@
 //!   of the image. A camera mounted with the identity [`Mount`] looks along the
 //!   vehicle's nose with the image's right side on the vehicle's right.
 //! - **Body frame**: the vehicle's forward-right-down frame (MAVLink / NED convention).
-//! - **NED**: local north-east-down at the vehicle. The vehicle attitude
-//!   ([`skymesh_ipc_types::CapturePose::attitude_q`]) rotates body vectors into NED;
-//!   the [`Mount`] rotates camera vectors into the body frame, so the camera's attitude
-//!   is `q_ned←cam = q_ned←body × q_body←cam` ([`CameraPose`]).
+//! - **NED**: local north-east-down at the vehicle. A vehicle attitude rotates body
+//!   vectors into NED; a [`Mount`] rotates camera vectors into the body frame, so the
+//!   camera's attitude is `q_ned←cam = q_ned←body × q_body←cam` ([`CameraPose::new`]).
+//!   A frame's header already carries `q_ned←cam`
+//!   ([`skymesh_ipc_types::CapturePose::attitude_q`], gimbal included) and the
+//!   vehicle's heading ([`CameraPose::from_capture`]).
 //!
 //! # Pixels and offsets
 //!
@@ -628,12 +630,25 @@ impl CameraPose {
         ))
     }
 
-    /// From a frame's capture pose and the mount.
-    pub fn from_capture(pose: &CapturePose, mount: &Mount) -> Result<CameraPose, GeometryError> {
+    /// From a frame's header: `pose.attitude_q` is already the camera's orientation
+    /// (camera → NED, gimbal included) and `vehicle_heading_deg` the nose.
+    pub fn from_capture(header: &FrameHeader) -> Result<CameraPose, GeometryError> {
+        let pose = &header.pose;
         if pose.valid == 0 {
             return Err(GeometryError::NoPose);
         }
-        CameraPose::from_attitude_q(pose.attitude_q, mount)
+        let camera = CameraPose::from_attitude_q(
+            pose.attitude_q,
+            &Mount::from_quaternion(UnitQuaternion::identity()),
+        )?;
+        let heading = f64::from(header.vehicle_heading_deg);
+        if !heading.is_finite() {
+            return Err(GeometryError::Attitude(pose.attitude_q.map(f64::from)));
+        }
+        Ok(CameraPose {
+            ned_from_camera: camera.ned_from_camera,
+            heading: wrap_pi(heading.to_radians()),
+        })
     }
 
     pub fn ned_from_camera(&self) -> UnitQuaternion<f64> {
@@ -1208,21 +1223,20 @@ mod tests {
             Err(GeometryError::Intrinsics { .. })
         ));
 
-        let mount = Mount::forward();
         assert_eq!(
-            CameraPose::from_capture(&header.pose, &mount),
+            CameraPose::from_capture(&header),
             Err(GeometryError::NoPose)
         );
         header.pose.valid = 1;
         assert!(matches!(
-            CameraPose::from_capture(&header.pose, &mount),
+            CameraPose::from_capture(&header),
             Err(GeometryError::Attitude(_))
         ));
         header.pose.attitude_q = [1.0, 0.0, 0.0, 0.0];
         header.pose.lat_deg = 47.0;
         header.pose.lon_deg = 8.0;
         header.pose.alt_m = 500.0;
-        assert!(CameraPose::from_capture(&header.pose, &mount).is_ok());
+        assert!(CameraPose::from_capture(&header).is_ok());
         assert_eq!(
             GeoPosition::from_capture(&header.pose),
             Ok(GeoPosition {
