@@ -2,6 +2,7 @@
 
 use serde::Deserialize;
 use skymesh_ipc_types::{PixelFormat, SCENE_MAX_TARGETS};
+use skymesh_runtime::config::finite;
 use skymesh_runtime::config::in_range;
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
@@ -231,14 +232,6 @@ impl Settings {
         self.format
             .frame_len(self.width, self.height, self.stride())
             .unwrap_or(0) as usize
-    }
-}
-
-fn finite(field: &str, v: f64) -> Result<f64, ConfigError> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(ConfigError::invalid(field, "must be a finite number"))
     }
 }
 

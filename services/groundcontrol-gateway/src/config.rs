@@ -8,7 +8,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::time::Duration;
 
 use serde::Deserialize;
-use skymesh_runtime::config::{in_range, socket_addr};
+use skymesh_runtime::config::{finite, in_range, socket_addr};
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
 use crate::privilege::{AddrSet, IpNet};
@@ -78,14 +78,6 @@ impl Default for RawConfig {
             liveness: "simulated".to_string(),
             state_timeout_s: 2.0,
         }
-    }
-}
-
-fn finite(field: &str, v: f64) -> Result<f64, ConfigError> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(ConfigError::invalid(field, "must be a finite number"))
     }
 }
 

@@ -74,6 +74,18 @@ pub fn socket_addr(field: &str, value: &str) -> Result<std::net::SocketAddr, Con
     })
 }
 
+/// Refuses NaN and infinities, naming the field on error.
+pub fn finite(field: &str, v: f64) -> Result<f64, ConfigError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("{v} is not a finite number"),
+        ))
+    }
+}
+
 /// Checks `min <= value <= max`, naming the field on error.
 pub fn in_range<T: PartialOrd + std::fmt::Display + Copy>(
     field: &str,

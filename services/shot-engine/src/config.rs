@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
+use skymesh_runtime::config::finite;
 use skymesh_runtime::config::in_range;
 use skymesh_runtime::ipc::{DEFAULT_DOMAIN, DOMAIN_ENV};
 use skymesh_runtime::{ConfigError, ServiceConfig};
@@ -184,17 +185,6 @@ pub fn default_state_file(state_directory: Option<&str>, domain: Option<&str>) -
     }
     let domain = domain.filter(|d| !d.is_empty()).unwrap_or(DEFAULT_DOMAIN);
     PathBuf::from(format!("/tmp/skymesh-{domain}")).join(STATE_FILE_NAME)
-}
-
-fn finite(field: &str, v: f64) -> Result<f64, ConfigError> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("{v} is not a finite number"),
-        ))
-    }
 }
 
 fn range_f(field: &str, v: f64, min: f64, max: f64) -> Result<f64, ConfigError> {

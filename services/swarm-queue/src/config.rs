@@ -17,6 +17,7 @@ use std::time::Duration;
 
 use serde::Deserialize;
 use skymesh_ipc_types::SWARM_MAX_DRONES;
+use skymesh_runtime::config::finite;
 use skymesh_runtime::config::in_range;
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
@@ -196,17 +197,6 @@ impl Default for RawConfig {
             pose_timeout_s: 1.0,
             link_timeout_s: 3.0,
         }
-    }
-}
-
-fn finite(field: &str, v: f64) -> Result<f64, ConfigError> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("{v} is not a finite number"),
-        ))
     }
 }
 
