@@ -24,6 +24,7 @@ pub mod shot_fence;
 pub mod swarm;
 pub mod topics;
 pub mod vehicle;
+pub mod vision;
 
 pub use arbiter::{
     ArbiterEvent, ArbiterEventKind, AuthorityChange, AuthorityState, FenceError, FenceKind,
@@ -58,6 +59,12 @@ pub use swarm::{
 };
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
+pub use vision::{
+    CropMode, SttMode, SttState, TargetingMode, VirtualCamState, VisionControl,
+    VisionControlKind, VisionDetection, VisionOrigin, VisionReply, VisionResult, VisionState,
+    VisionStreamState, LOCK_PITCH, LOCK_ROLL, LOCK_YAW, VISION_MAX_CAMS, VISION_MAX_DETECTIONS,
+    VISION_MAX_MODELS, VISION_MAX_STREAMS,
+};
 
 /// Declares a checked integer-backed enum: the wire holds the integer, the code sees
 /// the enum, and `TryFrom<int>` refuses anything not listed.

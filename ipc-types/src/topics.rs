@@ -254,6 +254,30 @@ pub fn camera_truth(stream: &str) -> Topic {
     Topic::new(format!("skymesh/camera/{stream}/truth"), TopicQos::STATE)
 }
 
+/// [`crate::VisionState`]: the vision pipeline's parameters, virtual cameras,
+/// tracker and detections (tens of kilobytes, latest value).
+pub fn vision_state() -> Topic {
+    Topic::new("skymesh/vision/state".into(), TopicQos::BULK_STATE)
+}
+
+/// [`crate::VisionControl`] requests to the vision pipeline (DigiView gateway,
+/// autopilot-link's gimbal protocol v2 and forwarded camera commands).
+pub fn vision_control() -> Topic {
+    Topic::new("skymesh/vision/control".into(), TopicQos::COMMANDS)
+}
+
+/// [`crate::VisionReply`]: one per [`crate::VisionControl`], to every requester (each
+/// matches its own `request_id`).
+pub fn vision_reply() -> Topic {
+    Topic::new("skymesh/vision/reply".into(), TopicQos::EVENTS)
+}
+
+/// The vision pipeline's rendered output of stream `stream` (virtual camera views and
+/// detection overlay), [`crate::FrameHeader`] + RGB24 pixels like the camera's frames.
+pub fn vision_output(stream: &str) -> Topic {
+    Topic::new(format!("skymesh/vision/{stream}/output"), TopicQos::FRAMES)
+}
+
 /// [`crate::ServiceHealth`] heartbeats of the service instance `name`.
 pub fn service_health(name: &str) -> Topic {
     Topic::new(format!("skymesh/service/{name}/health"), TopicQos::SERVICE)
