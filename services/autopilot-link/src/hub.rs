@@ -9,7 +9,8 @@
 //! | `skymesh_router_endpoint_peers` | `endpoint` |
 //!
 //! `endpoint` is the configured endpoint (with the bound port for `udpin`/`tcpin`),
-//! or `autopilot` for frames forwarded to the autopilot and its malformed input.
+//! `autopilot` for frames forwarded to the autopilot and its malformed input, or
+//! `gimbal_v2` for frames delivered to the virtual gimbals ([`Hub::attach_local`]).
 //! Every series is registered on first use: an endpoint costs between 0 and 8 of
 //! the stats sample's 384 entries (at most 8 endpoints).
 
@@ -174,7 +175,16 @@ pub struct Hub {
     /// The open autopilot connection's forward queue; `None` while the link is down.
     autopilot: Mutex<Option<Arc<Outbox>>>,
     autopilot_metrics: EndpointMetrics,
+    /// The virtual gimbals' inbox (the service's event loop drains it), once attached.
+    local: Mutex<Option<mpsc::Sender<RawFrame>>>,
+    local_metrics: EndpointMetrics,
 }
+
+/// Messages addressed to a whole system (or broadcast) that the virtual gimbals
+/// take: GIMBAL_MANAGER_SET_ATTITUDE and GIMBAL_MANAGER_SET_PITCHYAW (their
+/// `gimbal_device_id` says which gimbal). Commands are only taken when addressed to
+/// a virtual component: a broadcast command is the autopilot's to answer.
+const LOCAL_BROADCAST_IDS: [u32; 2] = [282, 287];
 
 impl Hub {
     /// `ports`: each endpoint's queue (drained by its task) and series.
@@ -192,6 +202,36 @@ impl Hub {
             ports,
             autopilot: Mutex::new(None),
             autopilot_metrics: EndpointMetrics::new(stats, "autopilot".to_string()),
+            local: Mutex::new(None),
+            local_metrics: EndpointMetrics::new(stats, "gimbal_v2".to_string()),
+        }
+    }
+
+    /// Serves `components` of our system locally: frames from endpoints addressed to
+    /// them (and broadcast gimbal-manager messages) go into `inbox` instead of to
+    /// the autopilot.
+    pub fn attach_local(&self, components: &[u8], inbox: mpsc::Sender<RawFrame>) {
+        let mut router = lock(&self.router);
+        for c in components {
+            router.add_local_component(*c);
+        }
+        *lock(&self.local) = Some(inbox);
+    }
+
+    fn to_local(&self, frame: &RawFrame) {
+        let targeted = matches!(frame.target(), crate::frame::Target::Component(..));
+        if !targeted && !LOCAL_BROADCAST_IDS.contains(&frame.message_id()) {
+            return;
+        }
+        let Some(tx) = lock(&self.local).clone() else {
+            return;
+        };
+        match tx.try_send(*frame) {
+            Ok(()) => self.local_metrics.frame_out(),
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                self.local_metrics.dropped(DropReason::QueueFull, 1);
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => {}
         }
     }
 
@@ -225,7 +265,8 @@ impl Hub {
         }
     }
 
-    /// Our own frame (the heartbeat of component 191) after it went to the autopilot.
+    /// Our own frame (the heartbeat of component 191 after it went to the autopilot,
+    /// or a virtual gimbal's traffic): to every endpoint.
     pub fn from_local(&self, frame: &RawFrame) {
         if self.ports.is_empty() {
             return;
@@ -257,6 +298,9 @@ impl Hub {
             }
             router.route(link, frame.target())
         };
+        if to.local {
+            self.to_local(frame);
+        }
         if to.autopilot {
             self.to_autopilot(frame);
         }

@@ -24,6 +24,7 @@
 //! | [`acks`] | COMMAND_ACK and GOPRO_SET_RESPONSE matching, retransmission, timeouts (pure) |
 //! | [`arbiter`] | authority, freshness, geofence envelope, audit: decides every command (pure) |
 //! | [`requests`] | our heartbeat, stream-rate and home requests (pure) |
+//! | [`gimbal_v2`] | the vision pipeline's virtual cameras as MAVLink gimbals (pure) |
 //! | [`metrics`] | the exported series |
 //! | `service` | the event loop tying them together |
 #![forbid(unsafe_code)]
@@ -34,6 +35,7 @@ pub mod commands;
 pub mod config;
 pub mod endpoints;
 pub mod frame;
+pub mod gimbal_v2;
 pub mod hub;
 pub mod link;
 pub mod metrics;
@@ -47,7 +49,7 @@ mod transport;
 use anyhow::Context as _;
 use skymesh_ipc_types::{
     topics, ArbiterEvent, AuthorityState, CommandAck, GeofenceSet, PayloadState, ServiceState,
-    VehicleCommand, VehicleState, VehicleStatus,
+    VehicleCommand, VehicleState, VehicleStatus, VisionControl, VisionReply, VisionState,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
 
@@ -159,6 +161,33 @@ pub async fn run_with_endpoints(
         &stats,
         router_stop.clone(),
     );
+    let vision_parts = if settings.vision.enabled {
+        let (tx, inbox) = tokio::sync::mpsc::channel(service::vision::INBOX);
+        hub.attach_local(&settings.vision.components, tx);
+        tracing::info!(
+            components = ?settings.vision.components,
+            stream = settings.vision.stream,
+            "virtual gimbals (gimbal protocol v2) enabled"
+        );
+        Some(service::VisionParts {
+            ports: service::vision::VisionPorts {
+                state: bus
+                    .subscriber::<VisionState>(&topics::vision_state())
+                    .context("opening the vision state topic")?,
+                control: bus
+                    .publisher::<VisionControl>(&topics::vision_control())
+                    .context("opening the vision control topic")?,
+                reply: bus
+                    .subscriber::<VisionReply>(&topics::vision_reply())
+                    .context("opening the vision reply topic")?,
+                inbox,
+            },
+            hub: hub.clone(),
+            stats: stats.clone(),
+        })
+    } else {
+        None
+    };
     // Not a child of `shutdown`: a parent token cancels its children before it marks
     // itself cancelled, so the link task could end (closing its channel) while the
     // service loop still sees `shutdown` as live and reports "the link task ended".
@@ -178,7 +207,7 @@ pub async fn run_with_endpoints(
         link_stop.clone(),
     );
     lifecycle.ready();
-    let mut svc = service::Service::new(settings, lifecycle, metrics, audit, ports);
+    let mut svc = service::Service::new(settings, lifecycle, metrics, audit, ports, vision_parts);
     let result = svc.run(&mut events, &shutdown).await;
     link_stop.cancel();
     // The reader thread may be waiting for room in the event channel: close it.

@@ -12,7 +12,12 @@
 //!   component of a known system, or a whole system → every link that system was
 //!   seen on; a system never seen → the autopilot (the default route: components
 //!   behind the flight controller are often silent until asked). Never back to the
-//!   link it came from; never to `Local` (we do not consume routed traffic).
+//!   link it came from.
+//! - to `Local` only for the virtual components registered with
+//!   [`Router::add_local_component`] (the vision pipeline's gimbals): frames
+//!   addressed to one of them go there and nowhere else; broadcast frames and frames
+//!   addressed to our whole system are also marked `local` (the hub picks the
+//!   message types they handle). Our own component 191 consumes nothing.
 //!
 //! Sources heard on the autopilot link and our own id are pinned: a frame from an
 //! endpoint claiming one of them is a loop (a router on an endpoint echoing our
@@ -50,6 +55,8 @@ pub struct Destinations {
     pub autopilot: bool,
     /// Bit `i` = endpoint `i`.
     pub endpoints: u8,
+    /// Our virtual components (see [`Router::add_local_component`]).
+    pub local: bool,
 }
 
 impl Destinations {
@@ -70,7 +77,7 @@ impl Destinations {
     }
 
     pub fn is_empty(&self) -> bool {
-        !self.autopilot && self.endpoints == 0
+        !self.autopilot && self.endpoints == 0 && !self.local
     }
 
     /// The endpoint indices in this set, ascending.
@@ -95,6 +102,8 @@ pub struct Router {
     local: (u8, u8),
     /// (system, component) → the link it was last heard on.
     seen: HashMap<(u8, u8), Link>,
+    /// Components of our system served locally (virtual gimbals), pinned to `Local`.
+    virtual_components: Vec<u8>,
 }
 
 impl Router {
@@ -108,6 +117,17 @@ impl Router {
             endpoints,
             local,
             seen,
+            virtual_components: Vec::new(),
+        }
+    }
+
+    /// Serves `component` of our system locally: frames addressed to it are
+    /// delivered to `Local` (never to the autopilot), and endpoints claiming it are
+    /// loops.
+    pub fn add_local_component(&mut self, component: u8) {
+        self.seen.insert((self.local.0, component), Link::Local);
+        if !self.virtual_components.contains(&component) {
+            self.virtual_components.push(component);
         }
     }
 
@@ -146,11 +166,16 @@ impl Router {
                 Target::Broadcast => {
                     to.autopilot = true;
                     to.endpoints = self.all_endpoints();
+                    to.local = !self.virtual_components.is_empty();
                 }
                 Target::Component(s, c) if self.seen.contains_key(&(s, c)) => {
                     to.add(self.seen[&(s, c)]);
+                    to.local = s == self.local.0 && self.virtual_components.contains(&c);
                 }
                 Target::Component(s, _) | Target::System(s) => {
+                    if matches!(target, Target::System(_)) && s == self.local.0 {
+                        to.local = !self.virtual_components.is_empty();
+                    }
                     let mut known = false;
                     for (_, link) in self.seen.iter().filter(|((sys, _), _)| *sys == s) {
                         known = true;
@@ -291,7 +316,38 @@ mod tests {
         Destinations {
             autopilot,
             endpoints: endpoints.iter().fold(0, |m, i| m | 1 << i),
+            local: false,
         }
+    }
+
+    #[test]
+    fn virtual_components_are_served_locally_and_never_by_the_autopilot() {
+        let mut r = router();
+        // Without virtual components nothing is local.
+        assert!(!r.route(E0, Target::Broadcast).local);
+        r.add_local_component(154);
+        let to = r.route(E0, Target::Component(1, 154));
+        assert_eq!(
+            to,
+            Destinations {
+                local: true,
+                ..Destinations::default()
+            }
+        );
+        // Broadcast and our system: local too, plus the usual links.
+        let b = r.route(E0, Target::Broadcast);
+        assert!(b.local && b.autopilot);
+        let sys = r.route(E0, Target::System(1));
+        assert!(sys.local && sys.autopilot);
+        // Our own component 191 still consumes nothing.
+        assert!(!r.route(E0, Target::Component(1, 191)).local);
+        // Another system's 154 is not ours.
+        assert!(!r.route(E0, Target::Component(7, 154)).local);
+        // An endpoint claiming a virtual component is a loop.
+        assert_eq!(r.learn(E0, (1, 154)), Learned::Loop);
+        // Nor is it taken over by the autopilot link (a colliding real component).
+        assert_eq!(r.learn(Link::Autopilot, (1, 154)), Learned::Loop);
+        assert!(r.route(E0, Target::Component(1, 154)).local);
     }
 
     #[test]

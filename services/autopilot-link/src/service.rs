@@ -9,6 +9,7 @@
 
 mod payload;
 mod safety;
+pub(crate) mod vision;
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
@@ -53,6 +54,7 @@ enum Wake {
     /// Boxed: a fence is 4 KiB and arrives rarely.
     Geofence(Result<Box<GeofenceSet>, IpcError>),
     Link(Option<LinkEvent>),
+    Vision(vision::VisionWake),
     Timer,
 }
 
@@ -70,6 +72,13 @@ pub(crate) struct Ports {
     pub events: Publisher<ArbiterEvent>,
     /// The geofence, from whichever source sets it (history 1).
     pub geofence: Subscriber<GeofenceSet>,
+}
+
+/// The virtual gimbals, when `[vision] enabled`.
+pub(crate) struct VisionParts {
+    pub ports: vision::VisionPorts,
+    pub hub: std::sync::Arc<crate::hub::Hub>,
+    pub stats: skymesh_runtime::Stats,
 }
 
 pub(crate) struct Service<L> {
@@ -104,6 +113,8 @@ pub(crate) struct Service<L> {
     stream_retries: u32,
     last_attitude: Option<Instant>,
     started: Instant,
+    /// Gimbal protocol v2 for the vision pipeline's virtual cameras.
+    vision: Option<vision::Vision>,
 }
 
 impl<L: Lifecycle> Service<L> {
@@ -113,9 +124,20 @@ impl<L: Lifecycle> Service<L> {
         metrics: Metrics,
         audit: Audit,
         ports: Ports,
+        vision_parts: Option<VisionParts>,
     ) -> Self {
         let now = Instant::now();
+        let vision = vision_parts.map(|p| {
+            vision::Vision::new(
+                &settings.vision,
+                settings.system_id,
+                p.ports,
+                p.hub,
+                &p.stats,
+            )
+        });
         Service {
+            vision,
             telemetry: Telemetry::new(settings.vehicle_id),
             payload: Payload::new(settings.vehicle_id),
             link: LinkMonitor::new(settings.link_timeout),
@@ -177,6 +199,7 @@ impl<L: Lifecycle> Service<L> {
                 sample = self.ports.commands.recv() => Wake::Command(sample),
                 fence = self.ports.geofence.recv() => Wake::Geofence(fence.map(Box::new)),
                 event = events.recv() => Wake::Link(event),
+                v = vision::Vision::next(self.vision.as_mut()) => Wake::Vision(v),
                 _ = &mut sleep => Wake::Timer,
             };
             let step = match wake {
@@ -186,6 +209,7 @@ impl<L: Lifecycle> Service<L> {
                 Wake::Geofence(Err(e)) => Err(e.into()),
                 Wake::Link(Some(event)) => self.on_link_event(event),
                 Wake::Link(None) => Err(anyhow::anyhow!("the link task ended")),
+                Wake::Vision(v) => self.on_vision(v),
                 Wake::Timer => Ok(()),
             };
             if let Err(e) = step {
@@ -210,6 +234,7 @@ impl<L: Lifecycle> Service<L> {
             unexplained,
             self.arbiter_deadline(),
             Some(self.payload_deadline()),
+            self.vision_deadline(),
         ]
         .into_iter()
         .flatten()
@@ -241,6 +266,7 @@ impl<L: Lifecycle> Service<L> {
             }
         }
         self.publish_payload_if_due()?;
+        self.poll_vision()?;
         if now >= self.next_tick {
             let next = self.next_tick + TICK;
             // Fell behind (a stalled machine): skip the missed ticks.
@@ -294,6 +320,7 @@ impl<L: Lifecycle> Service<L> {
                 }
             }
             LinkEvent::Message(header, msg) => {
+                self.check_collision(&header)?;
                 self.on_payload_message(&header, &msg, now)?;
                 let u = self.telemetry.handle(&header, &msg, monotonic_ns());
                 if let Some(system) = u.foreign_autopilot {
@@ -472,6 +499,7 @@ impl<L: Lifecycle> Service<L> {
                     self.limited
                         .insert((origin.source, origin.command_id), detail);
                 }
+                self.forward_to_vision(&command)?;
                 self.dispatch(origin, &command, now)
             }
             Outcome::Done { detail } => self.publish_answer(Answer {

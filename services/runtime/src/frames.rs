@@ -290,6 +290,64 @@ impl FrameSubscriber {
         }
     }
 
+    /// Takes every pending frame without waiting, keeps only the newest valid one and
+    /// hands it to `read` in place; the older ones are released unread. Returns
+    /// `read`'s result and how many older frames were skipped (a consumer slower than
+    /// the camera processes the newest frame, never a backlog, and copies nothing).
+    pub fn try_latest_with<R>(
+        &self,
+        read: impl FnOnce(&FrameHeader, &[u8]) -> R,
+    ) -> Result<Option<(R, u64)>, FrameError> {
+        let mut newest = None;
+        let mut skipped = 0u64;
+        while let Some(sample) = self
+            .port
+            .receive()
+            .map_err(|e| ipc_err("receive frame", &self.topic, e))?
+        {
+            if let Err(e) = sample.user_header().validate(sample.payload().len()) {
+                self.invalid.inc();
+                self.warn_invalid(&e);
+                continue;
+            }
+            self.account(sample.user_header());
+            if newest.replace(sample).is_some() {
+                skipped += 1;
+            }
+        }
+        Ok(newest.map(|sample| (read(sample.user_header(), sample.payload()), skipped)))
+    }
+
+    /// Waits until at least one frame is pending, then behaves like
+    /// [`FrameSubscriber::try_latest_with`]. Cancel-safe.
+    pub async fn latest_with<R>(
+        &mut self,
+        mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
+    ) -> Result<(R, u64), FrameError> {
+        loop {
+            if let Some(r) = self.try_latest_with(&mut read)? {
+                return Ok(r);
+            }
+            wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+        }
+    }
+
+    /// Returns once a frame is pending (at once if one already is), without taking
+    /// it: follow with [`FrameSubscriber::try_latest_with`]. Cancel-safe. It may
+    /// return without a frame after a spurious wake-up; the `try_` call then says
+    /// `None`.
+    pub async fn ready(&mut self) -> Result<(), FrameError> {
+        if self
+            .port
+            .has_samples()
+            .map_err(|e| ipc_err("check frames", &self.topic, e))?
+        {
+            return Ok(());
+        }
+        wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+        Ok(())
+    }
+
     /// Waits for the next frame and hands it to `read` in place (see
     /// [`FrameSubscriber::try_recv_with`]). Cancel-safe.
     pub async fn recv_with<R>(
