@@ -651,6 +651,15 @@ impl CameraPose {
         })
     }
 
+    /// From a camera → NED orientation and the vehicle's heading (radians), e.g. a
+    /// virtual camera's published aim.
+    pub fn from_parts(ned_from_camera: UnitQuaternion<f64>, heading: f64) -> CameraPose {
+        CameraPose {
+            ned_from_camera,
+            heading: wrap_pi(heading),
+        }
+    }
+
     pub fn ned_from_camera(&self) -> UnitQuaternion<f64> {
         self.ned_from_camera
     }

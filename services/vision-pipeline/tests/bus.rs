@@ -1,0 +1,355 @@
+//! The pipeline in-process on the real bus (its own iceoryx2 domain), fed synthetic
+//! frames rendered by the camera's renderer at 50 m looking down with known targets:
+//! detections match the truth, VIDEO_OUTPUT resizes the output, CAM_TARGETING aims a
+//! view at a target, every control is answered and garbage is Invalid.
+
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+use digiview_proto::{CamTargeting, Param, ParamType, StreamName, VideoOutput};
+use skymesh_camera::synthetic::{FrameStamp, Synthetic};
+use skymesh_ipc_types::{
+    topics, SceneTruth, ServiceId, VehicleState, VisionControl, VisionControlKind, VisionOrigin,
+    VisionReply, VisionResult, VisionState, MAX_FRAME_LEN,
+};
+use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::{Bus, CancellationToken, Context, Domain, ServiceConfig, Stats};
+use skymesh_vision_pipeline::geometry::{GeoPosition, YawPitch};
+
+/// Generous bound for anything that should take a moment.
+const PATIENCE: Duration = Duration::from_secs(60);
+
+fn unique_domain() -> Domain {
+    static N: AtomicU32 = AtomicU32::new(0);
+    let name = format!(
+        "vis{}x{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    );
+    Domain::load(&name, None).expect("domain")
+}
+
+fn edit<C: ServiceConfig>(edits: &[(&str, &str)]) -> C::Settings {
+    let mut text = C::DEFAULT_TOML.to_string();
+    for (from, to) in edits {
+        assert!(text.contains(from), "the shipped config has no `{from}`");
+        text = text.replace(from, to);
+    }
+    skymesh_runtime::config::parse::<C>(&text, "test").expect("config")
+}
+
+/// The camera's scene, targets standing still.
+fn camera() -> Synthetic {
+    Synthetic::new(edit::<skymesh_camera::RawConfig>(&[
+        ("width = 1280", "width = 640"),
+        ("height = 720", "height = 480"),
+        ("# origin = {", "origin = {"),
+        ("speed_mps = 1.4", "speed_mps = 0.0"),
+        ("speed_mps = 1.2", "speed_mps = 0.0"),
+        ("speed_mps = 1.0", "speed_mps = 0.0"),
+    ]))
+}
+
+fn vehicle() -> VehicleState {
+    // 50 m above the origin's ground, heading east, level.
+    let yaw = std::f32::consts::FRAC_PI_2;
+    let q = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, f64::from(yaw));
+    VehicleState {
+        vehicle_id: 1,
+        position_valid: 1,
+        attitude_valid: 1,
+        lat_deg: 47.397742,
+        lon_deg: 8.545594,
+        alt_msl_m: 538.0,
+        alt_rel_m: 50.0,
+        heading_deg: 90.0,
+        yaw_rad: yaw,
+        attitude_q: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+        ..VehicleState::default()
+    }
+}
+
+fn set(request_id: u64, param: &Param) -> VisionControl {
+    let (t, data) = param.encode();
+    VisionControl {
+        request_id,
+        kind: VisionControlKind::DigiViewSet.to_wire(),
+        origin: VisionOrigin::DigiView.to_wire(),
+        param: t as u8,
+        data,
+        ..VisionControl::default()
+    }
+}
+
+fn deg(rad: f64) -> f64 {
+    rad.to_degrees()
+}
+
+fn angle_diff_deg(a: f64, b: f64) -> f64 {
+    deg(skymesh_vision_pipeline::geometry::wrap_pi(a - b)).abs()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn detections_views_and_controls_on_the_bus() {
+    let domain = unique_domain();
+    let stats = Stats::new();
+    let bus = Bus::open(
+        &domain,
+        "vision",
+        ServiceId::VisionPipeline,
+        0,
+        stats.clone(),
+    )
+    .expect("bus");
+    let tool = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+    let mut frames = tool
+        .frame_publisher(&topics::camera_frames("main"), MAX_FRAME_LEN)
+        .expect("frame publisher");
+    let mut vehicle_pub = tool
+        .publisher::<VehicleState>(&topics::vehicle_state(1))
+        .expect("vehicle publisher");
+    let mut control = tool
+        .publisher::<VisionControl>(&topics::vision_control())
+        .expect("control publisher");
+    let replies = tool
+        .subscriber::<VisionReply>(&topics::vision_reply())
+        .expect("reply subscriber");
+    let state_sub = tool
+        .subscriber::<VisionState>(&topics::vision_state())
+        .expect("state subscriber");
+    let output = tool
+        .frame_subscriber(&topics::vision_output("main"))
+        .expect("output subscriber");
+
+    let settings = edit::<skymesh_vision_pipeline::RawConfig>(&[
+        ("thermal_zone = \"auto\"", "thermal_zone = \"none\""),
+        ("width = 1280", "width = 640"),
+        ("height = 720", "height = 480"),
+    ]);
+    let shutdown = CancellationToken::new();
+    let ctx = Context::new(bus, shutdown.clone(), stats.clone(), "vision");
+    let task = tokio::spawn(skymesh_vision_pipeline::run(settings, ctx));
+
+    let mut cam = camera();
+    let v = vehicle();
+    cam.update_vehicle(&v);
+    let me = GeoPosition {
+        lat_deg: v.lat_deg,
+        lon_deg: v.lon_deg,
+        alt_msl_m: f64::from(v.alt_msl_m),
+    };
+
+    // Feeds one frame and the vehicle state; returns the truth.
+    let mut seq = 0u64;
+    let mut feed = |frames: &mut skymesh_runtime::FramePublisher| -> SceneTruth {
+        seq += 1;
+        let stamp = FrameStamp {
+            seq,
+            mono_ns: monotonic_ns(),
+            unix_ns: 1,
+        };
+        let len = 640 * 480 * 3;
+        let mut truth = None;
+        frames
+            .publish_with(len, |h, px| truth = cam.render(0.0, stamp, h, px).ok())
+            .expect("publish frame");
+        truth.expect("a pose")
+    };
+
+    let mut replies_seen: Vec<VisionReply> = Vec::new();
+    let mut next_id = 100u64;
+    let mut sent_ids: Vec<u64> = Vec::new();
+    let send = |control: &mut skymesh_runtime::Publisher<VisionControl>, c: VisionControl| {
+        control.publish(c).expect("publish control");
+        c.request_id
+    };
+
+    // 1. Detections match the rendered targets.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let (truth, state) = loop {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no matching detections"
+        );
+        vehicle_pub.publish(v).expect("publish vehicle");
+        let truth = feed(&mut frames);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let Some(st) = state_sub.latest().expect("state") else {
+            continue;
+        };
+        let visible = truth.targets().iter().filter(|t| t.in_view == 1).count();
+        if visible > 0 && st.detections().len() >= visible && st.streams[0].frames_processed >= 3 {
+            break (truth, st);
+        }
+    };
+    for t in truth.targets().iter().filter(|t| t.in_view == 1) {
+        let pos = GeoPosition {
+            lat_deg: t.lat_deg,
+            lon_deg: t.lon_deg,
+            alt_msl_m: f64::from(t.alt_msl_m),
+        };
+        let dir = YawPitch::of(&me.ned_to(&pos)).expect("direction");
+        let best = state
+            .detections()
+            .iter()
+            .min_by(|a, b| {
+                let da = angle_diff_deg(f64::from(a.yaw_global_rad), dir.yaw)
+                    .hypot(angle_diff_deg(f64::from(a.pitch_global_rad), dir.pitch));
+                let db = angle_diff_deg(f64::from(b.yaw_global_rad), dir.yaw)
+                    .hypot(angle_diff_deg(f64::from(b.pitch_global_rad), dir.pitch));
+                da.total_cmp(&db)
+            })
+            .expect("a detection");
+        assert!(
+            angle_diff_deg(f64::from(best.pitch_global_rad), dir.pitch) < 1.0,
+            "target {} pitch {} vs {}",
+            t.id,
+            deg(f64::from(best.pitch_global_rad)),
+            deg(dir.pitch)
+        );
+        // Straight down the yaw is ill-conditioned; compare it only off nadir.
+        if dir.pitch > -89.0f64.to_radians() {
+            assert!(
+                angle_diff_deg(f64::from(best.yaw_global_rad), dir.yaw) < 1.0,
+                "target {} yaw {} vs {}",
+                t.id,
+                deg(f64::from(best.yaw_global_rad)),
+                deg(dir.yaw)
+            );
+        }
+        assert_eq!(best.geo_valid, 1, "{best:?}");
+        let found = GeoPosition {
+            lat_deg: best.lat_deg,
+            lon_deg: best.lon_deg,
+            alt_msl_m: f64::from(best.alt_msl_m),
+        };
+        let miss = pos.ned_to(&found);
+        assert!(
+            miss.x.hypot(miss.y) < 5.0,
+            "target {} off by {miss:?}",
+            t.id
+        );
+    }
+
+    // 2. VIDEO_OUTPUT resizes the output; 3. CAM_TARGETING coordinal aims view 0;
+    // 4. garbage is Invalid; every control gets one reply.
+    let target = truth
+        .targets()
+        .iter()
+        .find(|t| t.in_view == 1)
+        .expect("a target");
+    let tpos = GeoPosition {
+        lat_deg: target.lat_deg,
+        lon_deg: target.lon_deg,
+        alt_msl_m: f64::from(target.alt_msl_m),
+    };
+    // DigiView carries latitude and longitude as degrees × 1000 (FACTS.md), about
+    // 100 m steps: the view must point at the position the wire can say, which is
+    // the target's position quantised.
+    let q = |x: f64| digiview_proto::from_milli(digiview_proto::to_milli(x));
+    let commanded = GeoPosition {
+        lat_deg: q(tpos.lat_deg),
+        lon_deg: q(tpos.lon_deg),
+        alt_msl_m: f64::from(v.alt_msl_m) + q(tpos.alt_msl_m - f64::from(v.alt_msl_m)),
+    };
+    let tdir = YawPitch::of(&me.ned_to(&commanded)).expect("direction");
+    let video = Param::VideoOutput(VideoOutput {
+        stream: StreamName::new("main").unwrap(),
+        width: 800,
+        height: 600,
+        layout_mode: 0,
+        overlay_mode: 2,
+        ..VideoOutput::default()
+    });
+    let aim = Param::CamTargeting(CamTargeting {
+        stream: StreamName::new("main").unwrap(),
+        cam: 0,
+        mode: 1,
+        lock_flags: 0b111,
+        latitude: target.lat_deg,
+        longitude: target.lon_deg,
+        // Relative to the system (DigiView's meaning).
+        altitude: f64::from(target.alt_msl_m) - f64::from(v.alt_msl_m),
+        ..CamTargeting::default()
+    });
+    let mut garbage = set(0, &Param::CamTargeting(CamTargeting::default()));
+    garbage.param = ParamType::Ai as u8;
+    garbage.data = [7; 64];
+    for mut c in [set(0, &video), set(0, &aim), garbage] {
+        c.request_id = next_id;
+        next_id += 1;
+        sent_ids.push(send(&mut control, c));
+    }
+    let bogus_kind = VisionControl {
+        request_id: next_id,
+        kind: 99,
+        ..VisionControl::default()
+    };
+    sent_ids.push(send(&mut control, bogus_kind));
+
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let mut out_size = None;
+    let mut aimed = None;
+    while replies_seen.len() < sent_ids.len() || out_size != Some((800, 600)) || aimed.is_none() {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "replies {replies_seen:?}, output {out_size:?}, aimed {aimed:?}"
+        );
+        vehicle_pub.publish(v).expect("publish vehicle");
+        feed(&mut frames);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        while let Some(r) = replies.try_recv().expect("reply") {
+            replies_seen.push(r);
+        }
+        while let Some(sz) = output
+            .try_recv_with(|h, _| (h.width, h.height))
+            .expect("output")
+        {
+            out_size = Some(sz);
+        }
+        if let Some(st) = state_sub.latest().expect("state") {
+            let c = st.streams[0].cams[0];
+            if c.targeting_mode == 1 && c.aim_valid == 1 {
+                aimed = Some(c);
+            }
+        }
+    }
+    shutdown.cancel();
+    task.await.expect("join").expect("vision run");
+
+    for id in &sent_ids {
+        let n = replies_seen.iter().filter(|r| r.request_id == *id).count();
+        assert_eq!(n, 1, "request {id}: {replies_seen:?}");
+    }
+    let result = |id: u64| {
+        replies_seen
+            .iter()
+            .find(|r| r.request_id == id)
+            .map(|r| r.result())
+    };
+    assert_eq!(result(sent_ids[0]), Some(VisionResult::Applied));
+    assert_eq!(result(sent_ids[1]), Some(VisionResult::Applied));
+    assert_eq!(result(sent_ids[2]), Some(VisionResult::Invalid));
+    assert_eq!(result(sent_ids[3]), Some(VisionResult::Invalid));
+    let c = aimed.expect("aimed");
+    assert!(
+        angle_diff_deg(f64::from(c.view_pitch_rad), tdir.pitch) < 1.0,
+        "view pitch {} vs {}",
+        deg(f64::from(c.view_pitch_rad)),
+        deg(tdir.pitch)
+    );
+    if tdir.pitch > -89.0f64.to_radians() {
+        assert!(
+            angle_diff_deg(f64::from(c.view_yaw_rad), tdir.yaw) < 1.0,
+            "view yaw {} vs {}",
+            deg(f64::from(c.view_yaw_rad)),
+            deg(tdir.yaw)
+        );
+    }
+    assert!(
+        stats
+            .value("skymesh_vision_frames_processed_total", "stream=main")
+            .unwrap_or(0.0)
+            >= 3.0
+    );
+}
