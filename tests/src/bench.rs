@@ -5,7 +5,11 @@ use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{bail, Context as _, Result};
+use skymesh_ipc_types::{
+    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
+    VehicleState, VehicleStatus,
+};
 
 use skymesh_autopilot_link::frame::FrameParser;
 
@@ -95,4 +99,60 @@ where
         mesh.wait_running(name, Duration::from_secs(40))?;
     }
     Ok(mesh)
+}
+
+/// Operator: GUIDED, arm, take off to `alt` m, then give flight authority back.
+pub async fn take_off(mesh: &Mesh, alt: f32) -> Result<()> {
+    let bus = mesh.bus("bench-take-off")?;
+    let mut status = bus.subscriber::<VehicleStatus>(&topics::vehicle_status(1))?;
+    let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1))?;
+    let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1))?;
+    let mut cmds = bus.publisher::<VehicleCommand>(&topics::vehicle_command(1))?;
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let s = status.recv_timeout(Duration::from_secs(5)).await?;
+        if s.is_some_and(|s| s.ekf_healthy != 0) {
+            break;
+        }
+        if Instant::now() > deadline {
+            bail!("EKF never became healthy");
+        }
+    }
+    let steps = [
+        Command::SetMode(FlightMode::Guided),
+        Command::Arm { force: false },
+        Command::Takeoff { alt_rel_m: alt },
+        Command::ReleaseFlightAuthority,
+    ];
+    for (i, cmd) in steps.iter().enumerate() {
+        let id = 9000 + i as u32;
+        cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd)?)?;
+        loop {
+            let a = acks
+                .recv_timeout(Duration::from_secs(10))
+                .await?
+                .context("no command ack")?;
+            if a.command_id == id {
+                if a.result() != Some(AckResult::Accepted) {
+                    bail!("{cmd:?} refused: {a:?}");
+                }
+                break;
+            }
+        }
+        if matches!(cmd, Command::Takeoff { .. }) {
+            loop {
+                let s = state
+                    .recv_timeout(Duration::from_secs(5))
+                    .await?
+                    .context("no vehicle state")?;
+                if s.alt_rel_m > alt - 0.5 {
+                    break;
+                }
+                if Instant::now() > deadline {
+                    bail!("take-off did not reach {alt} m");
+                }
+            }
+        }
+    }
+    Ok(())
 }

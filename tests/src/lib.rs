@@ -156,6 +156,17 @@ pub struct MeshOptions {
     pub dji_gateway_extra: String,
     /// Extra TOML appended to the MQTT broker's config (e.g. `[[user]]` entries).
     pub mqtt_broker_extra: String,
+    /// Also run the camera (synthetic scene, stream `main`), the vision pipeline and
+    /// the DigiView gateway (on [`Mesh::digiview_port`]) for vehicle 1. Vehicle 1's
+    /// autopilot-link serves the virtual cameras only if `autopilot_link_extra` has a
+    /// `[vision]` table saying so.
+    pub vision: bool,
+    /// TOML of the camera's config after `vehicle_id = 1` (size, lens, mount, targets).
+    pub camera_extra: String,
+    /// TOML of the vision pipeline's config after `vehicle_id = 1`.
+    pub vision_extra: String,
+    /// TOML appended to the DigiView gateway's config (after `listen`).
+    pub digiview_extra: String,
 }
 
 impl Default for MeshOptions {
@@ -184,6 +195,10 @@ impl Default for MeshOptions {
             dji: false,
             dji_gateway_extra: String::new(),
             mqtt_broker_extra: String::new(),
+            vision: false,
+            camera_extra: String::new(),
+            vision_extra: String::new(),
+            digiview_extra: String::new(),
         }
     }
 }
@@ -219,6 +234,8 @@ pub struct Mesh {
     pub mqtt_addr: SocketAddr,
     /// The DJI gateway's serial number, unique per mesh (with `MeshOptions::dji`).
     pub gateway_sn: String,
+    /// The DigiView gateway's TCP port on 127.0.0.1 (with `MeshOptions::vision`).
+    pub digiview_port: u16,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
     _serial: MutexGuard<'static, ()>,
@@ -536,6 +553,54 @@ after = ["{link}", "mqtt-broker"]
             );
         }
 
+        let mut digiview_port = 0;
+        if opts.vision {
+            digiview_port = free_port();
+            std::fs::write(
+                d.join("camera.toml"),
+                format!("vehicle_id = 1\n{}\n", opts.camera_extra),
+            )?;
+            std::fs::write(
+                d.join("vision-pipeline.toml"),
+                format!("vehicle_id = 1\n{}\n", opts.vision_extra),
+            )?;
+            std::fs::write(
+                d.join("digiview-gateway.toml"),
+                format!(
+                    "listen = \"127.0.0.1:{digiview_port}\"\n{}\n",
+                    opts.digiview_extra
+                ),
+            )?;
+            let link = if opts.vehicles > 1 {
+                "autopilot-link-1"
+            } else {
+                "autopilot-link"
+            };
+            let _ = write!(
+                services,
+                r#"
+[[service]]
+name = "camera"
+binary = "{bins}/skymesh-camera"
+config = "camera.toml"
+after = ["{link}"]
+
+[[service]]
+name = "vision-pipeline"
+binary = "{bins}/skymesh-vision"
+config = "vision-pipeline.toml"
+after = ["camera"]
+
+[[service]]
+name = "digiview-gateway"
+binary = "{bins}/skymesh-digiview"
+config = "digiview-gateway.toml"
+after = ["vision-pipeline"]
+"#,
+                bins = bins.display(),
+            );
+        }
+
         std::fs::write(
             d.join("skymesh.toml"),
             format!(
@@ -587,6 +652,7 @@ grace_period_ms = 3000
             animations_dir,
             mqtt_addr,
             gateway_sn,
+            digiview_port,
             supervisor: Some(child),
             metrics_addr: None,
             _serial: serial,

@@ -13,6 +13,8 @@ const SERVICES: &[&str] = &[
     "skymesh-dji-gateway",
     "skymesh-camera",
     "skymesh-mqtt-broker",
+    "skymesh-vision",
+    "skymesh-digiview",
 ];
 
 fn run(bin: &str, args: &[&str]) -> std::process::Output {

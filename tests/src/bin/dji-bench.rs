@@ -30,10 +30,6 @@ use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
 use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
 use skymesh_e2e::{Mesh, MeshOptions};
-use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
-    VehicleState, VehicleStatus,
-};
 use tokio::sync::mpsc as tmpsc;
 
 /// Commands sent before the measured ones (the first switches the link, the stream
@@ -60,62 +56,6 @@ fn scan_setpoints(parser: &mut FrameParser, now: Instant, out: &mpsc::Sender<See
         };
         let _ = out.send(Seen { at: now, vel });
     }
-}
-
-/// Operator: GUIDED, arm, take off to 10 m, then give flight authority back.
-async fn take_off(mesh: &Mesh) -> Result<()> {
-    let bus = mesh.bus("dji-bench")?;
-    let mut status = bus.subscriber::<VehicleStatus>(&topics::vehicle_status(1))?;
-    let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1))?;
-    let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1))?;
-    let mut cmds = bus.publisher::<VehicleCommand>(&topics::vehicle_command(1))?;
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        let s = status.recv_timeout(Duration::from_secs(5)).await?;
-        if s.is_some_and(|s| s.ekf_healthy != 0) {
-            break;
-        }
-        if Instant::now() > deadline {
-            bail!("EKF never became healthy");
-        }
-    }
-    let steps = [
-        Command::SetMode(FlightMode::Guided),
-        Command::Arm { force: false },
-        Command::Takeoff { alt_rel_m: 10.0 },
-        Command::ReleaseFlightAuthority,
-    ];
-    for (i, cmd) in steps.iter().enumerate() {
-        let id = 9000 + i as u32;
-        cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd)?)?;
-        loop {
-            let a = acks
-                .recv_timeout(Duration::from_secs(10))
-                .await?
-                .context("no command ack")?;
-            if a.command_id == id {
-                if a.result() != Some(AckResult::Accepted) {
-                    bail!("{cmd:?} refused: {a:?}");
-                }
-                break;
-            }
-        }
-        if matches!(cmd, Command::Takeoff { .. }) {
-            loop {
-                let s = state
-                    .recv_timeout(Duration::from_secs(5))
-                    .await?
-                    .context("no vehicle state")?;
-                if s.alt_rel_m > 9.5 {
-                    break;
-                }
-                if Instant::now() > deadline {
-                    bail!("take-off did not reach 10 m");
-                }
-            }
-        }
-    }
-    Ok(())
 }
 
 /// One MQTT connection whose received publishes (topic, payload, arrival) go to a channel.
@@ -272,7 +212,7 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: Option<f64>) -> f64 {
 }
 
 async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> Result<()> {
-    take_off(mesh).await?;
+    skymesh_e2e::bench::take_off(mesh, 10.0).await?;
     let (host, port) = (mesh.mqtt_addr.ip().to_string(), mesh.mqtt_addr.port());
     let sn = mesh.gateway_sn.clone();
     let topic = |suffix: &str| format!("thing/product/{sn}/{suffix}");
