@@ -410,7 +410,11 @@ pub struct VisionControl {
     /// DigiView payload (`DigiViewSet`).
     pub data: [u8; 64],
 }
-crate::assert_layout!(VisionControl, size = 24 + 8 + 8 + 4 + 24 + 4 + 16 + 64, align = 8);
+crate::assert_layout!(
+    VisionControl,
+    size = 24 + 8 + 8 + 4 + 24 + 4 + 16 + 64,
+    align = 8
+);
 
 crate::impl_sample!(VisionControl);
 
