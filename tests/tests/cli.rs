@@ -50,7 +50,11 @@ fn every_service_has_help_and_a_default_config_that_checks() {
         );
 
         // The shipped file under deploy/ is the same default and also checks.
-        let name = bin.trim_start_matches("skymesh-");
+        let name = match *bin {
+            "skymesh-vision" => "vision-pipeline",
+            "skymesh-digiview" => "digiview-gateway",
+            other => other.trim_start_matches("skymesh-"),
+        };
         let shipped = repo_root().join(format!("deploy/{name}.toml"));
         let check = run(
             bin,

@@ -380,6 +380,7 @@ fn vision_end_to_end() {
     detections_match_the_truth(&mut c);
     digiview_parameters(&mut c);
     digiview_errors(&mut c);
+    single_target_and_targeting(&mut c);
     coordinal_view_keeps_the_point_centred(&mut c);
     gimbal_v2(&mut c);
     capture(&mut c, capture_dir.path());
@@ -539,20 +540,19 @@ fn digiview_parameters(c: &mut Ctx) {
     while c.output_centre().0 != 1920 {
         assert!(Instant::now() < deadline, "output never became 1920 wide");
     }
-    let Param::VideoOutput(vo) = c.dv.get_stream(ParamType::VideoOutput, None) else {
-        panic!()
-    };
-    if (vo.layout_mode, vo.layout_views, vo.views.len()) != (4, 4, 4) {
-        let now = c.wait_vision("debug", |_| true);
-        let mut again = Vec::new();
-        for _ in 0..5 {
-            std::thread::sleep(Duration::from_millis(200));
-            again.push(c.dv.get_stream(ParamType::VideoOutput, None));
+    // The gateway answers from the newest state it has received: on a loaded
+    // machine that can be a frame behind the one this test saw.
+    let deadline = Instant::now() + Duration::from_secs(3);
+    loop {
+        let Param::VideoOutput(vo) = c.dv.get_stream(ParamType::VideoOutput, None) else {
+            panic!()
+        };
+        if (vo.layout_mode, vo.layout_views, vo.views.len()) == (4, 4, 4) {
+            assert_eq!((vo.width, vo.height), (1920, 1080));
+            break;
         }
-        panic!(
-            "VIDEO_OUTPUT {vo:?}; bus now {:?}; GETs after: {again:?}",
-            (now.streams[0].layout_mode, now.streams[0].num_views)
-        );
+        assert!(Instant::now() < deadline, "VIDEO_OUTPUT still {vo:?}");
+        std::thread::sleep(Duration::from_millis(100));
     }
     // Back to one view (the coordinal phase checks its centre pixel).
     let set = Param::VideoOutput(VideoOutput {
@@ -675,6 +675,120 @@ fn digiview_errors(c: &mut Ctx) {
         std::thread::sleep(Duration::from_millis(200));
     }
     phase("DigiView error replies", t);
+}
+
+/// SINGLE_TARGET_TRACKING by detection id follows that detection (its direction is
+/// the detection's); a virtual camera in detection-tracking mode (3) looks at it;
+/// CAM_TARGETING and CAM_DEPTH_ESTIMATION GETs.
+fn single_target_and_targeting(c: &mut Ctx) {
+    let t = Instant::now();
+    let st = c.wait_vision("detections", |s| s.detection_count >= 3);
+    let target = st.detections()[0];
+    let stt = Param::SingleTargetTracking(digiview_proto::SingleTargetTracking {
+        command: 2,
+        stream: StreamName::new("main").unwrap(),
+        cam: 0,
+        detection_id: target.id,
+        zoom: 5,
+        rel_frame: 0,
+        ..Default::default()
+    });
+    assert_eq!(c.dv.set(&stt), MessageType::Acknowledgement);
+    // An id nobody has is refused.
+    let unknown = (0..=253u8)
+        .find(|id| st.detections().iter().all(|d| d.id != *id))
+        .unwrap();
+    let bad = Param::SingleTargetTracking(digiview_proto::SingleTargetTracking {
+        command: 2,
+        stream: StreamName::new("main").unwrap(),
+        detection_id: unknown,
+        ..Default::default()
+    });
+    assert_eq!(c.dv.set(&bad), MessageType::DataError);
+    let st = c.wait_vision("single target locked", |s| {
+        s.streams[0].stt.mode == 2 && s.streams[0].stt.locked == 1
+    });
+    let d = *st
+        .detections()
+        .iter()
+        .find(|d| d.id == target.id)
+        .expect("the followed detection");
+    let stt_state = st.streams[0].stt;
+    let sep = separation_deg(
+        (
+            f64::from(stt_state.yaw_global_rad),
+            f64::from(stt_state.pitch_global_rad),
+        ),
+        (f64::from(d.yaw_global_rad), f64::from(d.pitch_global_rad)),
+    );
+    assert!(sep < 1.0, "STT direction {sep:.2}° from its detection");
+    let Param::SingleTargetTracking(got) = c.dv.get_stream(ParamType::SingleTargetTracking, None)
+    else {
+        panic!()
+    };
+    assert_eq!((got.command, got.detection_id), (2, target.id), "{got:?}");
+    // Camera 0 on the single target: the view's axis on the detection.
+    let aim = Param::CamTargeting(CamTargeting {
+        stream: StreamName::new("main").unwrap(),
+        cam: 0,
+        mode: 3,
+        lock_flags: 0b111,
+        ..Default::default()
+    });
+    assert_eq!(c.dv.set(&aim), MessageType::Acknowledgement);
+    let st = c.wait_vision("view on the single target", |s| {
+        let cam = s.streams[0].cams[0];
+        let stt = s.streams[0].stt;
+        cam.targeting_mode == 3
+            && separation_deg(
+                (f64::from(cam.view_yaw_rad), f64::from(cam.view_pitch_rad)),
+                (
+                    f64::from(stt.yaw_global_rad),
+                    f64::from(stt.pitch_global_rad),
+                ),
+            ) < 1.0
+    });
+    let Param::CamTargeting(got) = c.dv.get_stream(ParamType::CamTargeting, Some(0)) else {
+        panic!()
+    };
+    assert_eq!((got.mode, got.lock_flags), (3, 0b111), "{got:?}");
+    // The output's centre shows the followed target's colour.
+    let truth = c.truth();
+    let (_, _, rgb) = c.output_centre();
+    let near = truth
+        .targets()
+        .iter()
+        .filter(|t| t.in_view == 1)
+        .min_by(|a, b| {
+            let da = ne((a.lat_deg, a.lon_deg), (d.lat_deg, d.lon_deg));
+            let db = ne((b.lat_deg, b.lon_deg), (d.lat_deg, d.lon_deg));
+            da.0.hypot(da.1).total_cmp(&db.0.hypot(db.1))
+        })
+        .copied()
+        .expect("a target");
+    let diff: i32 = (0..3)
+        .map(|k| (i32::from(rgb[k]) - i32::from(near.rgb[k])).abs())
+        .sum();
+    assert!(
+        diff < 90,
+        "centre {rgb:?}, followed target {} is {:?}",
+        near.id,
+        near.rgb
+    );
+    let _ = st;
+    // Disable; CAM_DEPTH_ESTIMATION is disabled as in DigiView.
+    let off = Param::SingleTargetTracking(digiview_proto::SingleTargetTracking {
+        command: 0,
+        stream: StreamName::new("main").unwrap(),
+        ..Default::default()
+    });
+    assert_eq!(c.dv.set(&off), MessageType::Acknowledgement);
+    c.dv.send(&Frame::new(MessageType::Get, ParamType::CamDepthEstimation));
+    assert_eq!(
+        c.dv.expect("CAM_DEPTH_ESTIMATION").message_type,
+        MessageType::Unknown
+    );
+    phase("single target tracking and targeting", t);
 }
 
 /// Coordinal mode at a ground point: the view points at it, and its centre shows the

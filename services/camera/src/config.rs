@@ -1,5 +1,7 @@
 //! `deploy/camera.toml` → [`Settings`].
 
+use std::path::{Path, PathBuf};
+
 use serde::Deserialize;
 use skymesh_ipc_types::{PixelFormat, SCENE_MAX_TARGETS};
 use skymesh_runtime::config::finite;
@@ -8,6 +10,8 @@ use skymesh_runtime::{ConfigError, ServiceConfig};
 
 use crate::render::{Intrinsics, Lens, Shape};
 use crate::scene::{Motion, Origin, TargetSpec};
+use crate::y4m::{Y4mHeader, Y4mReader};
+use crate::yuv::Range;
 
 /// The raw TOML.
 #[derive(Debug, Deserialize)]
@@ -33,6 +37,28 @@ pub struct RawConfig {
     mount: RawMount,
     #[serde(default)]
     synthetic: RawSynthetic,
+    #[serde(default)]
+    y4m: RawY4m,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawY4m {
+    path: Option<String>,
+    #[serde(default = "d_true", rename = "loop")]
+    looping: bool,
+    #[serde(default = "d_range")]
+    range: String,
+}
+
+impl Default for RawY4m {
+    fn default() -> Self {
+        RawY4m {
+            path: None,
+            looping: true,
+            range: d_range(),
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -187,6 +213,9 @@ fn d_threads() -> usize {
 fn d_shape() -> String {
     "disc".into()
 }
+fn d_range() -> String {
+    "full".into()
+}
 
 /// Where the camera looks when the gimbal's attitude is not used.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -207,11 +236,34 @@ pub struct SyntheticSettings {
     pub targets: Vec<TargetSpec>,
 }
 
+/// A Y4M file source.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Y4mSettings {
+    /// Absolute path of the file.
+    pub path: PathBuf,
+    /// At the end of the file start again; else stop publishing (and stay up).
+    pub looping: bool,
+    /// The value range of the file's samples (Y4M headers do not say).
+    pub range: Range,
+    /// The file's header as read when the configuration was checked.
+    pub header: Y4mHeader,
+}
+
+/// Where frames come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Source {
+    /// The synthetic scene (`[synthetic]`).
+    Synthetic,
+    /// A YUV4MPEG2 file (`[y4m]`).
+    Y4m(Y4mSettings),
+}
+
 /// The validated configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
     pub vehicle_id: u8,
     pub stream: String,
+    pub source: Source,
     pub width: u32,
     pub height: u32,
     pub fps: u32,
@@ -252,24 +304,22 @@ impl ServiceConfig for RawConfig {
                 format!("`{}` is not 1..=8 bytes of a-z, 0-9, - or _", self.stream),
             ));
         }
-        match self.source.as_str() {
-            "synthetic" => {}
-            "y4m" | "v4l2" => {
+        let y4m_wanted = match self.source.as_str() {
+            "synthetic" => false,
+            "y4m" => true,
+            "v4l2" => {
                 return Err(ConfigError::invalid(
                     "source",
-                    format!(
-                        "source `{}` is not implemented yet; use \"synthetic\"",
-                        self.source
-                    ),
+                    "source `v4l2` is not implemented yet; use \"synthetic\" or \"y4m\"",
                 ))
             }
             other => {
                 return Err(ConfigError::invalid(
                     "source",
-                    format!("unknown source `{other}` (synthetic)"),
+                    format!("unknown source `{other}` (synthetic, y4m)"),
                 ))
             }
-        }
+        };
         let width = in_range("width", self.width, 16, 1920)?;
         let height = in_range("height", self.height, 16, 1080)?;
         let fps = in_range("fps", self.fps, 1, 60)?;
@@ -326,6 +376,43 @@ impl ServiceConfig for RawConfig {
                 -360.0,
                 360.0,
             )?,
+        };
+        let range = match self.y4m.range.as_str() {
+            "full" => Range::Full,
+            "limited" => Range::Limited,
+            other => {
+                return Err(ConfigError::invalid(
+                    "y4m.range",
+                    format!("unknown range `{other}` (full, limited)"),
+                ))
+            }
+        };
+        let source = if y4m_wanted {
+            let Some(path) = self.y4m.path else {
+                return Err(ConfigError::invalid(
+                    "y4m.path",
+                    "source \"y4m\" needs `[y4m] path`",
+                ));
+            };
+            let path = PathBuf::from(path);
+            if !path.is_absolute() {
+                return Err(ConfigError::invalid(
+                    "y4m.path",
+                    format!("`{}` is not an absolute path", path.display()),
+                ));
+            }
+            let header = read_y4m_header(&path)
+                .map_err(|message| ConfigError::invalid("y4m.path", message))?;
+            check_y4m_size(&path, &header, width, height)
+                .map_err(|message| ConfigError::invalid("y4m.path", message))?;
+            Source::Y4m(Y4mSettings {
+                path,
+                looping: self.y4m.looping,
+                range,
+                header,
+            })
+        } else {
+            Source::Synthetic
         };
         let s = self.synthetic;
         let cell_m = in_range(
@@ -440,6 +527,7 @@ impl ServiceConfig for RawConfig {
         Ok(Settings {
             vehicle_id: self.vehicle_id,
             stream: self.stream,
+            source,
             width,
             height,
             fps,
@@ -455,6 +543,36 @@ impl ServiceConfig for RawConfig {
             },
         })
     }
+}
+
+/// Opens `path` and reads its Y4M header; the error names the file.
+pub fn read_y4m_header(path: &Path) -> Result<Y4mHeader, String> {
+    let file = std::fs::File::open(path)
+        .map_err(|e| format!("cannot open Y4M file {}: {e}", path.display()))?;
+    Y4mReader::new(std::io::BufReader::new(file))
+        .map(|r| *r.header())
+        .map_err(|e| format!("Y4M file {}: {e}", path.display()))
+}
+
+/// The file's frames must be the configured size (frames are not scaled).
+pub fn check_y4m_size(
+    path: &Path,
+    header: &Y4mHeader,
+    width: u32,
+    height: u32,
+) -> Result<(), String> {
+    if (header.width, header.height) == (width, height) {
+        return Ok(());
+    }
+    Err(format!(
+        "Y4M file {} has {}×{} frames but the config's width × height is {width}×{height} \
+         (frames are not scaled: set width = {} and height = {})",
+        path.display(),
+        header.width,
+        header.height,
+        header.width,
+        header.height
+    ))
 }
 
 #[cfg(test)]
@@ -481,6 +599,7 @@ mod tests {
         assert!((s.intrinsics.fx - 640.0).abs() < 1e-9 && s.intrinsics.fx == s.intrinsics.fy);
         assert_eq!((s.intrinsics.cx, s.intrinsics.cy), (639.5, 359.5));
         assert_eq!(s.synthetic.targets.len(), 3);
+        assert_eq!(s.source, Source::Synthetic);
         assert_eq!(s.synthetic.origin, None);
         assert_eq!(s.frame_len(), 1280 * 720 * 3);
         // An empty file gives the same camera, without targets.
@@ -545,5 +664,126 @@ mod tests {
         assert!((s.intrinsics.fx - 640.0 / std::f64::consts::FRAC_PI_2).abs() < 1e-9);
         assert_eq!(s.frame_len(), 1280 * 720 * 3 / 2);
         assert_eq!(s.synthetic.origin.map(|o| o.ground_alt_msl_m), Some(488.0));
+    }
+}
+
+#[cfg(test)]
+mod y4m_tests {
+    use super::*;
+    use skymesh_runtime::config::parse;
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    use crate::y4m::Chroma;
+
+    /// A Y4M file of `frames` grey frames in the temp dir (removed on drop).
+    struct TempY4m(PathBuf);
+
+    impl TempY4m {
+        fn new(header_line: &str, frames: usize, frame_len: usize) -> Self {
+            static N: AtomicU32 = AtomicU32::new(0);
+            let path = std::env::temp_dir().join(format!(
+                "skymesh-camera-config-{}-{}.y4m",
+                std::process::id(),
+                N.fetch_add(1, Ordering::Relaxed)
+            ));
+            let mut data = header_line.as_bytes().to_vec();
+            for _ in 0..frames {
+                data.extend_from_slice(b"FRAME\n");
+                data.extend(std::iter::repeat_n(100u8, frame_len));
+            }
+            std::fs::write(&path, data).expect("write the test file");
+            TempY4m(path)
+        }
+    }
+
+    impl Drop for TempY4m {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+
+    fn config(path: &Path, extra: &str) -> Result<Settings, ConfigError> {
+        let text = format!(
+            "source = \"y4m\"\nwidth = 64\nheight = 48\n[y4m]\npath = \"{}\"\n{extra}",
+            path.display()
+        );
+        parse::<RawConfig>(&text, "test")
+    }
+
+    #[test]
+    fn a_y4m_file_of_the_configured_size_is_accepted() {
+        let f = TempY4m::new("YUV4MPEG2 W64 H48 F25:1 C420jpeg\n", 2, 64 * 48 * 3 / 2);
+        let s = config(&f.0, "").unwrap();
+        let Source::Y4m(y) = &s.source else {
+            panic!("not a y4m source: {:?}", s.source)
+        };
+        assert_eq!(y.path, f.0);
+        assert!(y.looping);
+        assert_eq!(y.range, Range::Full);
+        assert_eq!((y.header.width, y.header.height), (64, 48));
+        assert_eq!(y.header.chroma, Chroma::C420);
+        let s = config(&f.0, "loop = false\nrange = \"limited\"").unwrap();
+        assert!(matches!(
+            s.source,
+            Source::Y4m(Y4mSettings {
+                looping: false,
+                range: Range::Limited,
+                ..
+            })
+        ));
+        // The shipped config is the synthetic source.
+        assert_eq!(
+            parse::<RawConfig>("", "empty").unwrap().source,
+            Source::Synthetic
+        );
+    }
+
+    #[test]
+    fn a_size_mismatch_names_the_file_and_both_sizes() {
+        let f = TempY4m::new("YUV4MPEG2 W80 H60 F25:1\n", 1, 80 * 60 * 3 / 2);
+        let e = config(&f.0, "").unwrap_err();
+        let text = e.to_string();
+        assert!(
+            matches!(&e, ConfigError::Invalid { field, .. } if field == "y4m.path"),
+            "{e}"
+        );
+        assert!(text.contains(&f.0.display().to_string()), "{text}");
+        assert!(text.contains("80×60") && text.contains("64×48"), "{text}");
+    }
+
+    #[test]
+    fn bad_y4m_settings_and_files_are_refused() {
+        let f422 = TempY4m::new("YUV4MPEG2 W64 H48 C422\n", 0, 0);
+        let e = config(&f422.0, "").unwrap_err().to_string();
+        assert!(e.contains("C422") && e.contains("not supported"), "{e}");
+        let junk = TempY4m::new("GIF89a\n", 0, 0);
+        let e = config(&junk.0, "").unwrap_err().to_string();
+        assert!(e.contains("at byte 0"), "{e}");
+        let e = config(Path::new("/nonexistent/skymesh/x.y4m"), "")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cannot open") && e.contains("/nonexistent/skymesh/x.y4m"),
+            "{e}"
+        );
+        let e = config(Path::new("relative.y4m"), "")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("absolute"), "{e}");
+        let e = parse::<RawConfig>("source = \"y4m\"", "test").unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::Invalid { field, .. } if field == "y4m.path"),
+            "{e}"
+        );
+        let ok = TempY4m::new("YUV4MPEG2 W64 H48\n", 1, 64 * 48 * 3 / 2);
+        let e = config(&ok.0, "range = \"tv\"").unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::Invalid { field, .. } if field == "y4m.range"),
+            "{e}"
+        );
+        assert!(matches!(
+            config(&ok.0, "looping = true"),
+            Err(ConfigError::Parse { .. })
+        ));
     }
 }

@@ -5,20 +5,20 @@
 //! | `skymesh/vehicle/{id}/state` | subscribe | `VehicleState` (the pose frames are rendered from) |
 //! | `skymesh/vehicle/{id}/payload` | subscribe | `PayloadState` (the gimbal's attitude) |
 //! | `skymesh/camera/{stream}/frames` | publish | frames: `FrameHeader` + pixels, written in place |
-//! | `skymesh/camera/{stream}/truth` | publish | `SceneTruth` (one per synthetic frame) |
+//! | `skymesh/camera/{stream}/truth` | publish | `SceneTruth` (one per synthetic frame; not opened for a file source, which has no truth) |
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{topics, FrameHeader, PayloadState, SceneTruth, VehicleState};
 use skymesh_runtime::{Bus, FrameError, FramePublisher, IpcError, Publisher, Subscriber};
 
-use crate::config::Settings;
+use crate::config::{Settings, Source};
 
 #[derive(Debug)]
 pub(crate) struct Ports {
     vehicle: Subscriber<VehicleState>,
     payload: Subscriber<PayloadState>,
     frames: FramePublisher,
-    truth: Publisher<SceneTruth>,
+    truth: Option<Publisher<SceneTruth>>,
 }
 
 impl Ports {
@@ -33,9 +33,13 @@ impl Ports {
             frames: bus
                 .frame_publisher(&topics::camera_frames(&s.stream), s.frame_len())
                 .context("opening the camera frame topic")?,
-            truth: bus
-                .publisher(&topics::camera_truth(&s.stream))
-                .context("opening the camera truth topic")?,
+            truth: match s.source {
+                Source::Synthetic => Some(
+                    bus.publisher(&topics::camera_truth(&s.stream))
+                        .context("opening the camera truth topic")?,
+                ),
+                Source::Y4m(_) => None,
+            },
         })
     }
 
@@ -52,7 +56,11 @@ impl Ports {
         self.frames.publish_with(len, fill)
     }
 
+    /// Publishes the synthetic scene's truth (nothing for other sources).
     pub fn truth(&mut self, truth: SceneTruth) -> Result<(), IpcError> {
-        self.truth.publish(truth).map(|_| ())
+        match &mut self.truth {
+            Some(p) => p.publish(truth).map(|_| ()),
+            None => Ok(()),
+        }
     }
 }

@@ -2,28 +2,35 @@
 //! (`skymesh/camera/{stream}/frames`: a `FrameHeader` with capture time, intrinsics
 //! and pose, then the pixels), paced at the configured frame rate.
 //!
-//! Sources: the synthetic scene ([`synthetic`]) — a textured ground plane with moving
-//! targets rendered for the vehicle's current pose, whose true positions are
-//! published on `skymesh/camera/{stream}/truth` with every frame. Y4M files and V4L2
-//! devices are not implemented yet (refused by the config).
+//! Sources (`source` in the config):
+//! - `synthetic` ([`synthetic`]): a textured ground plane with moving targets rendered
+//!   for the vehicle's current pose, whose true positions are published on
+//!   `skymesh/camera/{stream}/truth` with every frame. Frames are rendered one at a
+//!   time from the service's task (bands of rows on `synthetic.render_threads` scoped
+//!   threads) straight into the loaned frame.
+//! - `y4m` ([`file`]): a YUV4MPEG2 file read frame by frame ([`y4m`]) and converted
+//!   ([`yuv`]) straight into the loaned frame; no truth topic (a file has none).
+//! - V4L2 devices are not implemented yet (refused by the config).
 //!
-//! Frames are rendered one at a time from the service's task (bands of rows on
-//! `synthetic.render_threads` scoped threads) straight into the loaned frame; when
-//! rendering takes longer than a frame period the missed ticks are skipped and
+//! When a frame takes longer than a frame period the missed ticks are skipped and
 //! counted (`skymesh_camera_frames_skipped_total{reason="late"}`).
 //!
 //! The frame header's `pose.attitude_q` is the **camera mount → NED** quaternion
 //! (x along the optical axis, y image right, z image down), not the vehicle's
 //! attitude (as `ipc-types/src/frame.rs` defines it); the vehicle heading is in
-//! `vehicle_heading_deg`. See [`synthetic`].
+//! `vehicle_heading_deg`. See [`pose`].
 #![deny(unsafe_code)]
 
 pub mod config;
+pub mod file;
 mod ipc;
 pub mod metrics;
+pub mod pose;
 pub mod render;
 pub mod scene;
 pub mod synthetic;
+pub mod y4m;
+pub mod yuv;
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -31,16 +38,78 @@ use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Context, WarnLimiter};
 use tokio::time::{Instant, MissedTickBehavior};
 
-pub use config::{RawConfig, Settings};
+pub use config::{RawConfig, Settings, Source};
 
 use crate::ipc::Ports;
 use crate::metrics::{Metrics, Skip};
 use crate::synthetic::{FrameStamp, Synthetic};
 
-/// Publishes frames until `ctx.shutdown` is cancelled (then `Ok`) or the bus fails.
+/// Publishes frames until `ctx.shutdown` is cancelled (then `Ok`) or the bus fails
+/// (or, for a file source, the file cannot be opened or no longer fits the config).
 pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
-    let mut ports = Ports::open(&ctx.bus, &settings)?;
+    let ports = Ports::open(&ctx.bus, &settings)?;
     let metrics = Metrics::new(&ctx.stats);
+    match settings.source.clone() {
+        Source::Synthetic => run_synthetic(settings, ctx, ports, metrics).await,
+        Source::Y4m(y4m) => file::run(settings, y4m, ctx, ports, metrics).await,
+    }
+}
+
+/// The frame clock: ticks at `fps`, skipping (and counting) missed ticks.
+#[derive(Debug)]
+pub(crate) struct Ticker {
+    interval: tokio::time::Interval,
+    period: Duration,
+    prev: Option<Instant>,
+}
+
+impl Ticker {
+    pub fn new(fps: u32) -> Self {
+        let period = Duration::from_secs_f64(1.0 / f64::from(fps));
+        let mut interval = tokio::time::interval(period);
+        interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        Ticker {
+            interval,
+            period,
+            prev: None,
+        }
+    }
+
+    /// The next tick, or `None` once `ctx.shutdown` is cancelled.
+    pub async fn tick(&mut self, ctx: &Context, metrics: &Metrics) -> Option<Instant> {
+        let tick = tokio::select! {
+            _ = ctx.shutdown.cancelled() => return None,
+            t = self.interval.tick() => t,
+        };
+        if let Some(prev) = self.prev {
+            let periods = (tick - prev).as_secs_f64() / self.period.as_secs_f64();
+            let missed = periods.round() as u64;
+            if missed > 1 {
+                metrics.skipped(Skip::Late, missed - 1);
+            }
+        }
+        self.prev = Some(tick);
+        Some(tick)
+    }
+}
+
+/// The capture times of a frame taken now.
+pub(crate) fn stamp_now(seq: u64) -> FrameStamp {
+    FrameStamp {
+        seq,
+        mono_ns: monotonic_ns(),
+        unix_ns: SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64),
+    }
+}
+
+async fn run_synthetic(
+    settings: Settings,
+    ctx: Context,
+    mut ports: Ports,
+    metrics: Metrics,
+) -> anyhow::Result<()> {
     tracing::info!(
         stream = %settings.stream,
         vehicle_id = settings.vehicle_id,
@@ -54,30 +123,14 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         "camera publishing synthetic frames on skymesh/camera/{}/frames",
         settings.stream,
     );
-    let period = Duration::from_secs_f64(1.0 / f64::from(settings.fps));
     let len = settings.frame_len();
+    let mut ticker = Ticker::new(settings.fps);
     let mut source = Synthetic::new(settings);
-    let mut interval = tokio::time::interval(period);
-    interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let start = Instant::now();
-    let mut prev_tick: Option<Instant> = None;
     let mut frame_seq = 0u64;
     let mut warn = WarnLimiter::default();
     ctx.ready();
-    loop {
-        let tick = tokio::select! {
-            _ = ctx.shutdown.cancelled() => break,
-            t = interval.tick() => t,
-        };
-        if let Some(prev) = prev_tick {
-            let periods = (tick - prev).as_secs_f64() / period.as_secs_f64();
-            let missed = periods.round() as u64;
-            if missed > 1 {
-                metrics.skipped(Skip::Late, missed - 1);
-            }
-        }
-        prev_tick = Some(tick);
-
+    while let Some(tick) = ticker.tick(&ctx, &metrics).await {
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {
             source.update_vehicle(&v);
@@ -96,13 +149,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
             continue;
         }
         let began = std::time::Instant::now();
-        let stamp = FrameStamp {
-            seq: frame_seq + 1,
-            mono_ns: monotonic_ns(),
-            unix_ns: SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .map_or(0, |d| d.as_nanos() as u64),
-        };
+        let stamp = stamp_now(frame_seq + 1);
         let t_s = tick.duration_since(start).as_secs_f64();
         let mut truth = None;
         let sent = ports.frame(len, |header, pixels| {

@@ -4,7 +4,9 @@
 //! |---|---|---|
 //! | `skymesh_camera_frames_published_total` | | frames published |
 //! | `skymesh_camera_frames_skipped_total` | reason | frame ticks without a frame: `late` (rendering slower than the frame rate), `no_pose` (no vehicle pose and no configured origin), `publish_error` (the bus refused the frame) |
-//! | `skymesh_camera_render_seconds` | | time to render and publish one frame |
+//! | `skymesh_camera_render_seconds` | | time to render (synthetic) or convert (file) and publish one frame |
+//! | `skymesh_camera_file_errors_total` | | Y4M file read errors (truncated or corrupt frame, I/O): handled as the end of the file |
+//! | `skymesh_camera_file_rewinds_total` | | times a Y4M file source started again from its first frame (`loop = true`) |
 
 use skymesh_runtime::stats::LATENCY_BOUNDS_S;
 use skymesh_runtime::{Counter, Histogram, Stats};
@@ -25,6 +27,8 @@ pub struct Metrics {
     no_pose: Counter,
     publish_error: Counter,
     pub render_seconds: Histogram,
+    pub file_errors: Counter,
+    pub file_rewinds: Counter,
 }
 
 impl Metrics {
@@ -41,6 +45,8 @@ impl Metrics {
                 &[],
                 &LATENCY_BOUNDS_S,
             ),
+            file_errors: stats.counter("skymesh_camera_file_errors_total", &[]),
+            file_rewinds: stats.counter("skymesh_camera_file_rewinds_total", &[]),
         }
     }
 

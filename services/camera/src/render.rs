@@ -66,6 +66,24 @@ impl Intrinsics {
         }
     }
 
+    /// The frame header's intrinsics (no distortion coefficients).
+    pub fn to_wire(&self) -> skymesh_ipc_types::CameraIntrinsics {
+        skymesh_ipc_types::CameraIntrinsics {
+            fx: self.fx as f32,
+            fy: self.fy as f32,
+            cx: self.cx as f32,
+            cy: self.cy as f32,
+            k: [0.0; 4],
+            lens_model: match self.lens {
+                Lens::Pinhole => skymesh_ipc_types::LensModel::Pinhole,
+                Lens::Fisheye => skymesh_ipc_types::LensModel::Fisheye,
+            }
+            .to_wire(),
+            valid: 1,
+            reserved: [0; 2],
+        }
+    }
+
     /// The direction (not normalised) in the mount frame of pixel `(u, v)`; `None`
     /// beyond a fisheye's 180° from the axis.
     pub fn ray(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
