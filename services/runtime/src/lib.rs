@@ -15,6 +15,7 @@
 //! - SIGTERM/SIGINT → one [`CancellationToken`] → graceful shutdown.
 #![deny(unsafe_code)]
 
+pub mod addresses;
 pub mod clock;
 pub mod config;
 pub mod exit;

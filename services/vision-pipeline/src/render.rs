@@ -124,59 +124,43 @@ impl Renderer {
         }
         let mut target = Output::new(out, out_w, out_h, stride)?;
         target.clear();
-        let src_stride = src_header.stride as usize;
+        let plane = Plane {
+            stride: src_header.stride as usize,
+            w: sw as usize,
+            h: sh as usize,
+        };
+        let scene = Scene {
+            model: src_model,
+            pose: src_pose,
+            views,
+            debug_source,
+            tiles,
+        };
         match format {
             PixelFormat::Rgb24 => {
-                let source = RgbSource {
-                    data: src,
-                    stride: src_stride,
-                    w: sw as usize,
-                    h: sh as usize,
-                };
-                self.draw_all(
-                    &source,
-                    src_model,
-                    src_pose,
-                    views,
-                    debug_source,
-                    tiles,
-                    &mut target,
-                );
+                self.draw_all(&RgbSource { data: src, plane }, &scene, &mut target);
             }
             PixelFormat::Nv12 => {
-                let (luma, chroma) = src.split_at(src_stride * sh as usize);
+                let (luma, chroma) = src.split_at(plane.stride * plane.h);
                 let source = Nv12Source {
                     luma,
                     chroma,
-                    stride: src_stride,
-                    w: sw as usize,
-                    h: sh as usize,
+                    plane,
                 };
-                self.draw_all(
-                    &source,
-                    src_model,
-                    src_pose,
-                    views,
-                    debug_source,
-                    tiles,
-                    &mut target,
-                );
+                self.draw_all(&source, &scene, &mut target);
             }
         }
         Ok(())
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn draw_all<S: Source>(
-        &mut self,
-        source: &S,
-        model: &CameraModel,
-        pose: &CameraPose,
-        views: &[ViewSpec],
-        debug_source: bool,
-        tiles: &[TileSpec],
-        out: &mut Output<'_>,
-    ) {
+    fn draw_all<S: Source>(&mut self, source: &S, scene: &Scene<'_>, out: &mut Output<'_>) {
+        let Scene {
+            model,
+            pose,
+            views,
+            debug_source,
+            tiles,
+        } = *scene;
         if self.grids.len() < views.len() {
             self.grids.resize(views.len(), None);
         }
@@ -210,6 +194,15 @@ impl Renderer {
             }
         }
     }
+}
+
+/// What [`Renderer::render`] draws, apart from the source frame and the output.
+struct Scene<'a> {
+    model: &'a CameraModel,
+    pose: &'a CameraPose,
+    views: &'a [ViewSpec],
+    debug_source: bool,
+    tiles: &'a [TileSpec],
 }
 
 /// The exact source pixel of the continuous view pixel `(u, v)`.
@@ -284,16 +277,14 @@ fn draw_view<S: Source>(source: &S, grid: &Grid, rect: Clip, out: &mut Output<'_
                 for k in i..end {
                     let t = (k - cx * GRID_STEP) as f32;
                     if let Some(px) = source.sample(lx + dx * t, ly + dy * t) {
-                        let at = (rect.x + k) * 3;
-                        row[at..at + 3].copy_from_slice(&px);
+                        put(row, rect.x + k, &px);
                     }
                 }
             } else if valid > 0 {
                 for k in i..end {
                     let mapped = map_pixel(&grid.key, k as f64 + 0.5, j as f64 + 0.5);
                     if let Some(px) = mapped.and_then(|[x, y]| source.sample(x, y)) {
-                        let at = (rect.x + k) * 3;
-                        row[at..at + 3].copy_from_slice(&px);
+                        put(row, rect.x + k, &px);
                     }
                 }
             }
@@ -317,8 +308,7 @@ fn draw_debug<S: Source>(source: &S, rect: Clip, out: &mut Output<'_>) {
         let row = out.row(oy + j);
         for i in 0..dw {
             if let Some(px) = source.sample((i as f32 + 0.5) / scale, sy) {
-                let at = (ox + i) * 3;
-                row[at..at + 3].copy_from_slice(&px);
+                put(row, ox + i, &px);
             }
         }
     }
@@ -338,8 +328,7 @@ fn draw_tile<S: Source>(source: &S, bbox: &PixelBox, rect: Clip, out: &mut Outpu
                 let px = source
                     .sample(x0 + (i as f32 + 0.5) * sx, y)
                     .unwrap_or([0; 3]);
-                let at = (rect.x + i) * 3;
-                row[at..at + 3].copy_from_slice(&px);
+                put(row, rect.x + i, &px);
             }
         }
     }
@@ -349,11 +338,16 @@ fn draw_tile<S: Source>(source: &S, bbox: &PixelBox, rect: Clip, out: &mut Outpu
         for i in 0..rect.w {
             let edge = i < border || j < border || i + border >= rect.w || j + border >= rect.h;
             if edge {
-                let at = (rect.x + i) * 3;
-                row[at..at + 3].copy_from_slice(&TILE_BORDER);
+                put(row, rect.x + i, &TILE_BORDER);
             }
         }
     }
+}
+
+/// Stores RGB `px` at column `x` of an output row.
+#[inline(always)]
+fn put(row: &mut [u8], x: usize, px: &[u8; 3]) {
+    row[x * 3..x * 3 + 3].copy_from_slice(px);
 }
 
 /// A rectangle inside the output, in pixels.
@@ -433,27 +427,61 @@ fn inner(v: &[f32; 4], len: usize) -> bool {
     v.iter().all(|&c| c >= 0.5 + MARGIN && c < hi)
 }
 
+/// Size and row pitch of a source image (of its luma plane for NV12).
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    /// Bytes per row.
+    stride: usize,
+    w: usize,
+    h: usize,
+}
+
 /// A source image sampled at continuous pixel coordinates.
 trait Source {
-    fn width(&self) -> usize;
-    fn height(&self) -> usize;
+    fn plane(&self) -> Plane;
+
+    fn width(&self) -> usize {
+        self.plane().w
+    }
+
+    fn height(&self) -> usize {
+        self.plane().h
+    }
+
+    /// Bilinear RGB of the samples `taps`; `(x, y)` is the pixel holding the point
+    /// (NV12 takes its chroma there).
+    fn blend_taps(&self, taps: Taps, x: usize, y: usize) -> [u8; 3];
+
     /// Bilinear RGB at `(x, y)` (the image spans `0..w × 0..h`); `None` outside.
-    fn sample(&self, x: f32, y: f32) -> Option<[u8; 3]>;
+    #[inline(always)]
+    fn sample(&self, x: f32, y: f32) -> Option<[u8; 3]> {
+        let Plane { w, h, .. } = self.plane();
+        let taps = bilinear_at(x, y, w, h)?;
+        Some(self.blend_taps(taps, x as usize, y as usize))
+    }
+
     /// Bilinear RGB at fixed-point `((x − 0.5) × 256, (y − 0.5) × 256)`, which the
     /// caller keeps where the sample's right and lower neighbours exist.
     fn sample_fixed(&self, fx: u32, fy: u32) -> [u8; 3];
 }
 
-/// Fixed-point (8 fractional bits) bilinear coordinates of `(x, y)` in a `w × h`
-/// image: the top-left sample, the next column/row offsets (0 at the last one) and
-/// the weights of the next column/row (0..256).
+/// The four samples of one bilinear lookup: the top-left one `(x0, y0)`, the next
+/// column/row offsets (1, or 0 at the last column/row) and the weights of the next
+/// column/row (0..256).
+#[derive(Debug, Clone, Copy)]
+struct Taps {
+    x0: usize,
+    y0: usize,
+    dx: usize,
+    dy: usize,
+    wx: u32,
+    wy: u32,
+}
+
+/// Fixed-point (8 fractional bits) bilinear samples of `(x, y)` in a `w × h` image;
+/// `None` outside it.
 #[inline(always)]
-fn bilinear_at(
-    x: f32,
-    y: f32,
-    w: usize,
-    h: usize,
-) -> Option<(usize, usize, usize, usize, u32, u32)> {
+fn bilinear_at(x: f32, y: f32, w: usize, h: usize) -> Option<Taps> {
     if !(x >= 0.0 && y >= 0.0 && x <= w as f32 && y <= h as f32) {
         return None;
     }
@@ -462,7 +490,14 @@ fn bilinear_at(
     let (x0, y0) = ((fx >> 8) as usize, (fy >> 8) as usize);
     let dx = usize::from(x0 + 1 < w);
     let dy = usize::from(y0 + 1 < h);
-    Some((x0, y0, dx, dy, fx & 255, fy & 255))
+    Some(Taps {
+        x0,
+        y0,
+        dx,
+        dy,
+        wx: fx & 255,
+        wy: fy & 255,
+    })
 }
 
 #[inline(always)]
@@ -476,43 +511,37 @@ fn blend(a: u8, b: u8, c: u8, d: u8, wx: u32, wy: u32) -> u32 {
 
 struct RgbSource<'a> {
     data: &'a [u8],
-    stride: usize,
-    w: usize,
-    h: usize,
+    plane: Plane,
 }
 
 impl Source for RgbSource<'_> {
-    fn width(&self) -> usize {
-        self.w
-    }
-
-    fn height(&self) -> usize {
-        self.h
+    fn plane(&self) -> Plane {
+        self.plane
     }
 
     #[inline(always)]
-    fn sample(&self, x: f32, y: f32) -> Option<[u8; 3]> {
-        let (x0, y0, dx, dy, wx, wy) = bilinear_at(x, y, self.w, self.h)?;
-        let a = y0 * self.stride + x0 * 3;
-        let b = a + dx * 3;
-        let c = a + dy * self.stride;
-        let d = c + dx * 3;
-        let p = self.data;
+    fn blend_taps(&self, taps: Taps, _x: usize, _y: usize) -> [u8; 3] {
+        let a = taps.y0 * self.plane.stride + taps.x0 * 3;
+        let b = a + taps.dx * 3;
+        let c = a + taps.dy * self.plane.stride;
+        let d = c + taps.dx * 3;
+        let (p, wx, wy) = (self.data, taps.wx, taps.wy);
         let mut px = [0u8; 3];
         for (k, out) in px.iter_mut().enumerate() {
             // At most 255 by the weights.
             *out = blend(p[a + k], p[b + k], p[c + k], p[d + k], wx, wy) as u8;
         }
-        Some(px)
+        px
     }
 
     #[inline(always)]
     fn sample_fixed(&self, fx: u32, fy: u32) -> [u8; 3] {
         let (x0, y0) = ((fx >> 8) as usize, (fy >> 8) as usize);
         let (wx, wy) = (fx & 255, fy & 255);
-        let a = y0 * self.stride + x0 * 3;
+        let stride = self.plane.stride;
+        let a = y0 * stride + x0 * 3;
         let top = &self.data[a..a + 6];
-        let bottom = &self.data[a + self.stride..a + self.stride + 6];
+        let bottom = &self.data[a + stride..a + stride + 6];
         // At most 255 by the weights.
         [
             blend(top[0], top[3], bottom[0], bottom[3], wx, wy) as u8,
@@ -525,36 +554,31 @@ impl Source for RgbSource<'_> {
 struct Nv12Source<'a> {
     luma: &'a [u8],
     chroma: &'a [u8],
-    stride: usize,
-    w: usize,
-    h: usize,
+    /// Of the luma plane; the interleaved chroma plane has the same stride.
+    plane: Plane,
 }
 
 impl Source for Nv12Source<'_> {
-    fn width(&self) -> usize {
-        self.w
-    }
-
-    fn height(&self) -> usize {
-        self.h
+    fn plane(&self) -> Plane {
+        self.plane
     }
 
     #[inline(always)]
-    fn sample(&self, x: f32, y: f32) -> Option<[u8; 3]> {
-        let (x0, y0, dx, dy, wx, wy) = bilinear_at(x, y, self.w, self.h)?;
-        let a = y0 * self.stride + x0;
-        let c = a + dy * self.stride;
-        let l = self.luma;
-        let luma = blend(l[a], l[a + dx], l[c], l[c + dx], wx, wy) as i32;
-        Some(self.to_rgb(luma, x as usize, y as usize))
+    fn blend_taps(&self, taps: Taps, x: usize, y: usize) -> [u8; 3] {
+        let a = taps.y0 * self.plane.stride + taps.x0;
+        let c = a + taps.dy * self.plane.stride;
+        let (l, dx) = (self.luma, taps.dx);
+        let luma = blend(l[a], l[a + dx], l[c], l[c + dx], taps.wx, taps.wy) as i32;
+        self.to_rgb(luma, x, y)
     }
 
     #[inline(always)]
     fn sample_fixed(&self, fx: u32, fy: u32) -> [u8; 3] {
         let (x0, y0) = ((fx >> 8) as usize, (fy >> 8) as usize);
-        let a = y0 * self.stride + x0;
+        let stride = self.plane.stride;
+        let a = y0 * stride + x0;
         let top = &self.luma[a..a + 2];
-        let bottom = &self.luma[a + self.stride..a + self.stride + 2];
+        let bottom = &self.luma[a + stride..a + stride + 2];
         let luma = blend(top[0], top[1], bottom[0], bottom[1], fx & 255, fy & 255) as i32;
         self.to_rgb(luma, ((fx + 128) >> 8) as usize, ((fy + 128) >> 8) as usize)
     }
@@ -564,8 +588,9 @@ impl Nv12Source<'_> {
     /// RGB of `luma` with the chroma of the 2×2 block holding pixel `(x, y)`.
     #[inline(always)]
     fn to_rgb(&self, luma: i32, x: usize, y: usize) -> [u8; 3] {
-        let (cx, cy) = ((x / 2).min(self.w / 2 - 1), (y / 2).min(self.h / 2 - 1));
-        let at = cy * self.stride + cx * 2;
+        let Plane { stride, w, h } = self.plane;
+        let (cx, cy) = ((x / 2).min(w / 2 - 1), (y / 2).min(h / 2 - 1));
+        let at = cy * stride + cx * 2;
         let cb = i32::from(self.chroma[at]) - 128;
         let cr = i32::from(self.chroma[at + 1]) - 128;
         // BT.601 full range, 16 fractional bits.
@@ -644,6 +669,31 @@ mod tests {
         )
     }
 
+    /// Renders `views` alone (no debug view, no tiles) into a packed `w`×`h` output.
+    fn render_views(
+        r: &mut Renderer,
+        (header, src): (&FrameHeader, &[u8]),
+        model: &CameraModel,
+        pose: &CameraPose,
+        views: &[ViewSpec],
+        out: &mut [u8],
+        (w, h): (u32, u32),
+    ) -> Result<(), RenderError> {
+        r.render(
+            header,
+            src,
+            model,
+            pose,
+            views,
+            false,
+            &[],
+            out,
+            w,
+            h,
+            w * 3,
+        )
+    }
+
     fn near(a: [u8; 3], b: [u8; 3], tolerance: i32) -> bool {
         a.iter()
             .zip(b.iter())
@@ -664,18 +714,14 @@ mod tests {
         };
         let mut out = vec![7u8; 640 * 480 * 3];
         let mut r = Renderer::default();
-        r.render(
-            &h,
-            &src,
+        render_views(
+            &mut r,
+            (&h, &src),
             &model,
             &src_pose,
             &[view],
-            false,
-            &[],
             &mut out,
-            640,
-            480,
-            640 * 3,
+            (640, 480),
         )
         .unwrap();
         assert_eq!(pixel(&out, 640 * 3, 320, 240), checker(320, 240));
@@ -684,18 +730,14 @@ mod tests {
             assert_eq!(pixel(&out, 640 * 3, x, y), checker(x, y), "({x}, {y})");
         }
         // Rendering again reuses the grid; a turned view rebuilds it.
-        r.render(
-            &h,
-            &src,
+        render_views(
+            &mut r,
+            (&h, &src),
             &model,
             &src_pose,
             &[view],
-            false,
-            &[],
             &mut out,
-            640,
-            480,
-            640 * 3,
+            (640, 480),
         )
         .unwrap();
         assert_eq!(r.grid_builds(), 1);
@@ -703,18 +745,14 @@ mod tests {
             ned_from_view: pose(40.0, -20.0).ned_from_camera(),
             ..view
         };
-        r.render(
-            &h,
-            &src,
+        render_views(
+            &mut r,
+            (&h, &src),
             &model,
             &src_pose,
             &[turned],
-            false,
-            &[],
             &mut out,
-            640,
-            480,
-            640 * 3,
+            (640, 480),
         )
         .unwrap();
         assert_eq!(r.grid_builds(), 2);
@@ -775,42 +813,32 @@ mod tests {
         };
         let (ow, oh) = (640u32, 360u32);
         let mut out = vec![0u8; (ow * oh * 3) as usize];
-        Renderer::default()
-            .render(
-                &h,
-                &src,
-                &model,
-                &src_pose,
-                &[view],
-                false,
-                &[],
-                &mut out,
-                ow,
-                oh,
-                ow * 3,
-            )
-            .unwrap();
+        render_views(
+            &mut Renderer::default(),
+            (&h, &src),
+            &model,
+            &src_pose,
+            &[view],
+            &mut out,
+            (ow, oh),
+        )
+        .unwrap();
         assert_eq!(pixel(&out, ow * 3, 260, 140), [230, 10, 10]);
         // Outside the view's rect: black.
         assert_eq!(pixel(&out, ow * 3, 50, 20), [0, 0, 0]);
         // The same through an NV12 source.
         let (nh, nsrc) = nv12_of(&src, h.stride);
         let mut out2 = vec![0u8; (ow * oh * 3) as usize];
-        Renderer::default()
-            .render(
-                &nh,
-                &nsrc,
-                &model,
-                &src_pose,
-                &[view],
-                false,
-                &[],
-                &mut out2,
-                ow,
-                oh,
-                ow * 3,
-            )
-            .unwrap();
+        render_views(
+            &mut Renderer::default(),
+            (&nh, &nsrc),
+            &model,
+            &src_pose,
+            &[view],
+            &mut out2,
+            (ow, oh),
+        )
+        .unwrap();
         assert!(near(pixel(&out2, ow * 3, 260, 140), [230, 10, 10], 6));
     }
 
@@ -847,21 +875,16 @@ mod tests {
             crop: CropMode::Panoramic,
         };
         let mut out = vec![0u8; 640 * 480 * 3];
-        Renderer::default()
-            .render(
-                &h,
-                &src,
-                &model,
-                &src_pose,
-                &[view],
-                false,
-                &[],
-                &mut out,
-                640,
-                480,
-                640 * 3,
-            )
-            .unwrap();
+        render_views(
+            &mut Renderer::default(),
+            (&h, &src),
+            &model,
+            &src_pose,
+            &[view],
+            &mut out,
+            (640, 480),
+        )
+        .unwrap();
         // Yaw 0 column: the panoramic mapping is the pinhole there.
         let vf = 640.0 / hfov;
         for y in [10u32, 100, 240, 400, 470] {
@@ -946,36 +969,8 @@ mod tests {
         let mut r = Renderer::default();
         let mut out = vec![0u8; 100 * 100 * 3];
         let short = &src[..src.len() - 1];
-        assert!(r
-            .render(
-                &h,
-                short,
-                &model,
-                &p,
-                &[],
-                false,
-                &[],
-                &mut out,
-                100,
-                100,
-                300
-            )
-            .is_err());
-        assert!(r
-            .render(
-                &h,
-                &src,
-                &model,
-                &p,
-                &[],
-                false,
-                &[],
-                &mut out,
-                100,
-                101,
-                300
-            )
-            .is_err());
+        assert!(render_views(&mut r, (&h, short), &model, &p, &[], &mut out, (100, 100)).is_err());
+        assert!(render_views(&mut r, (&h, &src), &model, &p, &[], &mut out, (100, 101)).is_err());
         assert!(r
             .render(
                 &h,
@@ -995,21 +990,7 @@ mod tests {
             .render(&h, &src, &model, &p, &[], false, &[], &mut out, 0, 100, 300)
             .is_err());
         let other = view_model(320, 240, 1.0).unwrap();
-        assert!(r
-            .render(
-                &h,
-                &src,
-                &other,
-                &p,
-                &[],
-                false,
-                &[],
-                &mut out,
-                100,
-                100,
-                300
-            )
-            .is_err());
+        assert!(render_views(&mut r, (&h, &src), &other, &p, &[], &mut out, (100, 100)).is_err());
         // Views and tiles partly or wholly outside, degenerate FOVs and boxes: no panic.
         let views = [
             ViewSpec {
@@ -1073,18 +1054,14 @@ mod tests {
             crop: CropMode::Rectified,
         };
         out.fill(9);
-        r.render(
-            &h,
-            &src,
+        render_views(
+            &mut r,
+            (&h, &src),
             &model,
             &p,
             &[back],
-            false,
-            &[],
             &mut out,
-            100,
-            100,
-            300,
+            (100, 100),
         )
         .unwrap();
         assert!(out.iter().all(|&b| b == 0));
