@@ -27,10 +27,7 @@ use mavlink::MavHeader;
 use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
 use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
 use skymesh_e2e::{Mesh, MeshOptions};
-use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
-    VehicleState, VehicleStatus,
-};
+use skymesh_ipc_types::{topics, VehicleState};
 use solo_proto::{shots, Location, SoloMessage};
 
 /// One setpoint seen on the wire: when, and its NED velocity.
@@ -129,67 +126,10 @@ fn drain<T>(rx: &mpsc::Receiver<T>) {
 
 /// Operator: GUIDED, arm, take off to 10 m, then give authority back.
 fn take_off(mesh: &Mesh) -> Result<()> {
-    let rt = tokio::runtime::Builder::new_current_thread()
+    tokio::runtime::Builder::new_current_thread()
         .enable_all()
-        .build()?;
-    rt.block_on(async {
-        let bus = mesh.bus("solo-bench")?;
-        let mut status = bus.subscriber::<VehicleStatus>(&topics::vehicle_status(1))?;
-        let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(1))?;
-        let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1))?;
-        let mut cmds = bus.publisher::<VehicleCommand>(&topics::vehicle_command(1))?;
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            let s = status.recv_timeout(Duration::from_secs(5)).await?;
-            if s.is_some_and(|s| s.ekf_healthy != 0) {
-                break;
-            }
-            if Instant::now() > deadline {
-                bail!("EKF never became healthy");
-            }
-        }
-        let steps = [
-            Command::SetMode(FlightMode::Guided),
-            Command::Arm { force: false },
-            Command::Takeoff { alt_rel_m: 10.0 },
-        ];
-        for (i, cmd) in steps.iter().enumerate() {
-            let id = 9000 + i as u32;
-            cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd)?)?;
-            loop {
-                let a = acks
-                    .recv_timeout(Duration::from_secs(10))
-                    .await?
-                    .context("no ack")?;
-                if a.command_id == id {
-                    if a.result() != Some(AckResult::Accepted) {
-                        bail!("{cmd:?} refused: {a:?}");
-                    }
-                    break;
-                }
-            }
-        }
-        loop {
-            let s = state
-                .recv_timeout(Duration::from_secs(5))
-                .await?
-                .context("no state")?;
-            if s.alt_rel_m > 9.5 {
-                break;
-            }
-            if Instant::now() > deadline {
-                bail!("take-off did not reach 10 m");
-            }
-        }
-        let id = 9100;
-        cmds.publish(VehicleCommand::new(
-            1,
-            CommandSource::Operator,
-            id,
-            &Command::ReleaseFlightAuthority,
-        )?)?;
-        Ok(())
-    })
+        .build()?
+        .block_on(skymesh_e2e::bench::take_off(mesh, 10.0))
 }
 
 /// The baseline: the same TLV over loopback TCP, decoded by a thread that writes one

@@ -268,7 +268,7 @@ fn uds_baseline(len: usize, fps: u64, n: usize) -> Result<Vec<f64>> {
 /// coloured discs moving across it.
 fn write_y4m(path: &std::path::Path, w: usize, h: usize, n: usize) -> Result<()> {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
-    write!(f, "YUV4MPEG2 W{w} H{h} F30:1 Ip A1:1 C420jpeg\n")?;
+    writeln!(f, "YUV4MPEG2 W{w} H{h} F30:1 Ip A1:1 C420jpeg")?;
     let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
     let mut y = vec![0u8; w * h];
     let mut u = vec![0u8; cw * ch];
