@@ -176,3 +176,56 @@ fn the_blocking_wait_loop_wakes_on_samples_and_ticks_and_stops() {
     assert!(statuses[0].is_armed());
     assert!(ticks >= 5, "interval ticks: {ticks}");
 }
+
+/// `recv_blocking` (with and without a spin before blocking): times out with
+/// nothing pending, is woken by a publisher on another thread, returns samples in
+/// order, and a spin that took a sample leaves no stale notification behind (the
+/// next receive must wait for the next sample, not return early with nothing).
+#[test]
+fn recv_blocking_waits_wakes_and_times_out_with_and_without_spin() {
+    for (tag, spin) in [("rb0", Duration::ZERO), ("rb1", Duration::from_micros(300))] {
+        let d = domain(tag);
+        let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+        let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+        let topic = topics::vehicle_state(3);
+        let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+        sub.set_spin(spin);
+        let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+
+        let t0 = std::time::Instant::now();
+        assert!(sub
+            .recv_blocking(Some(Duration::from_millis(30)))
+            .unwrap()
+            .is_none());
+        assert!(t0.elapsed() >= Duration::from_millis(30), "{spin:?}");
+
+        std::thread::scope(|s| {
+            let publisher = s.spawn(move || {
+                for i in 1..=3 {
+                    std::thread::sleep(Duration::from_millis(10));
+                    publ.publish(VehicleState {
+                        lat_deg: f64::from(i),
+                        ..Default::default()
+                    })
+                    .unwrap();
+                }
+                publ
+            });
+            for i in 1..=3 {
+                let v = sub
+                    .recv_blocking(Some(Duration::from_secs(5)))
+                    .unwrap()
+                    .expect("woken by the publisher");
+                assert_eq!(v.lat_deg, f64::from(i), "{spin:?}");
+            }
+            let _publ = publisher.join().unwrap();
+            // Everything was taken: the next receive waits for its whole timeout.
+            let t0 = std::time::Instant::now();
+            assert!(sub
+                .recv_blocking(Some(Duration::from_millis(20)))
+                .unwrap()
+                .is_none());
+            assert!(t0.elapsed() >= Duration::from_millis(20), "{spin:?}");
+        });
+    }
+}

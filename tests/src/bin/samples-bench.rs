@@ -1,0 +1,762 @@
+//! Small-sample transport benchmark (issue 10, item 1 and the low-latency option): a
+//! `VehicleState` between this process and a child process through the skymesh bus
+//! (iceoryx2 via `skymesh_runtime`) vs loopback UDP carrying the same bytes, same
+//! run, interleaved.
+//!
+//! ```text
+//! cargo run --release -p skymesh-e2e --bin samples-bench [-- SCALE]
+//! ```
+//!
+//! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
+//! `SCALE` multiplying the counts, four receivers per rate, in this order:
+//! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
+//!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
+//! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
+//! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
+//!   wake-up through epoll: how the services receive);
+//! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime.
+//!
+//! Latency = the receiver's `CLOCK_MONOTONIC` when it holds the sample − the send
+//! stamp carried in it (the bus stamps `header.stamp_ns` just before sending; the
+//! UDP sender writes the same clock just before `send`). CPU per message is
+//! `CLOCK_PROCESS_CPUTIME_ID` (user + system) over the counted part of each phase,
+//! on each side. The first [`WARMUP`] messages of each phase are not counted. The bus
+//! topic holds a whole phase (nothing overwritten), so back to back both transports
+//! queue; that row measures queueing and the per-message cost, not wake-ups.
+//!
+//! **Ping-pong** (the low-latency option): the parent sends a sample, the child sends
+//! it straight back, 2,000 × `SCALE` round trips back to back; one-way latency =
+//! round trip / 2. `busy`: both sides poll shared memory and never block (the floor
+//! of this machine); `spin`: `Subscriber::set_spin(SPIN)` then block; `block`: block
+//! at once; `udp`: blocking sockets. CPU is per round trip on each side.
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::UdpSocket;
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
+use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::{Bus, Domain, Stats};
+
+/// Messages at the start of each phase not counted (first wake-ups, page faults).
+const WARMUP: usize = 50;
+/// Vehicle id written into the benchmark's samples.
+const VEHICLE: u8 = 201;
+/// The receiver stops when nothing arrived for this long (the last message was lost).
+const IDLE_END: Duration = Duration::from_secs(2);
+/// Bytes per UDP datagram: exactly a `VehicleState`.
+const LEN: usize = std::mem::size_of::<VehicleState>();
+/// Spin budget of the low-latency ping-pong.
+const SPIN: Duration = Duration::from_micros(200);
+
+/// How fast the sender goes.
+#[derive(Debug, Clone, Copy)]
+enum Rate {
+    Hz(f64),
+    BackToBack,
+}
+
+impl Rate {
+    fn label(self) -> String {
+        match self {
+            Rate::Hz(hz) if hz >= 1000.0 => format!("{} kHz", hz / 1000.0),
+            Rate::Hz(hz) => format!("{hz} Hz"),
+            Rate::BackToBack => "b2b".to_string(),
+        }
+    }
+}
+
+/// How a one-way receiver waits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Via {
+    IoxBlocking,
+    UdpBlocking,
+    IoxTokio,
+    UdpTokio,
+}
+
+impl Via {
+    const ALL: [Via; 4] = [
+        Via::IoxBlocking,
+        Via::UdpBlocking,
+        Via::IoxTokio,
+        Via::UdpTokio,
+    ];
+
+    fn arg(self) -> &'static str {
+        match self {
+            Via::IoxBlocking => "iox-blk",
+            Via::UdpBlocking => "udp-blk",
+            Via::IoxTokio => "iox-tok",
+            Via::UdpTokio => "udp-tok",
+        }
+    }
+
+    fn parse(s: &str) -> anyhow::Result<Via> {
+        Via::ALL
+            .into_iter()
+            .find(|v| v.arg() == s)
+            .ok_or_else(|| anyhow::anyhow!("unknown receiver `{s}`"))
+    }
+
+    fn is_iox(self) -> bool {
+        matches!(self, Via::IoxBlocking | Via::IoxTokio)
+    }
+}
+
+/// How the ping-pong partners wait.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pong {
+    Busy,
+    Spin,
+    Block,
+    Udp,
+}
+
+impl Pong {
+    const ALL: [Pong; 4] = [Pong::Busy, Pong::Spin, Pong::Block, Pong::Udp];
+
+    fn arg(self) -> &'static str {
+        match self {
+            Pong::Busy => "busy",
+            Pong::Spin => "spin",
+            Pong::Block => "block",
+            Pong::Udp => "udp",
+        }
+    }
+
+    fn parse(s: &str) -> anyhow::Result<Pong> {
+        Pong::ALL
+            .into_iter()
+            .find(|v| v.arg() == s)
+            .ok_or_else(|| anyhow::anyhow!("unknown ping-pong mode `{s}`"))
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    match args.get(1).map(String::as_str) {
+        Some("--sub") => receiver(Via::parse(&args[2])?, &args[3], args[4].parse()?),
+        Some("--pong") => pong_child(Pong::parse(&args[2])?, &args[3], args[4].parse()?),
+        _ => {
+            // [SCALE] [--only NAME,NAME...] (receiver / ping-pong mode names; for profiling)
+            let mut scale = 1;
+            let mut only: Option<Vec<String>> = None;
+            let mut it = args.iter().skip(1);
+            while let Some(a) = it.next() {
+                if a == "--only" {
+                    let list = it
+                        .next()
+                        .ok_or_else(|| anyhow::anyhow!("--only needs names"))?;
+                    only = Some(list.split(',').map(str::to_string).collect());
+                } else {
+                    scale = a.parse()?;
+                }
+            }
+            anyhow::ensure!(scale >= 1, "SCALE must be at least 1");
+            let wanted =
+                move |name: &str| only.as_ref().is_none_or(|o| o.iter().any(|n| n == name));
+            driver(scale, &wanted)
+        }
+    }
+}
+
+/// What one phase measured.
+struct Phase {
+    /// Latencies of the counted messages, ns.
+    lat: Vec<u64>,
+    /// Messages the receiver got (warm-up included).
+    got: usize,
+    sent: usize,
+    /// Receiver CPU per counted message, ns.
+    rx_cpu: f64,
+    /// Sender CPU per counted message, ns.
+    tx_cpu: f64,
+}
+
+/// A bench topic whose subscriber buffer holds a whole phase (nothing overwritten).
+fn bench_topic(name: &str, n: usize) -> Topic {
+    Topic {
+        name: format!("skymesh/bench/{VEHICLE}/{name}"),
+        qos: TopicQos {
+            max_publishers: 1,
+            max_subscribers: 1,
+            max_nodes: 4,
+            history: 0,
+            buffer: n.max(1),
+        },
+    }
+}
+
+/// Removes the domain's shared-memory files however the run ends.
+struct DomainGuard(Domain);
+
+impl Drop for DomainGuard {
+    fn drop(&mut self) {
+        self.0.remove_leftover_files();
+    }
+}
+
+fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
+    let name = format!("sb{}", std::process::id());
+    let domain = DomainGuard(Domain::load(&name, None)?);
+    let plan = [
+        (Rate::Hz(100.0), 500 * scale),
+        (Rate::Hz(1000.0), 2000 * scale),
+        (Rate::BackToBack, 2000 * scale),
+    ];
+    println!(
+        "samples-bench: VehicleState ({LEN} bytes) one way parent → child process; domain \
+         {name}; first {WARMUP} of each phase not counted; latency µs, CPU µs per message"
+    );
+    println!(
+        "{:>7} | {:>7} {:>11} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "rate", "via", "got", "p50", "p99", "p999", "rx cpu", "tx cpu"
+    );
+    for (rate, n) in plan {
+        let mut phases = Vec::new();
+        for via in Via::ALL {
+            if !wanted(via.arg()) {
+                continue;
+            }
+            let ph = one_way(&domain.0, via, rate, n)?;
+            let p = percentiles(&ph.lat);
+            println!(
+                "{:>7} | {:>7} {:>11} {:>8.1} {:>8.1} {:>8.1} {:>8.2} {:>8.2}",
+                rate.label(),
+                via.arg(),
+                format!("{}/{}", ph.got, ph.sent),
+                p[0] / 1e3,
+                p[1] / 1e3,
+                p[2] / 1e3,
+                ph.rx_cpu / 1e3,
+                ph.tx_cpu / 1e3,
+            );
+            phases.push((via, p, ph));
+        }
+        for (label, udp, iox) in [
+            ("blk", Via::UdpBlocking, Via::IoxBlocking),
+            ("tok", Via::UdpTokio, Via::IoxTokio),
+        ] {
+            let find = |v: Via| phases.iter().find(|(w, _, _)| *w == v);
+            let (Some((_, pu, u)), Some((_, pi, i))) = (find(udp), find(iox)) else {
+                continue;
+            };
+            println!(
+                "{:>7} | {:>7} {:>11} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+                rate.label(),
+                format!("u÷i {label}"),
+                "",
+                pu[0] / pi[0],
+                pu[1] / pi[1],
+                pu[2] / pi[2],
+                u.rx_cpu / i.rx_cpu,
+                u.tx_cpu / i.tx_cpu,
+            );
+        }
+    }
+    let n = 2000 * scale;
+    println!(
+        "ping-pong: {n} round trips back to back, one way = round trip / 2 (µs); \
+         spin = {} µs then block; CPU µs per round trip",
+        SPIN.as_micros()
+    );
+    println!(
+        "{:>7} | {:>8} {:>8} {:>8} {:>9} {:>8} {:>8}",
+        "mode", "p50", "p99", "p999", "p99÷busy", "ping cpu", "pong cpu"
+    );
+    let mut floor = f64::NAN;
+    for mode in Pong::ALL {
+        if !wanted(mode.arg()) {
+            continue;
+        }
+        let (lat, ping_cpu, pong_cpu) = ping_pong(&domain.0, mode, n)?;
+        let p = percentiles(&lat);
+        if mode == Pong::Busy {
+            floor = p[1];
+        }
+        println!(
+            "{:>7} | {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>8.2} {:>8.2}",
+            mode.arg(),
+            p[0] / 1e3,
+            p[1] / 1e3,
+            p[2] / 1e3,
+            p[1] / floor,
+            ping_cpu / 1e3,
+            pong_cpu / 1e3,
+        );
+    }
+    let left = domain.0.leftover_files();
+    drop(domain);
+    println!("removed {} leftover shared-memory files", left.len());
+    Ok(())
+}
+
+/// p50, p99, p999 in ns (NaN when nothing was counted).
+fn percentiles(v: &[u64]) -> [f64; 3] {
+    if v.is_empty() {
+        return [f64::NAN; 3];
+    }
+    let mut v = v.to_vec();
+    v.sort_unstable();
+    let at = |q: f64| v[((v.len() as f64 * q) as usize).min(v.len() - 1)] as f64;
+    [at(0.50), at(0.99), at(0.999)]
+}
+
+/// CPU time of this process (all threads, user + system), ns.
+fn process_cpu_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID) {
+        Ok(ts) => (ts.tv_sec() as u64).saturating_mul(1_000_000_000) + ts.tv_nsec() as u64,
+        Err(_) => 0,
+    }
+}
+
+/// Paces a send loop (absolute deadlines, so a late message does not shift the rest).
+struct Pacer {
+    start: Instant,
+    period: Option<Duration>,
+    n: u32,
+}
+
+impl Pacer {
+    fn new(rate: Rate) -> Pacer {
+        Pacer {
+            start: Instant::now(),
+            period: match rate {
+                Rate::Hz(hz) => Some(Duration::from_secs_f64(1.0 / hz)),
+                Rate::BackToBack => None,
+            },
+            n: 0,
+        }
+    }
+
+    fn wait(&mut self) {
+        let Some(period) = self.period else { return };
+        let due = self.start + period * self.n;
+        self.n += 1;
+        if let Some(d) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(d);
+        }
+    }
+}
+
+fn spawn_child(args: &[String]) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(args)
+        .stdout(Stdio::piped())
+        .spawn()?;
+    let Some(out) = child.stdout.take() else {
+        anyhow::bail!("child has no stdout");
+    };
+    Ok((child, BufReader::new(out)))
+}
+
+fn read_line(out: &mut BufReader<ChildStdout>) -> anyhow::Result<String> {
+    let mut line = String::new();
+    out.read_line(&mut line)?;
+    Ok(line.trim().to_string())
+}
+
+/// Sends `n` messages at `rate` through `send(k)`; returns sender CPU per counted one.
+fn send_loop(
+    rate: Rate,
+    n: usize,
+    mut send: impl FnMut(usize) -> anyhow::Result<()>,
+) -> anyhow::Result<f64> {
+    let mut pace = Pacer::new(rate);
+    let mut cpu0 = process_cpu_ns();
+    for k in 0..n {
+        pace.wait();
+        if k == WARMUP {
+            cpu0 = process_cpu_ns();
+        }
+        send(k)?;
+    }
+    let cpu = process_cpu_ns().saturating_sub(cpu0);
+    Ok(cpu as f64 / (n - WARMUP) as f64)
+}
+
+/// Reads the receiver's report: `got <n> <cpu_ns> <counted>`, then one latency per line.
+fn finish(
+    mut child: Child,
+    mut out: BufReader<ChildStdout>,
+    sent: usize,
+    tx_cpu: f64,
+) -> anyhow::Result<Phase> {
+    let head = read_line(&mut out)?;
+    let f: Vec<&str> = head.split_whitespace().collect();
+    anyhow::ensure!(
+        f.len() == 4 && f[0] == "got",
+        "receiver said `{head}` instead of its report"
+    );
+    let (got, cpu, counted): (usize, u64, usize) = (f[1].parse()?, f[2].parse()?, f[3].parse()?);
+    let mut lat = Vec::with_capacity(counted);
+    for line in out.lines() {
+        lat.push(line?.trim().parse()?);
+    }
+    let status = child.wait()?;
+    anyhow::ensure!(status.success(), "receiver failed: {status}");
+    Ok(Phase {
+        lat,
+        got,
+        sent,
+        rx_cpu: cpu as f64 / counted.max(1) as f64,
+        tx_cpu,
+    })
+}
+
+/// What the receiver accumulates, the same for every transport.
+struct Tally {
+    got: usize,
+    lat: Vec<u64>,
+    cpu0: Option<u64>,
+    cpu1: u64,
+}
+
+impl Tally {
+    fn new(n: usize) -> Tally {
+        Tally {
+            got: 0,
+            lat: Vec::with_capacity(n),
+            cpu0: None,
+            cpu1: 0,
+        }
+    }
+
+    /// Records message `k` sent at `t0`, received at `t1`; true after the last one.
+    fn add(&mut self, k: usize, t0: u64, t1: u64, n: usize) -> bool {
+        self.got += 1;
+        if k >= WARMUP {
+            // CPU is counted from the end of the last warm-up message's handling.
+            if self.cpu0.is_some() {
+                self.lat.push(t1.saturating_sub(t0));
+            }
+        }
+        if k + 1 >= WARMUP && self.cpu0.is_none() {
+            self.cpu0 = Some(process_cpu_ns());
+        }
+        self.cpu1 = process_cpu_ns();
+        k + 1 >= n
+    }
+
+    fn report(self) -> anyhow::Result<()> {
+        let cpu = self.cpu1.saturating_sub(self.cpu0.unwrap_or(self.cpu1));
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "got {} {} {}", self.got, cpu, self.lat.len())?;
+        for l in self.lat {
+            writeln!(out, "{l}")?;
+        }
+        Ok(())
+    }
+}
+
+/// A plausible state (values do not matter to either transport, size does).
+fn sample_state() -> VehicleState {
+    VehicleState {
+        vehicle_id: VEHICLE,
+        position_valid: 1,
+        attitude_valid: 1,
+        lat_deg: 47.397_742,
+        lon_deg: 8.545_594,
+        alt_msl_m: 488.0,
+        alt_rel_m: 20.0,
+        attitude_q: [1.0, 0.0, 0.0, 0.0],
+        ..VehicleState::default()
+    }
+}
+
+/// The datagram the UDP sender writes: a `VehicleState`'s size, with the sequence
+/// (k + 1) and send time where its header keeps them.
+fn udp_datagram(buf: &mut [u8; LEN], k: usize) {
+    buf[24] = VEHICLE;
+    buf[..8].copy_from_slice(&(k as u64 + 1).to_le_bytes());
+    buf[8..16].copy_from_slice(&monotonic_ns().to_le_bytes());
+}
+
+/// (sequence, send stamp) of a received datagram, checked.
+fn udp_fields(buf: &[u8], len: usize) -> anyhow::Result<(u64, u64)> {
+    anyhow::ensure!(len == LEN, "datagram of {len} bytes, expected {LEN}");
+    anyhow::ensure!(buf[24] == VEHICLE, "sample of vehicle {}", buf[24]);
+    let field = |i: usize| {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&buf[i..i + 8]);
+        u64::from_le_bytes(b)
+    };
+    Ok((field(0), field(8)))
+}
+
+fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
+    if via.is_iox() {
+        // A fresh bus and publisher per phase, so no phase inherits another's samples.
+        let bus = Bus::open(domain, "bench-state-pub", ServiceId::Tool, 0, Stats::new())?;
+        let mut publ = bus.publisher::<VehicleState>(&bench_topic("one_way", n))?;
+        let (child, mut out) = spawn_child(&[
+            "--sub".into(),
+            via.arg().into(),
+            domain.name.clone(),
+            n.to_string(),
+        ])?;
+        let ready = read_line(&mut out)?;
+        anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
+        std::thread::sleep(Duration::from_millis(100));
+        let mut state = sample_state();
+        let tx_cpu = send_loop(rate, n, |k| {
+            state.time_boot_ms = k as u32;
+            // The bus stamps `header.seq` (k + 1) and `header.stamp_ns` as it sends.
+            publ.publish(state)?;
+            Ok(())
+        })?;
+        finish(child, out, n, tx_cpu)
+    } else {
+        let (child, mut out) =
+            spawn_child(&["--sub".into(), via.arg().into(), "-".into(), n.to_string()])?;
+        let ready = read_line(&mut out)?;
+        let port: u16 = match ready.strip_prefix("ready ") {
+            Some(p) => p.parse()?,
+            None => anyhow::bail!("receiver said `{ready}`"),
+        };
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        sock.connect(("127.0.0.1", port))?;
+        std::thread::sleep(Duration::from_millis(100));
+        let mut buf = [0u8; LEN];
+        let tx_cpu = send_loop(rate, n, |k| {
+            udp_datagram(&mut buf, k);
+            let sent = sock.send(&buf)?;
+            anyhow::ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
+            Ok(())
+        })?;
+        finish(child, out, n, tx_cpu)
+    }
+}
+
+fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
+    let mut tally = Tally::new(n);
+    let iox_sample = |tally: &mut Tally, s: VehicleState| -> anyhow::Result<bool> {
+        let t1 = monotonic_ns();
+        anyhow::ensure!(
+            s.vehicle_id == VEHICLE,
+            "sample of vehicle {}",
+            s.vehicle_id
+        );
+        let k = s.header.seq.saturating_sub(1) as usize;
+        Ok(tally.add(k, s.header.stamp_ns, t1, n))
+    };
+    let udp_sample = |tally: &mut Tally, buf: &[u8], len: usize| -> anyhow::Result<bool> {
+        let t1 = monotonic_ns();
+        let (seq, t0) = udp_fields(buf, len)?;
+        Ok(tally.add(seq.saturating_sub(1) as usize, t0, t1, n))
+    };
+    let rt = || {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+    };
+    match via {
+        Via::IoxBlocking | Via::IoxTokio => {
+            let domain = Domain::load(domain, None)?;
+            let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
+            let mut sub = bus.subscriber::<VehicleState>(&bench_topic("one_way", n))?;
+            println!("ready");
+            if via == Via::IoxBlocking {
+                while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+                    if iox_sample(&mut tally, s)? {
+                        break;
+                    }
+                }
+            } else {
+                rt()?.block_on(async {
+                    while let Some(s) = sub.recv_timeout(IDLE_END).await? {
+                        if iox_sample(&mut tally, s)? {
+                            break;
+                        }
+                    }
+                    anyhow::Ok(())
+                })?;
+            }
+        }
+        Via::UdpBlocking => {
+            let sock = UdpSocket::bind("127.0.0.1:0")?;
+            sock.set_read_timeout(Some(IDLE_END))?;
+            println!("ready {}", sock.local_addr()?.port());
+            let mut buf = [0u8; LEN + 1];
+            loop {
+                let len = match sock.recv(&mut buf) {
+                    Ok(len) => len,
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                        ) =>
+                    {
+                        break
+                    }
+                    Err(e) => return Err(e.into()),
+                };
+                if udp_sample(&mut tally, &buf, len)? {
+                    break;
+                }
+            }
+        }
+        Via::UdpTokio => {
+            let rt = rt()?;
+            rt.block_on(async {
+                let sock = tokio::net::UdpSocket::bind("127.0.0.1:0").await?;
+                println!("ready {}", sock.local_addr()?.port());
+                let mut buf = [0u8; LEN + 1];
+                while let Ok(r) = tokio::time::timeout(IDLE_END, sock.recv(&mut buf)).await {
+                    if udp_sample(&mut tally, &buf, r?)? {
+                        break;
+                    }
+                }
+                anyhow::Ok(())
+            })?;
+        }
+    }
+    tally.report()
+}
+
+/// Receives the next sample the way `mode` waits (`busy` never blocks).
+fn iox_wait(
+    sub: &skymesh_runtime::Subscriber<VehicleState>,
+    mode: Pong,
+) -> anyhow::Result<Option<VehicleState>> {
+    if mode == Pong::Busy {
+        let start = Instant::now();
+        while start.elapsed() < IDLE_END {
+            if let Some(s) = sub.try_recv()? {
+                return Ok(Some(s));
+            }
+            std::hint::spin_loop();
+        }
+        return Ok(None);
+    }
+    Ok(sub.recv_blocking(Some(IDLE_END))?)
+}
+
+/// Round trips, one-way ns (round trip / 2); CPU per round trip of ping and pong.
+fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>, f64, f64)> {
+    let total = n + WARMUP;
+    let mut lat = Vec::with_capacity(n);
+    let (child, mut out, cpu) = if mode == Pong::Udp {
+        let (child, mut out) = spawn_child(&[
+            "--pong".into(),
+            mode.arg().into(),
+            "-".into(),
+            total.to_string(),
+        ])?;
+        let ready = read_line(&mut out)?;
+        let port: u16 = match ready.strip_prefix("ready ") {
+            Some(p) => p.parse()?,
+            None => anyhow::bail!("pong said `{ready}`"),
+        };
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        sock.connect(("127.0.0.1", port))?;
+        sock.set_read_timeout(Some(IDLE_END))?;
+        let mut buf = [0u8; LEN];
+        let mut back = [0u8; LEN + 1];
+        let mut cpu0 = 0;
+        for k in 0..total {
+            if k == WARMUP {
+                cpu0 = process_cpu_ns();
+            }
+            udp_datagram(&mut buf, k);
+            sock.send(&buf)?;
+            let len = sock.recv(&mut back)?;
+            let t1 = monotonic_ns();
+            let (seq, t0) = udp_fields(&back, len)?;
+            anyhow::ensure!(seq == k as u64 + 1, "pong {seq} for ping {}", k + 1);
+            if k >= WARMUP {
+                lat.push(t1.saturating_sub(t0) / 2);
+            }
+        }
+        (child, out, process_cpu_ns().saturating_sub(cpu0))
+    } else {
+        let bus = Bus::open(domain, "bench-ping", ServiceId::Tool, 0, Stats::new())?;
+        let mut ping = bus.publisher::<VehicleState>(&bench_topic("ping", total))?;
+        let mut pong = bus.subscriber::<VehicleState>(&bench_topic("pong", total))?;
+        if mode == Pong::Spin {
+            pong.set_spin(SPIN);
+        }
+        let (child, mut out) = spawn_child(&[
+            "--pong".into(),
+            mode.arg().into(),
+            domain.name.clone(),
+            total.to_string(),
+        ])?;
+        let ready = read_line(&mut out)?;
+        anyhow::ensure!(ready == "ready", "pong said `{ready}`");
+        std::thread::sleep(Duration::from_millis(200));
+        let mut state = sample_state();
+        let mut cpu0 = 0;
+        for k in 0..total {
+            if k == WARMUP {
+                cpu0 = process_cpu_ns();
+            }
+            state.time_boot_ms = k as u32;
+            let t0 = monotonic_ns();
+            ping.publish(state)?;
+            let Some(s) = iox_wait(&pong, mode)? else {
+                anyhow::bail!("no pong for ping {k}");
+            };
+            let t1 = monotonic_ns();
+            anyhow::ensure!(
+                s.time_boot_ms == k as u32,
+                "pong {} for ping {k}",
+                s.time_boot_ms
+            );
+            if k >= WARMUP {
+                lat.push(t1.saturating_sub(t0) / 2);
+            }
+        }
+        (child, out, process_cpu_ns().saturating_sub(cpu0))
+    };
+    let report = read_line(&mut out)?;
+    let pong_cpu: u64 = match report.strip_prefix("cpu ") {
+        Some(c) => c.parse()?,
+        None => anyhow::bail!("pong said `{report}`"),
+    };
+    let mut child = child;
+    let status = child.wait()?;
+    anyhow::ensure!(status.success(), "pong failed: {status}");
+    Ok((lat, cpu as f64 / n as f64, pong_cpu as f64 / n as f64))
+}
+
+/// The ping-pong partner: returns every ping at once; reports its CPU after warm-up.
+fn pong_child(mode: Pong, domain: &str, total: usize) -> anyhow::Result<()> {
+    let mut cpu0 = 0;
+    if mode == Pong::Udp {
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        sock.set_read_timeout(Some(IDLE_END))?;
+        println!("ready {}", sock.local_addr()?.port());
+        let mut buf = [0u8; LEN + 1];
+        for k in 0..total {
+            let (len, from) = sock.recv_from(&mut buf)?;
+            if k == WARMUP {
+                cpu0 = process_cpu_ns();
+            }
+            sock.send_to(&buf[..len], from)?;
+        }
+    } else {
+        let domain = Domain::load(domain, None)?;
+        let bus = Bus::open(&domain, "bench-pong", ServiceId::Tool, 0, Stats::new())?;
+        let mut ping = bus.subscriber::<VehicleState>(&bench_topic("ping", total))?;
+        let mut pong = bus.publisher::<VehicleState>(&bench_topic("pong", total))?;
+        if mode == Pong::Spin {
+            ping.set_spin(SPIN);
+        }
+        println!("ready");
+        for k in 0..total {
+            let Some(s) = iox_wait(&ping, mode)? else {
+                anyhow::bail!("no ping {k}");
+            };
+            if k == WARMUP {
+                cpu0 = process_cpu_ns();
+            }
+            // Sent back as it came: its header stamp is replaced, the payload is not.
+            pong.publish(s)?;
+        }
+    }
+    println!("cpu {}", process_cpu_ns().saturating_sub(cpu0));
+    Ok(())
+}

@@ -1,0 +1,275 @@
+//! What the process-to-process transport benchmarks (`fanout-bench`, `frames-bench`,
+//! `samples-bench`) share: percentiles over nanoseconds, process CPU time, pacing,
+//! child processes (the benchmark binary re-executed with a hidden first argument,
+//! talking back over its stdout) and the receiver's tally and report.
+//!
+//! Report protocol, child → parent, on the child's stdout: first a line the parent
+//! waits for (`ready`, or `ready <port>`), then, at the end,
+//! `got <received> <cpu_ns> <counted>` followed by one `<k> <latency_ns>` line per
+//! counted message (`k` = the message's index in the phase, from 0).
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, ensure, Result};
+use skymesh_runtime::Domain;
+
+/// p50, p99 and p999 (nearest rank) of `v` in ns; NaN when `v` is empty.
+pub fn percentiles(v: &[u64]) -> [f64; 3] {
+    if v.is_empty() {
+        return [f64::NAN; 3];
+    }
+    let mut v = v.to_vec();
+    v.sort_unstable();
+    let at = |q: f64| v[((v.len() as f64 * q) as usize).min(v.len() - 1)] as f64;
+    [at(0.50), at(0.99), at(0.999)]
+}
+
+/// CPU time of this process (all threads, user + system, `CLOCK_PROCESS_CPUTIME_ID`), ns.
+pub fn process_cpu_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID) {
+        Ok(ts) => (ts.tv_sec() as u64).saturating_mul(1_000_000_000) + ts.tv_nsec() as u64,
+        Err(_) => 0,
+    }
+}
+
+/// How fast a sender goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    Hz(f64),
+    BackToBack,
+}
+
+impl Rate {
+    /// `100 Hz`, `1 kHz`, `b2b`.
+    pub fn label(self) -> String {
+        match self {
+            Rate::Hz(hz) if hz >= 1000.0 => format!("{} kHz", hz / 1000.0),
+            Rate::Hz(hz) => format!("{hz} Hz"),
+            Rate::BackToBack => "b2b".to_string(),
+        }
+    }
+}
+
+/// Paces a send loop on absolute deadlines (a late message does not shift the rest).
+#[derive(Debug)]
+pub struct Pacer {
+    start: Instant,
+    period: Option<Duration>,
+    n: u32,
+}
+
+impl Pacer {
+    pub fn new(rate: Rate) -> Pacer {
+        Pacer {
+            start: Instant::now(),
+            period: match rate {
+                Rate::Hz(hz) => Some(Duration::from_secs_f64(1.0 / hz)),
+                Rate::BackToBack => None,
+            },
+            n: 0,
+        }
+    }
+
+    /// Sleeps until the next message is due (at once back to back).
+    pub fn wait(&mut self) {
+        let Some(period) = self.period else { return };
+        let due = self.start + period * self.n;
+        self.n += 1;
+        if let Some(d) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(d);
+        }
+    }
+}
+
+/// Starts this executable again with `args`, its stdout piped back.
+pub fn spawn_child(args: &[String]) -> Result<(Child, BufReader<ChildStdout>)> {
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(args)
+        .stdout(Stdio::piped())
+        .spawn()?;
+    let Some(out) = child.stdout.take() else {
+        bail!("child has no stdout");
+    };
+    Ok((child, BufReader::new(out)))
+}
+
+/// One line of a child's stdout, trimmed.
+pub fn read_line(out: &mut BufReader<ChildStdout>) -> Result<String> {
+    let mut line = String::new();
+    out.read_line(&mut line)?;
+    Ok(line.trim().to_string())
+}
+
+/// Reads one line and fails unless it is `want`.
+pub fn expect_line(out: &mut BufReader<ChildStdout>, want: &str) -> Result<()> {
+    let line = read_line(out)?;
+    ensure!(line == want, "child said `{line}` instead of `{want}`");
+    Ok(())
+}
+
+/// What one receiving child measured.
+#[derive(Debug, Clone, Default)]
+pub struct RxReport {
+    /// Messages received (warm-up included).
+    pub got: usize,
+    /// Receiver CPU over the counted part, ns.
+    pub cpu_ns: u64,
+    /// `(k, latency ns)` of every counted message.
+    pub lat: Vec<(usize, u64)>,
+}
+
+impl RxReport {
+    /// Receiver CPU per counted message, ns.
+    pub fn cpu_per_msg(&self) -> f64 {
+        self.cpu_ns as f64 / self.lat.len().max(1) as f64
+    }
+
+    /// The latencies alone.
+    pub fn latencies(&self) -> Vec<u64> {
+        self.lat.iter().map(|&(_, l)| l).collect()
+    }
+}
+
+/// Reads a child's report (see the module doc) and waits for it to exit successfully.
+pub fn finish_child(mut child: Child, mut out: BufReader<ChildStdout>) -> Result<RxReport> {
+    let head = read_line(&mut out)?;
+    let f: Vec<&str> = head.split_whitespace().collect();
+    ensure!(
+        f.len() == 4 && f[0] == "got",
+        "receiver said `{head}` instead of its report"
+    );
+    let (got, cpu_ns, counted): (usize, u64, usize) = (f[1].parse()?, f[2].parse()?, f[3].parse()?);
+    let mut lat = Vec::with_capacity(counted);
+    for line in out.lines() {
+        let line = line?;
+        let Some((k, l)) = line.trim().split_once(' ') else {
+            bail!("receiver said `{line}` instead of `<k> <latency>`");
+        };
+        lat.push((k.parse()?, l.parse()?));
+    }
+    let status = child.wait()?;
+    ensure!(status.success(), "receiver failed: {status}");
+    ensure!(
+        lat.len() == counted,
+        "receiver announced {counted} latencies, sent {}",
+        lat.len()
+    );
+    Ok(RxReport { got, cpu_ns, lat })
+}
+
+/// What a receiving child accumulates, whatever the transport.
+#[derive(Debug)]
+pub struct Tally {
+    warmup: usize,
+    got: usize,
+    lat: Vec<(usize, u64)>,
+    cpu0: Option<u64>,
+    cpu1: u64,
+}
+
+impl Tally {
+    /// A tally for up to `n` messages whose first `warmup` are not counted.
+    pub fn new(n: usize, warmup: usize) -> Tally {
+        Tally {
+            warmup,
+            got: 0,
+            lat: Vec::with_capacity(n),
+            cpu0: None,
+            cpu1: 0,
+        }
+    }
+
+    /// Records message `k` sent at `t0`, received at `t1` (both `CLOCK_MONOTONIC` ns),
+    /// after the receiver has handled it. CPU is counted from the end of the handling
+    /// of the last warm-up message to the end of the last message's.
+    pub fn add(&mut self, k: usize, t0: u64, t1: u64) {
+        self.got += 1;
+        if k >= self.warmup && self.cpu0.is_some() {
+            self.lat.push((k, t1.saturating_sub(t0)));
+        }
+        if k + 1 >= self.warmup && self.cpu0.is_none() {
+            self.cpu0 = Some(process_cpu_ns());
+        }
+        self.cpu1 = process_cpu_ns();
+    }
+
+    /// Writes the report to stdout (see the module doc).
+    pub fn report(self) -> Result<()> {
+        let cpu = self.cpu1.saturating_sub(self.cpu0.unwrap_or(self.cpu1));
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "got {} {} {}", self.got, cpu, self.lat.len())?;
+        for (k, l) in self.lat {
+            writeln!(out, "{k} {l}")?;
+        }
+        out.flush()?;
+        Ok(())
+    }
+}
+
+/// Sender CPU over the counted part of a send loop: call [`SendCpu::at`] before
+/// sending each message `k`, then [`SendCpu::per_msg`].
+#[derive(Debug)]
+pub struct SendCpu {
+    warmup: usize,
+    cpu0: u64,
+    counted: usize,
+}
+
+impl SendCpu {
+    pub fn new(warmup: usize) -> SendCpu {
+        SendCpu {
+            warmup,
+            cpu0: process_cpu_ns(),
+            counted: 0,
+        }
+    }
+
+    /// Before message `k` is sent.
+    pub fn at(&mut self, k: usize) {
+        if k == self.warmup {
+            self.cpu0 = process_cpu_ns();
+        }
+        if k >= self.warmup {
+            self.counted += 1;
+        }
+    }
+
+    /// CPU per counted message so far, ns.
+    pub fn per_msg(&self) -> f64 {
+        process_cpu_ns().saturating_sub(self.cpu0) as f64 / self.counted.max(1) as f64
+    }
+}
+
+/// An iceoryx2 domain whose shared-memory files are removed however the run ends.
+#[derive(Debug)]
+pub struct DomainGuard(pub Domain);
+
+impl Drop for DomainGuard {
+    fn drop(&mut self) {
+        self.0.remove_leftover_files();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_nearest_rank() {
+        let v: Vec<u64> = (1..=1000).collect();
+        assert_eq!(percentiles(&v), [501.0, 991.0, 1000.0]);
+        assert!(percentiles(&[]).iter().all(|p| p.is_nan()));
+    }
+
+    #[test]
+    fn tally_skips_warmup() {
+        let mut t = Tally::new(10, 2);
+        for k in 0..5 {
+            t.add(k, 100, 150 + k as u64);
+        }
+        assert_eq!(t.got, 5);
+        assert_eq!(t.lat, vec![(2, 52), (3, 53), (4, 54)]);
+    }
+}
