@@ -42,6 +42,26 @@ pub fn mavlink_tap<F>(listener: TcpListener, sim_port: u16, on_link_bytes: F)
 where
     F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
 {
+    mavlink_tap_both(
+        listener,
+        sim_port,
+        on_link_bytes,
+        |_: &mut FrameParser, _| {},
+    );
+}
+
+/// [`mavlink_tap`] that also hands every chunk vehicle-sim writes (towards
+/// autopilot-link) to `on_sim_bytes`, the same way: parsed after forwarding, with
+/// the time the chunk was read.
+pub fn mavlink_tap_both<F, G>(
+    listener: TcpListener,
+    sim_port: u16,
+    on_link_bytes: F,
+    on_sim_bytes: G,
+) where
+    F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+    G: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+{
     std::thread::spawn(move || loop {
         let Ok((link, _)) = listener.accept() else {
             return;
@@ -55,12 +75,20 @@ where
             continue;
         };
         let (mut sim_r, mut link_w) = (sim, link);
+        let mut on_sim = on_sim_bytes.clone();
         std::thread::spawn(move || {
+            let mut parser = FrameParser::new();
             let mut buf = [0u8; 4096];
             while let Ok(n) = sim_r.read(&mut buf) {
-                if n == 0 || link_w.write_all(&buf[..n]).is_err() {
+                if n == 0 {
                     break;
                 }
+                let now = Instant::now();
+                if link_w.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+                parser.push(&buf[..n]);
+                on_sim(&mut parser, now);
             }
         });
         let mut on_bytes = on_link_bytes.clone();
@@ -88,13 +116,28 @@ pub fn start_tapped_mesh<F>(opts: MeshOptions, services: &[&str], on_link_bytes:
 where
     F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
 {
+    start_tapped_mesh_both(opts, services, on_link_bytes, |_: &mut FrameParser, _| {})
+}
+
+/// [`start_tapped_mesh`] with a [`mavlink_tap_both`]: `on_sim_bytes` sees what
+/// vehicle-sim writes towards autopilot-link.
+pub fn start_tapped_mesh_both<F, G>(
+    opts: MeshOptions,
+    services: &[&str],
+    on_link_bytes: F,
+    on_sim_bytes: G,
+) -> Result<Mesh>
+where
+    F: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+    G: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
+{
     let tap_listener = TcpListener::bind("127.0.0.1:0")?;
     let opts = MeshOptions {
         link_via: Some(tap_listener.local_addr()?.port()),
         ..opts
     };
     let mut mesh = Mesh::start(opts)?;
-    mavlink_tap(tap_listener, mesh.mavlink_port, on_link_bytes);
+    mavlink_tap_both(tap_listener, mesh.mavlink_port, on_link_bytes, on_sim_bytes);
     for name in services {
         mesh.wait_running(name, Duration::from_secs(40))?;
     }

@@ -26,7 +26,8 @@ pub const STATE_FILE_NAME: &str = "shot-engine.json";
 pub struct Settings {
     /// The `{id}` of the vehicle topics.
     pub vehicle_id: u8,
-    /// One control-loop tick.
+    /// One control-loop tick. App messages and buttons that change a flying shot's
+    /// guidance also step it at once, between ticks (the engine's "Event steps").
     pub loop_period: Duration,
     /// `max_age_ms` of every velocity setpoint.
     pub setpoint_max_age_ms: u32,

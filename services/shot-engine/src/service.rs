@@ -9,6 +9,11 @@
 //! state, status, payload, authority, arbiter events and acks, steps the flying
 //! shot and publishes what the engine asks for. A tick that takes longer than the
 //! period, or starts more than a period late, counts as an overrun.
+//!
+//! Event steps: when an app message or button changed a flying shot's guidance
+//! (`Engine::take_step_request`), the loop ticks at once instead of draining, and
+//! keeps its phase: the next periodic tick comes when it was due anyway (see
+//! "Event steps" in `engine/mod.rs` for why).
 
 use std::time::Duration;
 
@@ -70,7 +75,8 @@ pub(crate) async fn run_loop(
             Wake::App(m) => m.and_then(|m| {
                 drain_vehicle(&mut engine, &ports, now)?;
                 handle_inbound(&mut engine, &ports, Inbound::Message(Box::new(m)), now)?;
-                publish(&mut ports, engine.drain(now))
+                let out = event_outputs(&mut engine, now);
+                publish(&mut ports, out)
             }),
             Wake::Fence(g) => g.and_then(|g| {
                 drain_vehicle(&mut engine, &ports, now)?;
@@ -84,7 +90,8 @@ pub(crate) async fn run_loop(
             Wake::Button(b) => b.and_then(|b| {
                 drain_vehicle(&mut engine, &ports, now)?;
                 engine.handle_button(&b, now);
-                publish(&mut ports, engine.drain(now))
+                let out = event_outputs(&mut engine, now);
+                publish(&mut ports, out)
             }),
         };
         if let Err(e) = step {
@@ -96,6 +103,16 @@ pub(crate) async fn run_loop(
         tracing::warn!(error = %e, "publishing the final outputs failed");
     }
     result
+}
+
+/// After an app message or button: a step now if the engine asks for one, else just
+/// what the handlers produced. The loop keeps its phase (see the module doc).
+fn event_outputs(engine: &mut Engine, now: u64) -> Outputs {
+    if engine.take_step_request() {
+        engine.tick(now)
+    } else {
+        engine.drain(now)
+    }
 }
 
 /// Everything the vehicle topics hold, oldest first (the newest state wins).

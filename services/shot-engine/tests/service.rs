@@ -162,3 +162,57 @@ async fn an_orbit_over_the_bus_from_entry_to_exit() {
     drop(tool_bus);
     domain.remove_leftover_files();
 }
+
+/// With the loop period set to an hour, the only setpoints are event steps: the ROI
+/// that starts an orbit and a cruise-speed change each bring a setpoint at once.
+/// Without the event step this waits an hour (and fails after `PATIENCE`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn guidance_changes_send_a_setpoint_without_waiting_for_the_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let domain = unique_domain();
+    let tool_bus = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+    let mut tool = Tool::open(&tool_bus);
+    let mut s = settings(dir.path());
+    s.loop_period = std::time::Duration::from_secs(3600);
+    let engine = Engine::start(&domain, s).await;
+
+    tool.vehicle(FlightMode::Loiter);
+    tool.session
+        .publish(AppSession {
+            session: 1,
+            connected: 1,
+            ..AppSession::default()
+        })
+        .unwrap();
+    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    tool.from_app
+        .publish(app_msg(&SoloMessage::SetCurrentShot(1)))
+        .unwrap();
+    tool.expect_app(&SoloMessage::GetCurrentShot(1)).await;
+
+    let roi = Location {
+        lat_deg: -35.363,
+        lon_deg: 149.16523,
+        alt_m: 0.0,
+    };
+    tool.from_app
+        .publish(app_msg(&SoloMessage::Location(roi)))
+        .unwrap();
+    tool.expect_command(CommandKind::VelocityNed).await;
+
+    tool.vehicle(FlightMode::Guided);
+    tool.from_app
+        .publish(app_msg(&SoloMessage::ShotOptions { cruise_speed: 3.0 }))
+        .unwrap();
+    let Command::VelocityNed { vel_ned_mps, .. } =
+        tool.expect_command(CommandKind::VelocityNed).await
+    else {
+        unreachable!("a VelocityNed");
+    };
+    assert!(vel_ned_mps.iter().all(|v| v.is_finite()));
+
+    engine.stop().await;
+    drop(tool);
+    drop(tool_bus);
+    domain.remove_leftover_files();
+}

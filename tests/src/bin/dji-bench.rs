@@ -12,6 +12,11 @@
 //! and the vertical axis is not rotated by the vehicle's yaw), and the time from the
 //! publish call to that frame is its latency.
 //!
+//! Split, same run: a bus subscriber in this process on `skymesh/vehicle/1/command`
+//! sees each command as the gateway publishes it (`bus`: publish → gateway →
+//! iceoryx2 → subscriber wakes), so `drc − bus` is roughly autopilot-link's share
+//! (arbiter, MAVLink encode, TCP to the tap) — where the time goes.
+//!
 //! The baseline, in the same run and for the very same messages: a plain MQTT
 //! subscriber on `drc/down` on the same broker, the time from the publish call to its
 //! receipt (the broker hop every DRC command pays before the gateway sees it).
@@ -19,8 +24,9 @@
 //! `cargo run --release -p skymesh-e2e --bin dji-bench -- --commands 300`
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -30,6 +36,8 @@ use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
 use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
 use skymesh_e2e::{Mesh, MeshOptions};
+use skymesh_ipc_types::{topics, Command, ServiceId, VehicleCommand};
+use skymesh_runtime::{Bus, Stats};
 use tokio::sync::mpsc as tmpsc;
 
 /// Commands sent before the measured ones (the first switches the link, the stream
@@ -56,6 +64,45 @@ fn scan_setpoints(parser: &mut FrameParser, now: Instant, out: &mpsc::Sender<See
         };
         let _ = out.send(Seen { at: now, vel });
     }
+}
+
+/// A bus subscriber on vehicle 1's command topic, on its own thread: every
+/// `VelocityNed` with the time it was received, until `stop`.
+fn command_watch(mesh: &Mesh, stop: Arc<AtomicBool>) -> Result<mpsc::Receiver<Seen>> {
+    let domain = mesh.ipc_domain()?;
+    let (tx, rx) = mpsc::channel();
+    let (ready_tx, ready_rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let run = || -> Result<()> {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()?;
+            rt.block_on(async {
+                let bus = Bus::open(&domain, "dji-bench-split", ServiceId::Tool, 0, Stats::new())?;
+                let mut cmds = bus.subscriber::<VehicleCommand>(&topics::vehicle_command(1))?;
+                let _ = ready_tx.send(());
+                while !stop.load(Ordering::Relaxed) {
+                    if let Some(c) = cmds.recv_timeout(Duration::from_millis(200)).await? {
+                        let at = Instant::now();
+                        if let Ok(Command::VelocityNed { vel_ned_mps, .. }) = c.command() {
+                            let _ = tx.send(Seen {
+                                at,
+                                vel: vel_ned_mps,
+                            });
+                        }
+                    }
+                }
+                anyhow::Ok(())
+            })
+        };
+        if let Err(e) = run() {
+            eprintln!("command watch: {e:#}");
+        }
+    });
+    ready_rx
+        .recv_timeout(Duration::from_secs(10))
+        .context("command watch did not start")?;
+    Ok(rx)
 }
 
 /// One MQTT connection whose received publishes (topic, payload, arrival) go to a channel.
@@ -203,15 +250,21 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: Option<f64>) -> f64 {
         .map(|b| format!("  p50/baseline={:.1}x", p50 / b))
         .unwrap_or_default();
     println!(
-        "{name:<9} n={:<4} p50={p50:8.3} ms  p99={:8.3} ms  max={:8.3} ms{ratio}",
+        "{name:<10} n={:<4} p50={p50:8.3} ms  p99={:8.3} ms  p999={:8.3} ms  max={:8.3} ms{ratio}",
         ms.len(),
         percentile(&ms, 0.99),
+        percentile(&ms, 0.999),
         percentile(&ms, 1.0),
     );
     p50
 }
 
-async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> Result<()> {
+async fn bench(
+    mesh: &Mesh,
+    seen_rx: mpsc::Receiver<Seen>,
+    bus_rx: mpsc::Receiver<Seen>,
+    commands: usize,
+) -> Result<()> {
     skymesh_e2e::bench::take_off(mesh, 10.0).await?;
     let (host, port) = (mesh.mqtt_addr.ip().to_string(), mesh.mqtt_addr.port());
     let sn = mesh.gateway_sn.clone();
@@ -223,7 +276,15 @@ async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> R
         bail!("flight_authority_grab: result {r}");
     }
     let mut drc = Mqtt::connect("bench-drc", &host, port, &[topic("drc/up")]).await?;
-    let mut baseline = Mqtt::connect("bench-baseline", &host, port, &[topic("drc/down")]).await?;
+    // The broker delivers to subscribers in subscription order: `--baseline-last 1`
+    // subscribes the baseline after the gateway (it is served second), the default
+    // before it.
+    let baseline_last = arg("--baseline-last", 0) != 0;
+    let mut baseline = if baseline_last {
+        None
+    } else {
+        Some(Mqtt::connect("bench-baseline", &host, port, &[topic("drc/down")]).await?)
+    };
     let enter = json!({
         "mqtt_broker": {
             "address": format!("{host}:{port}"), "client_id": format!("drc-{sn}"),
@@ -243,7 +304,12 @@ async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> R
     drc.expect(&up, Duration::from_secs(5), |v| v["method"] == "heart_beat")
         .await
         .context("no heart_beat echo: DRC link not up")?;
+    let mut baseline = match baseline.take() {
+        Some(b) => b,
+        None => Mqtt::connect("bench-baseline", &host, port, &[topic("drc/down")]).await?,
+    };
     while seen_rx.try_recv().is_ok() {}
+    while bus_rx.try_recv().is_ok() {}
 
     // 10 Hz, each publish stamped just before the call.
     let total = WARMUP + commands;
@@ -266,6 +332,7 @@ async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> R
     }
     tokio::time::sleep(Duration::from_secs(1)).await;
     let seen: Vec<Seen> = seen_rx.try_iter().collect();
+    let on_bus: Vec<Seen> = bus_rx.try_iter().collect();
 
     // The baseline subscriber's receipts, by seq.
     let mut base_at: HashMap<u64, Instant> = HashMap::new();
@@ -297,15 +364,27 @@ async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> R
     }
 
     let (mut drc_ms, mut base_ms, mut unmatched) = (Vec::new(), Vec::new(), 0usize);
+    let (mut bus_ms, mut link_ms) = (Vec::new(), Vec::new());
     for (i, &(t0, h)) in sent.iter().enumerate().skip(WARMUP) {
         let end = sent.get(i + 1).map(|s| s.0 + Duration::from_secs(1));
         let want = -h as f32;
-        let hit = seen
-            .iter()
-            .find(|s| s.at >= t0 && end.is_none_or(|e| s.at < e) && (s.vel[2] - want).abs() < 1e-3);
+        let find = |list: &[Seen]| {
+            list.iter()
+                .find(|s| {
+                    s.at >= t0 && end.is_none_or(|e| s.at < e) && (s.vel[2] - want).abs() < 1e-3
+                })
+                .copied()
+        };
+        let hit = find(&seen);
         match hit {
             Some(s) => drc_ms.push((s.at - t0).as_secs_f64() * 1e3),
             None => unmatched += 1,
+        }
+        if let Some(b) = find(&on_bus) {
+            bus_ms.push((b.at - t0).as_secs_f64() * 1e3);
+            if let Some(s) = hit {
+                link_ms.push((s.at.saturating_duration_since(b.at)).as_secs_f64() * 1e3);
+            }
         }
         if let Some(at) = base_at.get(&(i as u64)) {
             base_ms.push((*at - t0).as_secs_f64() * 1e3);
@@ -315,10 +394,14 @@ async fn bench(mesh: &Mesh, seen_rx: mpsc::Receiver<Seen>, commands: usize) -> R
     let r = call(&mut cloud, &sn, "drc_mode_exit", json!({})).await?;
     println!(
         "dji-bench: {commands} drone_control at 10 Hz after {WARMUP} warm-up \
-         (publish on drc/down → SET_POSITION_TARGET_* with its velocity at the vehicle's port)"
+         (publish on drc/down → SET_POSITION_TARGET_* with its velocity at the vehicle's port); \
+         baseline subscribed {} the gateway",
+        if baseline_last { "after" } else { "before" }
     );
     let base_p50 = report("baseline", base_ms, None);
     report("drc", drc_ms, Some(base_p50));
+    report("split:bus", bus_ms, Some(base_p50));
+    report("split:link", link_ms, None);
     let mut results: Vec<_> = results.into_iter().collect();
     results.sort();
     println!(
@@ -352,7 +435,10 @@ fn main() -> Result<()> {
         .worker_threads(2)
         .enable_all()
         .build()?;
-    let outcome = rt.block_on(bench(&mesh, seen_rx, commands));
+    let stop_watch = Arc::new(AtomicBool::new(false));
+    let bus_rx = command_watch(&mesh, stop_watch.clone())?;
+    let outcome = rt.block_on(bench(&mesh, seen_rx, bus_rx, commands));
+    stop_watch.store(true, Ordering::Relaxed);
     // The MQTT tasks end with the runtime, before the broker goes away.
     rt.shutdown_timeout(Duration::from_secs(1));
     if outcome.is_err() {

@@ -8,7 +8,9 @@
 //! - `roi`: SOLO_MESSAGE_LOCATION (the orbit's ROI) → the first setpoint on the wire
 //!   (includes the engine's GUIDED switch, authority grab and ROI command);
 //! - `speed`: SOLO_SHOT_OPTIONS (cruise speed change) while orbiting → the first
-//!   setpoint whose velocity reflects it;
+//!   setpoint whose velocity reflects it (faster than every setpoint of the 500 ms
+//!   before); `speed>.05`: → the first one faster than 0.05 m/s (the acceleration
+//!   limit, 2 m/s², gets there 25 ms of steps after the change);
 //!
 //! and a baseline in the same run: the same TLV packet over loopback TCP to a thread
 //! that decodes it and writes a MAVLink setpoint over a second loopback TCP socket to
@@ -120,6 +122,40 @@ fn first_setpoint(
     bail!("no setpoint within 10 s")
 }
 
+/// A setpoint carries a speed change once it is this much faster than every
+/// setpoint of the 500 ms before (the smallest event step changes it by
+/// `max_accel` × 1 ms = 2 mm/s).
+const SPEED_EPS_MPS: f32 = 0.001;
+
+/// Waits for the first setpoints after `t0` satisfying `f` and `g`; their latencies.
+fn first_two(
+    rx: &mpsc::Receiver<Seen>,
+    t0: Instant,
+    f: impl Fn(&Seen) -> bool,
+    g: impl Fn(&Seen) -> bool,
+) -> Result<(Duration, Duration)> {
+    let deadline = t0 + Duration::from_secs(10);
+    let (mut a, mut b) = (None, None);
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(s) if s.at >= t0 => {
+                if a.is_none() && f(&s) {
+                    a = Some(s.at - t0);
+                }
+                if b.is_none() && g(&s) {
+                    b = Some(s.at - t0);
+                }
+                if let (Some(a), Some(b)) = (a, b) {
+                    return Ok((a, b));
+                }
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    bail!("no setpoint within 10 s")
+}
+
 fn drain<T>(rx: &mpsc::Receiver<T>) {
     while rx.try_recv().is_ok() {}
 }
@@ -216,9 +252,10 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: f64) {
     ms.sort_by(f64::total_cmp);
     let p50 = percentile(&ms, 0.5);
     println!(
-        "{name:<8} n={:<4} p50={p50:8.3} ms  p99={:8.3} ms  max={:8.3} ms  p50/baseline={:.0}x",
+        "{name:<9} n={:<4} p50={p50:8.3} ms  p99={:8.3} ms  p999={:8.3} ms  max={:8.3} ms  p50/baseline={:.0}x",
         ms.len(),
         percentile(&ms, 0.99),
+        percentile(&ms, 0.999),
         percentile(&ms, 1.0),
         p50 / base_p50
     );
@@ -269,6 +306,7 @@ fn main() -> Result<()> {
     };
 
     let (mut roi_ms, mut speed_ms, mut command_ms) = (Vec::new(), Vec::new(), Vec::new());
+    let mut moving_ms = Vec::new();
     for round in 0..rounds {
         app_w.write_all(&SoloMessage::SetCurrentShot(shots::ORBIT).to_bytes())?;
         expect_app(
@@ -283,15 +321,21 @@ fn main() -> Result<()> {
         drain(&seen_rx);
         let t0 = Instant::now();
         app_w.write_all(&SoloMessage::Location(roi).to_bytes())?;
-        // The engine reacts to the packet at once (GUIDED, ROI: MAVLink commands) and
-        // sends its first setpoint on its next 25 Hz tick.
+        // The engine reacts to the packet at once: GUIDED, ROI (MAVLink commands) and,
+        // with its event step, the first setpoint.
         command_ms.push(first_setpoint(&seen_rx, t0, |s| !is_setpoint(s))?.as_secs_f64() * 1e3);
         roi_ms.push(first_setpoint(&seen_rx, t0, is_setpoint)?.as_secs_f64() * 1e3);
 
         // Orbiting at 0 m/s: change the cruise speed and wait for a moving setpoint.
         std::thread::sleep(Duration::from_millis(500) + jitter(3));
         let speed = if round % 2 == 0 { 3.0 } else { -3.0 };
-        drain(&seen_rx);
+        // The setpoints' horizontal speed before the change (radial corrections
+        // only): a setpoint carries the change once it is faster than all of them.
+        let floor = seen_rx
+            .try_iter()
+            .filter(is_setpoint)
+            .map(|s| s.vel[0].hypot(s.vel[1]))
+            .fold(0.0f32, f32::max);
         let t0 = Instant::now();
         app_w.write_all(
             &SoloMessage::ShotOptions {
@@ -299,13 +343,14 @@ fn main() -> Result<()> {
             }
             .to_bytes(),
         )?;
-        speed_ms.push(
-            first_setpoint(&seen_rx, t0, |s| {
-                is_setpoint(s) && s.vel[0].hypot(s.vel[1]) > 0.05
-            })?
-            .as_secs_f64()
-                * 1e3,
-        );
+        let (changed, moving) = first_two(
+            &seen_rx,
+            t0,
+            |s| is_setpoint(s) && s.vel[0].hypot(s.vel[1]) > floor + SPEED_EPS_MPS,
+            |s| is_setpoint(s) && s.vel[0].hypot(s.vel[1]) > 0.05,
+        )?;
+        speed_ms.push(changed.as_secs_f64() * 1e3);
+        moving_ms.push(moving.as_secs_f64() * 1e3);
         std::thread::sleep(Duration::from_millis(300));
         app_w.write_all(&SoloMessage::SetCurrentShot(shots::NONE).to_bytes())?;
         expect_app(
@@ -325,6 +370,7 @@ fn main() -> Result<()> {
     report("command", command_ms, base_p50);
     report("roi", roi_ms, base_p50);
     report("speed", speed_ms, base_p50);
+    report("speed>.05", moving_ms, base_p50);
     mesh.stop(Duration::from_secs(10))?;
     Ok(())
 }

@@ -55,7 +55,11 @@ impl Engine {
             return;
         }
         self.app_heard(msg.session, now_ns);
+        let steers = steers_guidance(&decoded);
         self.dispatch(decoded, now_ns);
+        if steers && self.is_flying() {
+            self.step_requested = true;
+        }
     }
 
     fn dispatch(&mut self, msg: SoloMessage, now_ns: u64) {
@@ -357,6 +361,37 @@ impl Engine {
     }
 }
 
+/// App messages that can change what a flying shot commands (or start its flight):
+/// after one, the engine steps at once instead of on the next tick.
+fn steers_guidance(msg: &SoloMessage) -> bool {
+    use SoloMessage as M;
+    matches!(
+        msg,
+        M::SetCurrentShot(_)
+            | M::Location(_)
+            | M::RecordPosition
+            | M::CableCamOptions { .. }
+            | M::Pause
+            | M::FollowOptions { .. }
+            | M::FollowOptionsV2 { .. }
+            | M::ShotOptions { .. }
+            | M::SplinePlay
+            | M::SplineSeek { .. }
+            | M::SplinePathSettings { .. }
+            | M::SplineAttach(_)
+            | M::ZiplineOptions { .. }
+            | M::ZiplineLock
+            | M::PanoOptions { .. }
+            | M::RewindOptions { .. }
+            | M::InspectStart { .. }
+            | M::InspectSetWaypoint { .. }
+            | M::InspectMoveGimbal { .. }
+            | M::InspectMoveVehicle { .. }
+            | M::ScanStart
+            | M::SurveyStart
+    )
+}
+
 /// GoPro status "connected" (GOPRO_HEARTBEAT_STATUS_CONNECTED, the app's STATUS_GOPRO_CONNECTED).
 const GOPRO_CONNECTED: u8 = 2;
 
@@ -375,6 +410,10 @@ pub(crate) fn button(engine: &mut Engine, ev: &ButtonEvent, now_ns: u64) {
     };
     if kind != ButtonEventKind::Press {
         return;
+    }
+    if matches!(button, Button::Pause | Button::A | Button::B) {
+        // Pause and the shot's A/B change a flying shot's guidance: step at once.
+        engine.step_requested = true;
     }
     match button {
         Button::Fly if engine.active.is_some() => engine.exit_shot(ExitReason::FlyButton),

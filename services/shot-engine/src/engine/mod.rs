@@ -15,7 +15,27 @@
 //! | arbiter: authority, events, acks | [`Engine::handle_authority`], [`Engine::handle_arbiter_event`], [`Engine::handle_ack`] |
 //! | loop tick (`loop_hz`) | [`Engine::tick`]: steps the flying shot, then returns everything pending |
 //! | between ticks | [`Engine::drain`]: returns what the handlers produced |
+//! | after an app message or button | [`Engine::take_step_request`]: true when it changed a flying shot's guidance (tick now) |
 //!
+//! # Event steps
+//!
+//! An app message or button that changes what a *flying* shot does (ROI, locations,
+//! cruise speed, cable / follow / zipline / pano / spline options, pause, entering a
+//! shot that flies at once, Site Scan moves) asks for a step now
+//! ([`Engine::take_step_request`]); the service then runs [`Engine::tick`] at once,
+//! so the new guidance reaches the arbiter without waiting up to a loop period.
+//! The loop keeps its phase: the periodic tick still comes when it was due. Every
+//! step uses its measured `dt`, so the acceleration limit holds however the steps
+//! are spaced, and the periodic tick after an event step continues the ramp the
+//! event step began (restarting the period instead would shift the whole ramp by up
+//! to a period: the first setpoint sooner, every later speed reached later). That
+//! tick can carry a setpoint close to the event step's (a shot already at its
+//! target): harmless, it is one extra setpoint per app message or button press
+//! (human rate), the steady-state rate stays `loop_hz`, and the gap between
+//! setpoints never exceeds the period, which is what the arbiter's freshness check
+//! watches. Follow-stream positions do not ask for a step: they are a stream of
+//! their own (the app's 25 Hz), and stepping on each would double the setpoint rate.
+
 //! # Shots (this milestone: selfie, orbit, cable cam, follow)
 //!
 //! A shot is *entered* (SET_CURRENT_SHOT from the app, or A/B mapped to it) after the
@@ -185,6 +205,9 @@ pub struct Engine {
     fence: geofence::FenceState,
     /// Breadcrumbs, rewind options, the home told to the app (`rewind.rs`).
     rewind: rewind::RewindState,
+    /// An app message or button changed the flying shot's guidance since the last
+    /// step: step now rather than on the next tick (see "Event steps").
+    step_requested: bool,
 }
 
 impl Engine {
@@ -231,6 +254,7 @@ impl Engine {
             payload_used: false,
             fence: geofence::FenceState::default(),
             rewind: rewind::RewindState::default(),
+            step_requested: false,
         }
     }
 
@@ -313,8 +337,16 @@ impl Engine {
         app::button(self, event, now_ns);
     }
 
+    /// True (once) when an app message or button since the last step changed the
+    /// guidance of a flying shot: the caller should [`Engine::tick`] now (keeping its
+    /// loop's phase; see "Event steps").
+    pub fn take_step_request(&mut self) -> bool {
+        std::mem::take(&mut self.step_requested) && self.is_flying()
+    }
+
     /// Steps the flying shot and returns everything pending.
     pub fn tick(&mut self, now_ns: u64) -> Outputs {
+        self.step_requested = false;
         if self.out.app_connected
             && now_ns.saturating_sub(self.app_heard_ns)
                 > u64::try_from(self.settings.app_session_timeout.as_nanos()).unwrap_or(u64::MAX)

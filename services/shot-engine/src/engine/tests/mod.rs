@@ -2,6 +2,7 @@
 //! processes, no bus, no clock.
 
 mod entry;
+mod event_steps;
 mod exits;
 mod follow;
 mod geofence;
