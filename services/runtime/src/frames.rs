@@ -11,7 +11,7 @@
 
 use std::collections::HashMap;
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -20,7 +20,9 @@ use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 use tokio::io::unix::AsyncFd;
 
 use crate::clock::monotonic_ns;
-use crate::ipc::{ipc_err, wait_listener, with_retry, Bus, IpcError, ListenerFd, Svc, WaitSource};
+use crate::ipc::{
+    ipc_err, poll_listener, wait_listener, with_retry, Bus, IpcError, ListenerFd, Svc, WaitSource,
+};
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
 
@@ -359,6 +361,31 @@ impl FrameSubscriber {
                 return Ok(r);
             }
             wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+        }
+    }
+
+    /// Waits on the calling thread, without an async runtime, for the next frame and
+    /// hands it to `read` in place (see [`FrameSubscriber::try_recv_with`]): blocks in
+    /// the kernel on the stream's event, as a blocking socket read does. `None` after
+    /// `timeout` without a frame; `timeout = None` waits indefinitely.
+    pub fn recv_blocking_with<R>(
+        &self,
+        timeout: Option<Duration>,
+        mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
+    ) -> Result<Option<R>, FrameError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
+        loop {
+            if let Some(r) = self.try_recv_with(&mut read)? {
+                return Ok(Some(r));
+            }
+            let left = match deadline {
+                None => None,
+                Some(d) => match d.saturating_duration_since(Instant::now()) {
+                    left if left.is_zero() => return Ok(None),
+                    left => Some(left),
+                },
+            };
+            poll_listener(&self.listener, left, &self.topic)?;
         }
     }
 

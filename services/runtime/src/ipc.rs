@@ -496,7 +496,7 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
 /// `blocking_wait`/`timed_wait` would also switch the socket between blocking and
 /// non-blocking and set a receive timeout (four `fcntl` and a `setsockopt` per
 /// wake-up, measured with strace).
-fn poll_listener(
+pub(crate) fn poll_listener(
     listener: &Listener<Svc>,
     timeout: Option<Duration>,
     topic: &str,

@@ -140,20 +140,27 @@ async fn a_frame_crosses_processes_intact() {
     let mut to_child = child.stdin.take().unwrap();
 
     for k in 0..FRAMES.len() {
-        let (hd, len, sum, mapping) = tokio::time::timeout(
-            Duration::from_secs(20),
-            sub.recv_with(|hd, pixels| {
-                (
-                    *hd,
-                    pixels.len(),
-                    fnv1a(pixels),
-                    mapping_of(pixels.as_ptr() as usize),
-                )
-            }),
-        )
-        .await
-        .expect("frame not received in time")
-        .unwrap();
+        let read = |hd: &FrameHeader, pixels: &[u8]| {
+            (
+                *hd,
+                pixels.len(),
+                fnv1a(pixels),
+                mapping_of(pixels.as_ptr() as usize),
+            )
+        };
+        // Even frames through the async receive, odd ones through the blocking one.
+        let (hd, len, sum, mapping) = if k % 2 == 0 {
+            tokio::time::timeout(Duration::from_secs(20), sub.recv_with(read))
+                .await
+                .expect("frame not received in time")
+                .unwrap()
+        } else {
+            tokio::task::block_in_place(|| {
+                sub.recv_blocking_with(Some(Duration::from_secs(20)), read)
+            })
+            .unwrap()
+            .expect("frame not received in time")
+        };
         assert_eq!(len, frame_len(k), "frame {k}");
         assert_eq!(hd.payload_len as usize, len);
         assert_eq!(sum, expected_checksum(k), "pixels of frame {k}");

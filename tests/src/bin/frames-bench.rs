@@ -19,7 +19,7 @@
 //! - `xfer` (transfer only): the frame is already written when the clock starts and
 //!   the receiver does not read the pixels. iceoryx2: the publisher loans and writes
 //!   the frame (not timed); the bus stamps `header.stamp_ns` just before `send`; the
-//!   receiver's time is taken in `recv_with`'s closure, when it holds the sample
+//!   receiver's time is taken in `recv_blocking_with`'s closure, when it holds the sample
 //!   (header read, pixels untouched but the first and last byte checked after the
 //!   clock stopped). Socket: header and pixels already in one buffer, stamped just
 //!   before one `write_all`; receipt after `read_exact` of the whole frame (a socket
@@ -292,50 +292,40 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
 fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<()> {
     let domain = Domain::load(domain, None)?;
     let bus = Bus::open(&domain, "bench-reader", ServiceId::Tool, 0, Stats::new())?;
-    let mut sub = bus.frame_subscriber(&topics::camera_frames("bench"))?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
+    let sub = bus.frame_subscriber(&topics::camera_frames("bench"))?;
     let mut tally = Tally::new(frames, WARMUP);
     println!("ready");
-    rt.block_on(async {
-        loop {
-            let got = tokio::time::timeout(
-                IDLE_END,
-                sub.recv_with(|hd, pixels| {
-                    let k = hd.frame_seq as usize;
-                    match mode {
-                        Mode::Full => {
-                            let sum = byte_sum(pixels);
-                            let t1 = monotonic_ns();
-                            (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
-                        }
-                        Mode::Xfer => {
-                            let t1 = monotonic_ns();
-                            let ends = (
-                                pixels.first().copied().unwrap_or(0),
-                                pixels.last().copied().unwrap_or(0),
-                            );
-                            (k, hd.header.stamp_ns, t1, pixels.len(), 0, ends)
-                        }
-                    }
-                }),
-            )
-            .await;
-            let Ok(got) = got else { break };
-            let (k, t0, t1, n, sum, ends) = got?;
-            ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
-            match mode {
-                Mode::Full => check_sum(k, n, sum)?,
-                Mode::Xfer => check_ends(k, ends)?,
+    // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
+    // receiver blocks in `read_exact`: the same wake pattern on both sides.
+    while let Some(got) = sub.recv_blocking_with(Some(IDLE_END), |hd, pixels| {
+        let k = hd.frame_seq as usize;
+        match mode {
+            Mode::Full => {
+                let sum = byte_sum(pixels);
+                let t1 = monotonic_ns();
+                (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
             }
-            tally.add(k, t0, t1);
-            if k + 1 >= frames {
-                break;
+            Mode::Xfer => {
+                let t1 = monotonic_ns();
+                let ends = (
+                    pixels.first().copied().unwrap_or(0),
+                    pixels.last().copied().unwrap_or(0),
+                );
+                (k, hd.header.stamp_ns, t1, pixels.len(), 0, ends)
             }
         }
-        anyhow::Ok(())
-    })?;
+    })? {
+        let (k, t0, t1, n, sum, ends) = got;
+        ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
+        match mode {
+            Mode::Full => check_sum(k, n, sum)?,
+            Mode::Xfer => check_ends(k, ends)?,
+        }
+        tally.add(k, t0, t1);
+        if k + 1 >= frames {
+            break;
+        }
+    }
     tally.report()
 }
 
