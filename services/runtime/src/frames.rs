@@ -21,7 +21,7 @@ use tokio::io::unix::AsyncFd;
 
 use crate::clock::monotonic_ns;
 use crate::ipc::{
-    ipc_err, poll_listener, wait_listener, with_retry, Bus, IpcError, ListenerFd, Svc, WaitSource,
+    ipc_err, wait_listener, with_retry, BlockingWait, Bus, IpcError, ListenerFd, Svc, WaitSource,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -129,6 +129,7 @@ impl Bus {
         let stats = self.stats();
         Ok(FrameSubscriber {
             afd: None,
+            blocking: BlockingWait::default(),
             listener,
             port,
             received: stats.counter("skymesh_topic_samples_received_total", &labels),
@@ -243,6 +244,8 @@ impl FramePublisher {
 pub struct FrameSubscriber {
     // Declared first: must drop before `listener` (see `ipc::ListenerFd`).
     afd: Option<AsyncFd<ListenerFd>>,
+    // The listener's fd in an epoll set, for `recv_blocking_with`; also dropped first.
+    blocking: BlockingWait,
     listener: Listener<Svc>,
     port: iceoryx2::port::subscriber::Subscriber<Svc, [u8], FrameHeader>,
     received: Counter,
@@ -385,7 +388,7 @@ impl FrameSubscriber {
                     left => Some(left),
                 },
             };
-            poll_listener(&self.listener, left, &self.topic)?;
+            self.blocking.wait(&self.listener, left, &self.topic)?;
         }
     }
 

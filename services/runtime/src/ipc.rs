@@ -8,7 +8,7 @@
 use std::ops::ControlFlow;
 use std::os::fd::{AsRawFd, BorrowedFd, RawFd};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use iceoryx2::config::Config;
@@ -17,7 +17,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::ipc_threadsafe;
-use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::sys::epoll::{Epoll, EpollCreateFlags, EpollEvent, EpollFlags, EpollTimeout};
 use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
@@ -440,6 +440,7 @@ impl Bus {
         let stats = &self.inner.stats;
         Ok(Subscriber {
             afd: None,
+            blocking: BlockingWait::default(),
             listener,
             port,
             received: stats.counter("skymesh_topic_samples_received_total", &labels),
@@ -451,6 +452,7 @@ impl Bus {
             ),
             last_seq: Mutex::new(Vec::new()),
             spin: Duration::ZERO,
+            newest_only: false,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -490,38 +492,62 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
     Ok(unsafe { AsyncFd::register_with_interest(fd, tokio::io::Interest::READABLE) }?)
 }
 
-/// Blocks until `listener`'s socket is readable or `timeout` passes (`None` waits
-/// indefinitely), then consumes the notifications with the non-blocking
-/// `try_wait`. One `poll` plus the listener's reads, where the listener's own
-/// `blocking_wait`/`timed_wait` would also switch the socket between blocking and
-/// non-blocking and set a receive timeout (four `fcntl` and a `setsockopt` per
-/// wake-up, measured with strace).
-pub(crate) fn poll_listener(
-    listener: &Listener<Svc>,
-    timeout: Option<Duration>,
-    topic: &str,
-) -> Result<(), IpcError> {
-    let timeout = match timeout {
-        None => PollTimeout::NONE,
-        // Rounded up to whole milliseconds (poll's resolution); never 0 = no wait.
-        Some(t) => {
-            PollTimeout::try_from(t.as_micros().div_ceil(1000).max(1)).unwrap_or(PollTimeout::MAX)
+/// Blocking waits on a listener's socket without an async runtime: the fd sits in a
+/// private epoll set (created on the first wait), so a wait is one `epoll_wait` plus
+/// the listener's non-blocking read. Measured against the alternatives (strace,
+/// samples-bench): the listener's own `blocking_wait`/`timed_wait` also switch the
+/// socket between blocking and non-blocking and set a receive timeout (four `fcntl`
+/// and a `setsockopt` per wake-up), and a `poll` sets up and tears down its wait
+/// queue entry on every call, where epoll keeps it registered.
+#[derive(Debug, Default)]
+pub(crate) struct BlockingWait(OnceLock<Epoll>);
+
+impl BlockingWait {
+    /// Blocks until `listener`'s socket is readable or `timeout` passes (`None` waits
+    /// indefinitely), then consumes the notifications with the non-blocking
+    /// `try_wait`. Returns without error on a timeout or a signal: callers look for
+    /// samples either way.
+    pub(crate) fn wait(
+        &self,
+        listener: &Listener<Svc>,
+        timeout: Option<Duration>,
+        topic: &str,
+    ) -> Result<(), IpcError> {
+        let err = |e: nix::errno::Errno| IpcError::Wait {
+            topic: topic.to_string(),
+            source: e.into(),
+        };
+        let epoll = match self.0.get() {
+            Some(epoll) => epoll,
+            None => {
+                let epoll = Epoll::new(EpollCreateFlags::EPOLL_CLOEXEC).map_err(err)?;
+                epoll
+                    .add(
+                        listener_fd(listener),
+                        EpollEvent::new(EpollFlags::EPOLLIN, 0),
+                    )
+                    .map_err(err)?;
+                // Two threads racing here each built one; the loser's is dropped.
+                let _ = self.0.set(epoll);
+                self.0.get().expect("set above")
+            }
+        };
+        let timeout = match timeout {
+            None => EpollTimeout::NONE,
+            // Rounded up to whole milliseconds (epoll's resolution); never 0 = no wait.
+            Some(t) => EpollTimeout::try_from(t.as_micros().div_ceil(1000).max(1))
+                .unwrap_or(EpollTimeout::MAX),
+        };
+        let mut events = [EpollEvent::empty()];
+        match epoll.wait(&mut events, timeout) {
+            Ok(_) | Err(nix::errno::Errno::EINTR) => {}
+            Err(e) => return Err(err(e)),
         }
-    };
-    let mut fds = [PollFd::new(listener_fd(listener), PollFlags::POLLIN)];
-    match poll(&mut fds, timeout) {
-        Ok(_) | Err(nix::errno::Errno::EINTR) => {}
-        Err(e) => {
-            return Err(IpcError::Wait {
-                topic: topic.to_string(),
-                source: e.into(),
-            })
-        }
+        listener
+            .try_wait(|_| {})
+            .map_err(|e| ipc_err("listener wait", topic, e))?;
+        Ok(())
     }
-    listener
-        .try_wait(|_| {})
-        .map_err(|e| ipc_err("listener wait", topic, e))?;
-    Ok(())
 }
 
 /// Waits until `listener`'s event fires, registering it with tokio (in `afd`) on first
@@ -627,6 +653,8 @@ pub struct Subscriber<T: Sample> {
     // Declared first: must drop before `listener` (see `ListenerFd`). Registered
     // with tokio on the first `recv`, so blocking users need no runtime.
     afd: Option<AsyncFd<ListenerFd>>,
+    // The listener's fd in an epoll set, for `recv_blocking`; also dropped first.
+    blocking: BlockingWait,
     listener: Listener<Svc>,
     port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
     received: Counter,
@@ -640,6 +668,8 @@ pub struct Subscriber<T: Sample> {
     /// How long a receive polls shared memory before it blocks (see
     /// [`Subscriber::set_spin`]); zero = block at once.
     spin: Duration,
+    /// Overwritten samples are expected, not lost (see `set_newest_only`).
+    newest_only: bool,
     topic: String,
     _bus: Bus,
 }
@@ -699,10 +729,18 @@ impl<T: Sample> Subscriber<T> {
         };
         if let Some(prev) = prev {
             // A lower sequence means the publisher restarted; not a loss.
-            if h.seq > prev + 1 {
+            if h.seq > prev + 1 && !self.newest_only {
                 self.lost.add(h.seq - prev - 1);
             }
         }
+    }
+
+    /// Declares that this subscriber wants only the newest value (it reads with
+    /// [`Subscriber::latest`] at its own rate, slower than the publisher's), so
+    /// samples overwritten in its buffer before it looked are by design and are not
+    /// counted in `skymesh_topic_samples_lost_total`.
+    pub fn set_newest_only(&mut self) {
+        self.newest_only = true;
     }
 
     /// Low-latency receive for the consumers that need it: before blocking, every
@@ -766,7 +804,7 @@ impl<T: Sample> Subscriber<T> {
                     Some(left)
                 }
             };
-            poll_listener(&self.listener, left, &self.topic)?;
+            self.blocking.wait(&self.listener, left, &self.topic)?;
         }
     }
 

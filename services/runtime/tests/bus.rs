@@ -229,3 +229,43 @@ fn recv_blocking_waits_wakes_and_times_out_with_and_without_spin() {
         });
     }
 }
+
+/// Samples overwritten before a slow reader looked are counted as lost, unless the
+/// subscriber declared it reads only the newest value.
+#[test]
+fn overwritten_samples_count_as_lost_unless_the_subscriber_wants_only_the_newest() {
+    for newest_only in [false, true] {
+        let d = domain(if newest_only { "nw1" } else { "nw0" });
+        let stats = Stats::new();
+        let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+        let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, stats.clone()).unwrap();
+        let topic = topics::vehicle_state(4);
+        let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+        if newest_only {
+            sub.set_newest_only();
+        }
+        let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+        publ.publish(VehicleState::default()).unwrap();
+        assert!(sub.latest().unwrap().is_some());
+        // Far more than the topic's buffer holds, then read only the newest.
+        for i in 0..100 {
+            publ.publish(VehicleState {
+                lat_deg: f64::from(i),
+                ..Default::default()
+            })
+            .unwrap();
+        }
+        assert_eq!(sub.latest().unwrap().unwrap().lat_deg, 99.0);
+        let lost = stats
+            .counter(
+                "skymesh_topic_samples_lost_total",
+                &[("topic", &topic.name)],
+            )
+            .get();
+        if newest_only {
+            assert_eq!(lost, 0);
+        } else {
+            assert!(lost > 0, "overwritten samples not counted");
+        }
+    }
+}

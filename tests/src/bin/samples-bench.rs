@@ -145,6 +145,15 @@ fn main() -> anyhow::Result<()> {
             let mut only: Option<Vec<String>> = None;
             let mut it = args.iter().skip(1);
             while let Some(a) = it.next() {
+                if a == "-h" || a == "--help" {
+                    println!(
+                        "usage: samples-bench [SCALE] [--only NAME,...]\n\
+                         iceoryx2 (skymesh bus) vs loopback UDP, one way at 100 Hz, 1 kHz and\n\
+                         back to back, then ping-pong; SCALE multiplies the message counts;\n\
+                         --only runs the named receivers / ping-pong modes (e.g. iox-blk,udp-blk)"
+                    );
+                    return Ok(());
+                }
                 if a == "--only" {
                     let list = it
                         .next()
