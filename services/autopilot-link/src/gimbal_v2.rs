@@ -406,12 +406,26 @@ impl GimbalV2 {
             .collect()
     }
 
-    /// When [`poll`](Self::poll) has something to do next.
-    pub fn next_deadline_ns(&self) -> u64 {
+    /// When [`poll`](Self::poll) has something to do next. With no camera shown and
+    /// none still marked announced, a telemetry slot would send nothing: no slot is
+    /// due until a new [`on_state`](Self::on_state) shows a camera (the service
+    /// waits for every `VisionState` and asks again after it), so a mesh without a
+    /// vision pipeline does not wake 10 times a second for nothing.
+    pub fn next_deadline_ns(&self, now_ns: u64) -> u64 {
+        let slot = if self.slots_idle(now_ns) {
+            u64::MAX
+        } else {
+            self.next_slot_ns
+        };
         self.pending
             .values()
             .map(|p| p.deadline_ns)
-            .fold(self.next_slot_ns, u64::min)
+            .fold(slot, u64::min)
+    }
+
+    /// True when a telemetry slot at `now_ns` would do nothing.
+    fn slots_idle(&self, now_ns: u64) -> bool {
+        self.slots.iter().all(|s| !s.announced) && self.active(now_ns).is_empty()
     }
 
     fn time_boot_ms(&self, now_ns: u64) -> u32 {
@@ -1160,6 +1174,29 @@ mod tests {
             message: FixedStr::new("why"),
             ..VisionReply::default()
         }
+    }
+
+    #[test]
+    fn no_slot_is_due_while_no_camera_is_shown() {
+        let mut g = gimbals();
+        // Nothing shown, nothing announced: no telemetry slot to wait for.
+        assert_eq!(g.next_deadline_ns(T0), u64::MAX);
+        // A camera shown: slots run, and the first announces it.
+        g.on_state(&state(&[1], T0));
+        let due = g.next_deadline_ns(T0);
+        assert!(due <= T0 + SLOT_NS);
+        let mut out = Output::default();
+        g.poll(due.max(T0), &mut out);
+        assert!(!out.sends.is_empty());
+        // The state goes stale: one more slot un-announces the camera (so it
+        // announces itself again when it returns), then nothing is due.
+        let stale = T0 + STATE_FRESH_NS;
+        let due = g.next_deadline_ns(stale);
+        assert_ne!(due, u64::MAX);
+        let mut out = Output::default();
+        g.poll(stale.max(due), &mut out);
+        assert!(out.sends.is_empty());
+        assert_eq!(g.next_deadline_ns(stale + SLOT_NS), u64::MAX);
     }
 
     #[test]

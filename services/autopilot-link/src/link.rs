@@ -7,9 +7,10 @@
 //! service's [`LinkEvent`] channel; and a writer that drains the [`Outbox`]:
 //! our own messages (queued through [`LinkWriter`], serialised with our header and
 //! sequence) before frames the router forwards from endpoints, each kind bounded
-//! on its own so ground-station traffic can never crowd out our commands. Both poll
-//! a stop flag at least every [`POLL`], so a shutdown or a reconnect never waits
-//! on a blocked read.
+//! on its own so ground-station traffic can never crowd out our commands. The
+//! reader polls a stop flag at least every [`POLL`], so a shutdown or a reconnect
+//! never waits on a blocked read; the writer sleeps until there is something to
+//! write or the outbox is closed (which every stop does).
 //!
 //! COMMAND_ACKs that answer an endpoint's command (decided by the
 //! [`AckLedger`], fed by the writer) are forwarded but not given to the service.
@@ -150,20 +151,24 @@ impl Outbox {
         Ok(())
     }
 
-    /// The next thing to write, waiting at most `timeout`.
-    fn next(&self, timeout: Duration) -> Option<Outgoing> {
+    /// The next thing to write, waiting as long as it takes; `None` once closed.
+    /// No timeout: every way a connection ends closes the outbox ([`StopGuard`],
+    /// the writer's own end), which wakes this wait, so an idle link costs the
+    /// writer thread no periodic wake-ups.
+    fn next(&self) -> Option<Outgoing> {
         let mut s = self.lock();
-        if s.own.is_empty() && s.forwarded.is_empty() && !s.closed {
-            s = self
-                .ready
-                .wait_timeout(s, timeout)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
+        loop {
+            if s.closed {
+                return None;
+            }
+            if let Some(m) = s.own.pop_front() {
+                return Some(Outgoing::Own(m));
+            }
+            if let Some(f) = s.forwarded.pop_front() {
+                return Some(Outgoing::Forwarded(f));
+            }
+            s = self.ready.wait(s).unwrap_or_else(PoisonError::into_inner);
         }
-        if let Some(m) = s.own.pop_front() {
-            return Some(Outgoing::Own(m));
-        }
-        s.forwarded.pop_front().map(Outgoing::Forwarded)
     }
 
     fn close(&self) {
@@ -377,7 +382,7 @@ async fn serve(
         _ = shutdown.cancelled() => ("shutdown".to_string(), false, false),
     };
     drop(guard);
-    // Both threads see the flag within POLL. The reader may be waiting for room in
+    // The reader sees the flag within POLL, the writer at once (closed outbox). The reader may be waiting for room in
     // the event channel; the service keeps draining it until it drops the receiver.
     if !reader_done {
         let _ = reader.await;
@@ -506,7 +511,7 @@ struct WriteContext<'a> {
 fn write_loop(writer: &mut transport::Writer, ctx: &WriteContext<'_>, stop: &AtomicBool) -> String {
     let mut sequence: u8 = 0;
     while !stop.load(Ordering::Relaxed) {
-        match ctx.outbox.next(POLL) {
+        match ctx.outbox.next() {
             Some(Outgoing::Own(msg)) => {
                 let header = MavHeader {
                     sequence,
@@ -535,7 +540,8 @@ fn write_loop(writer: &mut transport::Writer, ctx: &WriteContext<'_>, stop: &Ato
                 }
                 ctx.hub.forwarded_to_autopilot();
             }
-            None => {}
+            // Closed: the connection is ending.
+            None => break,
         }
     }
     "stopped".to_string()

@@ -1,5 +1,7 @@
 //! The gateway's one loop: MQTT events, replies and events from the tasks, DRC
 //! notices and a tick → checks, dispatch, the outbox, the authority keep-alive.
+//! The tick runs only when something needs it (see [`Gateway::next_tick`]): an idle
+//! gateway wakes for MQTT and bus traffic alone.
 //!
 //! Inbound messages go through [`crate::inbound::classify`]: what cannot be replied
 //! to is counted by kind and warned at most every 10 s per kind; a request refused
@@ -28,8 +30,12 @@ use crate::outbox::{OutMessage, Outbox};
 use crate::ratelimit::RateLimiter;
 use crate::shared::{Emitter, Keep, Outgoing, Shared};
 
-/// Outbox draining, re-sends and gauges.
+/// Outbox draining, the authority keep-alive and the task gauges, while any of them
+/// has something to do.
 const TICK: Duration = Duration::from_millis(50);
+/// The longest wait with nothing scheduled: a tick that finds nothing to do; only
+/// bounds the wait, no deadline depends on it.
+const IDLE_WAIT: Duration = Duration::from_secs(60);
 
 /// Milliseconds since the Unix epoch (envelope timestamps).
 pub fn now_ms() -> u64 {
@@ -240,6 +246,25 @@ impl Gateway {
         self.metrics.queued.set(self.outbox.queued() as f64);
     }
 
+    /// When [`Gateway::tick`] next has work: every [`TICK`] while the client's queue
+    /// was full (retry the drain), while the cloud keeps an authority (keep-alive,
+    /// loss detection) or while a flight task, POI or panorama runs (their gauges);
+    /// else at the next event re-send (while connected); else not at all (`None`):
+    /// what changes that arrives as an MQTT event, a task's message or a notice,
+    /// after which this is asked again.
+    fn next_tick(&self, now: Instant) -> Option<Instant> {
+        let busy = (self.connected && self.outbox.queued() > 0)
+            || self.keep.get(AuthorityDomain::Flight)
+            || self.keep.get(AuthorityDomain::Payload)
+            || self.dispatcher.task_active()
+            || self.dispatcher.poi_active()
+            || self.dispatcher.pano_active();
+        if busy {
+            return Some(now + TICK);
+        }
+        self.connected.then(|| self.outbox.next_resend()).flatten()
+    }
+
     fn tick(&mut self, now: Instant) {
         if self.connected {
             let round = self.outbox.resend_due(now);
@@ -254,6 +279,10 @@ impl Gateway {
         }
         self.drain();
         self.keepalive();
+        self.update_gauges();
+    }
+
+    fn update_gauges(&self) {
         self.metrics
             .task_active
             .set(f64::from(u8::from(self.dispatcher.task_active())));
@@ -368,9 +397,9 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
     ctx.ready();
     ctx.set_state(ServiceState::Degraded);
     let mut ever_connected = false;
-    let mut tick = tokio::time::interval(TICK);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut next_tick = Some(Instant::now() + TICK);
     loop {
+        let wake = next_tick.unwrap_or_else(|| Instant::now() + IDLE_WAIT);
         tokio::select! {
             _ = ctx.shutdown.cancelled() => break,
             ev = mqtt_events.recv() => match ev {
@@ -409,8 +438,16 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
                 gw.on_notice(n, Instant::now());
                 gw.drain();
             }
-            _ = tick.tick() => gw.tick(Instant::now()),
+            _ = tokio::time::sleep_until(wake.into()) => gw.tick(Instant::now()),
         }
+        gw.update_gauges();
+        let now = Instant::now();
+        // A tick that was already due stays on its time (the interval it replaces
+        // did not move on events either).
+        next_tick = match (next_tick, gw.next_tick(now)) {
+            (Some(old), Some(new)) if old > now => Some(old.min(new)),
+            (_, new) => new,
+        };
     }
     // Publish what is still queued (replies to the last requests) while the client
     // can take it; the MQTT task sends a DISCONNECT once it sees the shutdown.

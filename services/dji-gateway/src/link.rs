@@ -2,6 +2,13 @@
 //! the latest vehicle samples in a `watch` channel, and `VehicleCommand`s (source
 //! `dji_drc`) published with their `CommandAck` awaited.
 //!
+//! The latest-value topics (state at the autopilot's `attitude_hz`, status, payload,
+//! authority) are not awaited sample by sample while nobody waits for their changes:
+//! [`VehicleLink::snapshot`] reads the newest samples when asked, so an idle gateway
+//! is not woken 50+ times a second. While a [`VehicleLink::watch`] receiver exists
+//! (a DRC session, a panorama settling, a wait for authority) the bus task awaits
+//! every sample and the watch sees each change as it arrives.
+//!
 //! | topic | direction | type |
 //! |---|---|---|
 //! | `skymesh/vehicle/{id}/command` | publish | `VehicleCommand` (source `dji_drc`) |
@@ -13,7 +20,7 @@
 //! | `skymesh/vehicle/{id}/arbiter_events` | subscribe | `ArbiterEvent` |
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -23,8 +30,8 @@ use skymesh_ipc_types::{
     ArbiterEvent, AuthorityDomain, AuthorityState, Command, CommandAck, CommandError,
     CommandSource, PayloadState, VehicleCommand, VehicleState, VehicleStatus,
 };
-use skymesh_runtime::{Bus, CancellationToken, Publisher};
-use tokio::sync::{broadcast, oneshot, watch};
+use skymesh_runtime::{Bus, CancellationToken, IpcError, Publisher, Subscriber};
+use tokio::sync::{broadcast, oneshot, watch, Notify};
 
 /// Our command source.
 pub const SOURCE: CommandSource = CommandSource::DjiDrc;
@@ -70,6 +77,100 @@ pub enum CommandFailure {
 
 type Pending = Arc<Mutex<HashMap<u32, oneshot::Sender<CommandAck>>>>;
 
+/// The subscriptions behind the [`Snapshot`].
+#[derive(Debug)]
+struct LatestPorts {
+    state: Subscriber<VehicleState>,
+    status: Subscriber<VehicleStatus>,
+    payload: Subscriber<PayloadState>,
+    authority: Subscriber<AuthorityState>,
+}
+
+impl LatestPorts {
+    /// Takes what is pending (without waiting) into the watch; notifies its
+    /// receivers only if something came.
+    fn refresh(&self, tx: &watch::Sender<Snapshot>) -> Result<(), IpcError> {
+        let state = self.state.latest()?;
+        let status = self.status.latest()?;
+        let payload = self.payload.latest()?;
+        let authority = self.authority.latest()?;
+        if state.is_some() || status.is_some() || payload.is_some() || authority.is_some() {
+            tx.send_modify(|x| {
+                x.state = state.or(x.state);
+                x.status = status.or(x.status);
+                x.payload = payload.or(x.payload);
+                x.authority = authority.or(x.authority);
+            });
+        }
+        Ok(())
+    }
+
+    /// Waits for the next sample of any of them and puts it into the watch.
+    /// Cancel-safe (every branch is).
+    async fn next(&mut self, tx: &watch::Sender<Snapshot>) -> Result<(), (&'static str, IpcError)> {
+        tokio::select! {
+            r = self.state.recv() => {
+                let v = r.map_err(|e| ("vehicle state", e))?;
+                tx.send_modify(|x| x.state = Some(v));
+            }
+            r = self.status.recv() => {
+                let v = r.map_err(|e| ("vehicle status", e))?;
+                tx.send_modify(|x| x.status = Some(v));
+            }
+            r = self.payload.recv() => {
+                let v = r.map_err(|e| ("payload", e))?;
+                tx.send_modify(|x| x.payload = Some(v));
+            }
+            r = self.authority.recv() => {
+                let v = r.map_err(|e| ("authority", e))?;
+                tx.send_modify(|x| x.authority = Some(v));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the bus task and every clone share about the latest-value topics.
+#[derive(Debug)]
+struct Latest {
+    tx: watch::Sender<Snapshot>,
+    /// The subscriptions while nobody watches (the bus task holds them otherwise).
+    ports: Mutex<Option<LatestPorts>>,
+    /// Live [`Watch`]es: while above zero the bus task awaits every sample.
+    watchers: AtomicUsize,
+    /// Wakes the bus task when `watchers` goes from or to zero.
+    watchers_changed: Notify,
+}
+
+/// A [`watch::Receiver`] of the [`Snapshot`] that keeps the bus task following
+/// every sample while it lives (derefs to the receiver).
+#[derive(Debug)]
+pub struct Watch {
+    rx: watch::Receiver<Snapshot>,
+    latest: Arc<Latest>,
+}
+
+impl std::ops::Deref for Watch {
+    type Target = watch::Receiver<Snapshot>;
+    fn deref(&self) -> &Self::Target {
+        &self.rx
+    }
+}
+
+impl std::ops::DerefMut for Watch {
+    fn deref_mut(&mut self) -> &mut Self::Target {
+        &mut self.rx
+    }
+}
+
+impl Drop for Watch {
+    fn drop(&mut self) {
+        if self.latest.watchers.fetch_sub(1, Ordering::AcqRel) == 1 {
+            self.latest.watchers_changed.notify_one();
+        }
+    }
+}
+
 /// Cheap to clone; every clone talks to the same ports.
 #[derive(Debug, Clone)]
 pub struct VehicleLink {
@@ -78,6 +179,7 @@ pub struct VehicleLink {
     next_id: Arc<AtomicU32>,
     pending: Pending,
     snapshot: watch::Receiver<Snapshot>,
+    latest: Arc<Latest>,
     events: broadcast::Sender<ArbiterEvent>,
     ack_timeout: Duration,
     /// `CLOCK_MONOTONIC` ns of the last flight / payload command published (0 = none).
@@ -106,29 +208,44 @@ impl VehicleLink {
         let mut acks = bus
             .subscriber::<CommandAck>(&topics::vehicle_command_ack(vehicle_id))
             .context("opening the command ack topic")?;
-        let mut state = bus
+        let state = bus
             .subscriber::<VehicleState>(&topics::vehicle_state(vehicle_id))
             .context("opening the vehicle state topic")?;
-        let mut status = bus
+        let status = bus
             .subscriber::<VehicleStatus>(&topics::vehicle_status(vehicle_id))
             .context("opening the vehicle status topic")?;
-        let mut payload = bus
+        let payload = bus
             .subscriber::<PayloadState>(&topics::vehicle_payload(vehicle_id))
             .context("opening the payload topic")?;
-        let mut authority = bus
+        let authority = bus
             .subscriber::<AuthorityState>(&topics::vehicle_authority(vehicle_id))
             .context("opening the authority topic")?;
         let mut arbiter = bus
             .subscriber::<ArbiterEvent>(&topics::vehicle_arbiter_events(vehicle_id))
             .context("opening the arbiter events topic")?;
-        // Latest-value topics may already hold a sample.
-        let snap = Snapshot {
-            state: state.latest().ok().flatten(),
-            status: status.latest().ok().flatten(),
-            payload: payload.latest().ok().flatten(),
-            authority: authority.latest().ok().flatten(),
+        let (tx, rx) = watch::channel(Snapshot::default());
+        // Read newest-first on demand while nobody watches: overwritten samples are
+        // by design, not lost.
+        let (mut state, mut status, mut payload) = (state, status, payload);
+        state.set_newest_only();
+        status.set_newest_only();
+        payload.set_newest_only();
+        let ports = LatestPorts {
+            state,
+            status,
+            payload,
+            authority,
         };
-        let (tx, rx) = watch::channel(snap);
+        // Latest-value topics may already hold a sample.
+        ports
+            .refresh(&tx)
+            .context("reading the latest vehicle samples")?;
+        let latest = Arc::new(Latest {
+            tx,
+            ports: Mutex::new(Some(ports)),
+            watchers: AtomicUsize::new(0),
+            watchers_changed: Notify::new(),
+        });
         let (events, _) = broadcast::channel(64);
         let pending: Pending = Arc::default();
         let link = VehicleLink {
@@ -137,14 +254,37 @@ impl VehicleLink {
             next_id: Arc::new(AtomicU32::new(1)),
             pending: pending.clone(),
             snapshot: rx,
+            latest: latest.clone(),
             events: events.clone(),
             ack_timeout,
             last_sent_ns: Arc::new([AtomicU64::new(0), AtomicU64::new(0)]),
         };
         tokio::spawn(async move {
+            // The latest-value subscriptions while someone watches; back in
+            // `latest.ports` (read on demand by `snapshot`) otherwise.
+            let mut following: Option<LatestPorts> = None;
             loop {
+                let watched = latest.watchers.load(Ordering::Acquire) > 0;
+                if watched && following.is_none() {
+                    following = latest.lock_ports().take();
+                    if let Some(p) = &following {
+                        if let Err(e) = p.refresh(&latest.tx) {
+                            tracing::error!(error = %e, "vehicle subscriptions failed");
+                            break;
+                        }
+                    }
+                } else if !watched && following.is_some() {
+                    *latest.lock_ports() = following.take();
+                }
+                let follow = async {
+                    match following.as_mut() {
+                        Some(p) => p.next(&latest.tx).await,
+                        None => std::future::pending().await,
+                    }
+                };
                 tokio::select! {
                     _ = shutdown.cancelled() => break,
+                    _ = latest.watchers_changed.notified() => {}
                     r = acks.recv() => match r {
                         Ok(ack) => {
                             if ack.source == SOURCE.to_wire() {
@@ -156,21 +296,9 @@ impl VehicleLink {
                         }
                         Err(e) => { tracing::error!(error = %e, "command ack subscription failed"); break; }
                     },
-                    r = state.recv() => match r {
-                        Ok(s) => tx.send_modify(|x| x.state = Some(s)),
-                        Err(e) => { tracing::error!(error = %e, "vehicle state subscription failed"); break; }
-                    },
-                    r = status.recv() => match r {
-                        Ok(s) => tx.send_modify(|x| x.status = Some(s)),
-                        Err(e) => { tracing::error!(error = %e, "vehicle status subscription failed"); break; }
-                    },
-                    r = payload.recv() => match r {
-                        Ok(s) => tx.send_modify(|x| x.payload = Some(s)),
-                        Err(e) => { tracing::error!(error = %e, "payload subscription failed"); break; }
-                    },
-                    r = authority.recv() => match r {
-                        Ok(s) => tx.send_modify(|x| x.authority = Some(s)),
-                        Err(e) => { tracing::error!(error = %e, "authority subscription failed"); break; }
+                    r = follow => if let Err((what, e)) = r {
+                        tracing::error!(error = %e, "{what} subscription failed");
+                        break;
                     },
                     r = arbiter.recv() => match r {
                         Ok(e) => { let _ = events.send(e); }
@@ -186,14 +314,29 @@ impl VehicleLink {
         self.vehicle_id
     }
 
-    /// The latest samples (a copy).
+    /// The latest samples (a copy): the newest ones on the bus at this moment.
     pub fn snapshot(&self) -> Snapshot {
+        // Unwatched, the subscriptions are here and read now; watched, the bus task
+        // keeps the watch current.
+        if let Some(p) = self.latest.lock_ports().as_ref() {
+            if let Err(e) = p.refresh(&self.latest.tx) {
+                tracing::warn!(error = %e, "cannot read the vehicle subscriptions");
+            }
+        }
         *self.snapshot.borrow()
     }
 
-    /// Changes of the latest samples.
-    pub fn watch(&self) -> watch::Receiver<Snapshot> {
-        self.snapshot.clone()
+    /// Changes of the latest samples, each as it arrives while the [`Watch`] lives.
+    pub fn watch(&self) -> Watch {
+        if self.latest.watchers.fetch_add(1, Ordering::AcqRel) == 0 {
+            self.latest.watchers_changed.notify_one();
+        }
+        // Start from the newest samples (the bus task may not be following yet).
+        let _ = self.snapshot();
+        Watch {
+            rx: self.snapshot.clone(),
+            latest: self.latest.clone(),
+        }
     }
 
     /// Arbiter events (refusals, pre-emptions, geofence, failsafes) as they arrive.
@@ -260,5 +403,11 @@ impl VehicleLink {
 
     fn lock_pending(&self) -> std::sync::MutexGuard<'_, HashMap<u32, oneshot::Sender<CommandAck>>> {
         self.pending.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+impl Latest {
+    fn lock_ports(&self) -> std::sync::MutexGuard<'_, Option<LatestPorts>> {
+        self.ports.lock().unwrap_or_else(|p| p.into_inner())
     }
 }

@@ -130,6 +130,12 @@ impl Outbox {
         self.awaiting.len()
     }
 
+    /// When the first awaited event is due for a re-send (what
+    /// [`Outbox::resend_due`] acts on); `None` when nothing awaits a reply.
+    pub fn next_resend(&self) -> Option<Instant> {
+        self.awaiting.values().map(|a| a.next_at).min()
+    }
+
     /// Re-queues every awaited event that is due (call only while connected: time
     /// offline does not use up the re-sends).
     pub fn resend_due(&mut self, now: Instant) -> ResendRound {

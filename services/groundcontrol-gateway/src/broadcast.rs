@@ -20,7 +20,9 @@
 //!
 //! No `SwarmState` yet, or none for `state_timeout_s` (the swarm queue stopped):
 //! no datagram, counted as skipped; clients see the broadcast pause instead of
-//! frozen poses that look live.
+//! frozen poses that look live. While paused the task does not tick: it waits for
+//! the queue's next `SwarmState` (the ticks it did not run are counted as skipped
+//! when the broadcast resumes) and resumes at once.
 //!
 //! Size: 84 bytes per drone, so 250 drones are 21 000 bytes in one datagram. That
 //! is one datagram on loopback (MTU 64 KiB), but on Ethernet or Wi-Fi (MTU 1500)
@@ -111,7 +113,7 @@ impl Broadcast {
     /// Sends a datagram every period until `stop`. Fails only when the bus does.
     pub async fn run(
         self,
-        state: Subscriber<SwarmState>,
+        mut state: Subscriber<SwarmState>,
         stop: CancellationToken,
     ) -> Result<(), IpcError> {
         let metrics = self.drops.metrics().clone();
@@ -132,18 +134,36 @@ impl Broadcast {
                 *latest = s;
                 received_at = Some(now);
             }
-            let Some(at) = received_at else {
-                metrics.broadcast_skipped(BroadcastSkip::NoState);
-                continue;
+            let skip = match received_at {
+                None => Some(BroadcastSkip::NoState),
+                Some(at) if now.duration_since(at) > self.state_timeout => {
+                    Some(BroadcastSkip::Stale)
+                }
+                Some(_) => None,
             };
-            if now.duration_since(at) > self.state_timeout {
-                metrics.broadcast_skipped(BroadcastSkip::Stale);
-                if !std::mem::replace(&mut stale_logged, true) {
+            if let Some(reason) = skip {
+                metrics.broadcast_skipped(reason);
+                if reason == BroadcastSkip::Stale && !std::mem::replace(&mut stale_logged, true) {
                     tracing::warn!(
                         timeout_s = self.state_timeout.as_secs_f64(),
                         "no SwarmState from the swarm queue: pose broadcast paused"
                     );
                 }
+                // Nothing to send until the queue publishes again: wait for its next
+                // sample instead of waking every period to find none.
+                let paused = Instant::now();
+                let sample = tokio::select! {
+                    _ = stop.cancelled() => return Ok(()),
+                    r = state.recv() => r?,
+                };
+                // Keep the skip counter what a tick per period would have made it.
+                let missed = paused.elapsed().as_nanos() / self.period.as_nanos().max(1);
+                for _ in 0..missed {
+                    metrics.broadcast_skipped(reason);
+                }
+                *latest = sample;
+                received_at = Some(Instant::now());
+                tick.reset_immediately();
                 continue;
             }
             if std::mem::replace(&mut stale_logged, false) {

@@ -126,6 +126,12 @@ impl Commands {
     }
 
     /// Commands whose ack did not come in time.
+    /// The earliest reply deadline of the pending requests (what
+    /// [`Self::expire`] acts on).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.pending.values().map(|p| p.deadline).min()
+    }
+
     pub fn expire(&mut self, now: Instant) -> Vec<PendingCommand> {
         let late: Vec<u32> = self
             .pending

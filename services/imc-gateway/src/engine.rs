@@ -464,7 +464,8 @@ impl Engine {
     }
 
     /// What is due at `now`: peer expiry, Heartbeat, Announce, timeouts, power-down
-    /// progress. Call it often (every 100 ms); it does each thing at its own period.
+    /// progress. Call it at [`Engine::next_due`] (or more often); it does each thing at
+    /// its own period.
     pub fn tick(&mut self, now: Instant, out: &mut Outputs) {
         for gone in self.peers.expire(now) {
             tracing::info!(peer = %gone, "IMC peer silent; no more heartbeats");
@@ -534,6 +535,32 @@ impl Engine {
                 }
             }
         }
+    }
+
+    /// When [`Engine::tick`] next has something to do: a dynamic peer's expiry, the
+    /// next Heartbeat (only while someone gets one), the next Announce (only with
+    /// destinations), a hardware or command reply deadline, the power-down progress
+    /// (only while watching one). `None`: nothing scheduled (idle, no peers), so the
+    /// loop need not wake until a datagram or a bus sample changes that.
+    pub fn next_due(&self, now: Instant) -> Option<Instant> {
+        let heartbeat = (!self.peers.is_empty()).then(|| self.heartbeat.next_due(now));
+        let announce =
+            (!self.settings.announce_destinations.is_empty()).then(|| self.announce.next_due(now));
+        let progress = self
+            .power_watch
+            .as_ref()
+            .map(|_| self.progress.next_due(now));
+        [
+            self.peers.next_expiry(),
+            heartbeat,
+            announce,
+            self.hardware.next_deadline(),
+            self.commands.next_deadline(),
+            progress,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     /// Our Announce: name, type UAV, position from the vehicle (zeros until known),

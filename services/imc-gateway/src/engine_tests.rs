@@ -753,3 +753,38 @@ fn a_silent_peer_releases_its_buttons() {
         )]
     );
 }
+
+#[test]
+fn idle_without_peers_nothing_is_due() {
+    let t0 = Instant::now();
+    let mut engine = engine_with(settings(), t0);
+    let mut out = Outputs::default();
+    engine.tick(t0, &mut out);
+    assert_eq!(engine.next_due(t0), None, "no peers, no destinations");
+}
+
+#[test]
+fn the_next_deadline_follows_peers_and_their_expiry() {
+    let t0 = Instant::now();
+    let s = settings();
+    let (hb, timeout) = (s.heartbeat_interval, s.peer_timeout);
+    let mut engine = engine_with(s, t0);
+    let mut out = Outputs::default();
+    engine.tick(t0, &mut out);
+    // Long idle: the heartbeat schedule was not looked at for a while.
+    let t1 = t0 + hb * 5 + hb / 2;
+    feed(&mut engine, &Message::Heartbeat, t1);
+    // The next heartbeat stays on its period grid; expiry is further out.
+    assert_eq!(engine.next_due(t1), Some(t0 + hb * 6));
+    assert!(t1 + timeout > t0 + hb * 6);
+    let mut out = Outputs::default();
+    engine.tick(t0 + hb * 6, &mut out);
+    assert_eq!(out.sends.len(), 1, "one heartbeat to the peer");
+    assert_eq!(engine.next_due(t0 + hb * 6), Some(t0 + hb * 7));
+    // Once the peer expired, nothing is due again.
+    let gone = t1 + timeout;
+    let mut out = Outputs::default();
+    engine.tick(gone, &mut out);
+    assert_eq!(engine.peer_count(), 0);
+    assert_eq!(engine.next_due(gone), None);
+}

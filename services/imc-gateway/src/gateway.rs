@@ -1,5 +1,6 @@
-//! The gateway's one loop: the UDP socket, the bus subscriptions and a 100 ms tick
-//! feed the [`Engine`]; what it returns is sent, published, counted and logged here.
+//! The gateway's one loop: the UDP socket, the bus subscriptions and the engine's
+//! next deadline feed the [`Engine`]; what it returns is sent, published, counted and
+//! logged here.
 
 use std::collections::HashSet;
 use std::net::SocketAddr;
@@ -17,8 +18,9 @@ use crate::engine::{Engine, Outputs, Send};
 use crate::ipc::Ports;
 use crate::metrics::{Direction, Metrics};
 
-/// How often the engine's schedules are looked at.
-const TICK: Duration = Duration::from_millis(100);
+/// The longest sleep with nothing scheduled (idle, no peers): a wake-up whose tick
+/// finds nothing to do; only bounds the wait, no deadline depends on it.
+const IDLE_WAIT: Duration = Duration::from_secs(60);
 /// Receive buffer: larger than any UDP payload.
 const RECV_BUFFER: usize = 65_536;
 /// Destinations remembered as failing (each logged once).
@@ -140,6 +142,27 @@ async fn execute(
     Ok(())
 }
 
+/// Hands the engine the newest vehicle state and status. They are read only when a
+/// datagram or a tick may use them (teleoperation, remote actions, Announce), so the
+/// loop does not wake for every VehicleState (50 Hz) while idle.
+fn refresh_vehicle(ports: &Ports, engine: &mut Engine) -> anyhow::Result<()> {
+    if let Some(s) = ports
+        .vehicle_state
+        .latest()
+        .context("receiving the vehicle state")?
+    {
+        engine.on_vehicle_state(s);
+    }
+    if let Some(s) = ports
+        .vehicle_status
+        .latest()
+        .context("receiving the vehicle status")?
+    {
+        engine.on_vehicle_status(s);
+    }
+    Ok(())
+}
+
 /// Runs the gateway on an already-bound socket until `ctx.shutdown` is cancelled
 /// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once its bus
 /// ports exist.
@@ -170,14 +193,20 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
     ctx.ready();
 
     let mut buf = vec![0u8; RECV_BUFFER];
-    let mut tick = tokio::time::interval(TICK);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let mut out = Outputs::default();
+        // Wake for the engine's next real deadline (peer expiry, Heartbeat, Announce,
+        // reply timeouts, power-down progress), not on a fixed tick: idle with no
+        // peers that is never.
+        let now = Instant::now();
+        let wake = engine.next_due(now).unwrap_or(now + IDLE_WAIT);
         tokio::select! {
             _ = ctx.shutdown.cancelled() => break,
             r = socket.recv_from(&mut buf) => match r {
-                Ok((n, from)) => engine.on_datagram(from, &buf[..n], Instant::now(), &mut out),
+                Ok((n, from)) => {
+                    refresh_vehicle(&ports, &mut engine)?;
+                    engine.on_datagram(from, &buf[..n], Instant::now(), &mut out);
+                }
                 // Unconnected UDP sockets report little; nothing here is the peer's fault
                 // or fatal. A short pause keeps a persistent error from spinning.
                 Err(e) => {
@@ -195,13 +224,10 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
             r = ports.acks.recv() => {
                 engine.on_command_ack(&r.context("receiving command acks")?, &mut out);
             }
-            r = ports.vehicle_state.recv() => {
-                engine.on_vehicle_state(r.context("receiving the vehicle state")?);
+            _ = tokio::time::sleep_until(wake.into()) => {
+                refresh_vehicle(&ports, &mut engine)?;
+                engine.tick(Instant::now(), &mut out);
             }
-            r = ports.vehicle_status.recv() => {
-                engine.on_vehicle_status(r.context("receiving the vehicle status")?);
-            }
-            _ = tick.tick() => engine.tick(Instant::now(), &mut out),
         }
         execute(
             out,

@@ -327,6 +327,12 @@ impl Requests {
     }
 
     /// Requests whose reply did not come in time.
+    /// The earliest reply deadline of the pending requests (what
+    /// [`Self::expire`] acts on).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.pending.values().map(|p| p.deadline).min()
+    }
+
     pub fn expire(&mut self, now: Instant) -> Vec<Pending> {
         let late: Vec<u32> = self
             .pending

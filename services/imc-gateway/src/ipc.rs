@@ -35,7 +35,7 @@ pub struct Ports {
 
 impl Ports {
     pub fn open(bus: &Bus, vehicle_id: u8) -> anyhow::Result<Ports> {
-        Ok(Ports {
+        let mut ports = Ports {
             commands: bus
                 .publisher(&topics::vehicle_command(vehicle_id))
                 .context("opening the vehicle command topic")?,
@@ -61,6 +61,11 @@ impl Ports {
                 .subscriber(&topics::hardware_state())
                 .context("opening the hardware state topic")?,
             origin: bus.origin(),
-        })
+        };
+        // Read with `latest()` just before they are used: overwritten samples are by
+        // design, not lost.
+        ports.vehicle_state.set_newest_only();
+        ports.vehicle_status.set_newest_only();
+        Ok(ports)
     }
 }

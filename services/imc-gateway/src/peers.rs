@@ -162,6 +162,16 @@ impl Peers {
         self.peers.is_empty()
     }
 
+    /// When the first dynamic peer falls silent for the timeout (what
+    /// [`Peers::expire`] acts on); `None` with no dynamic peer.
+    pub fn next_expiry(&self) -> Option<Instant> {
+        self.peers
+            .values()
+            .filter(|p| !p.is_static)
+            .map(|p| p.last_seen.map_or(Instant::now(), |t| t + self.timeout))
+            .min()
+    }
+
     fn dynamic_count(&self) -> usize {
         self.peers.values().filter(|p| !p.is_static).count()
     }
@@ -182,6 +192,18 @@ impl Every {
             period,
             next: first,
         }
+    }
+
+    /// When it is next due: its stored time, or, if that has passed unseen (nobody
+    /// asked [`Every::due`] while there was nothing to do), the next point on the
+    /// same period grid after `now`, so an idle wait does not shift its phase.
+    pub fn next_due(&self, now: Instant) -> Instant {
+        if self.next >= now || self.period.is_zero() {
+            return self.next;
+        }
+        let behind = now.duration_since(self.next).as_nanos();
+        let periods = behind / self.period.as_nanos() + 1;
+        self.next + self.period * u32::try_from(periods).unwrap_or(u32::MAX)
     }
 
     /// True (once) when the period has come round.
@@ -229,6 +251,27 @@ mod tests {
         assert_eq!(p.len(), 2, "addr 2 and the static peer");
         assert_eq!(p.expire(t0 + Duration::from_secs(3600)), vec![addr(2)]);
         assert_eq!(p.heartbeat_targets().len(), 1);
+    }
+
+    #[test]
+    fn next_due_keeps_the_period_grid_after_an_idle_wait() {
+        let t0 = Instant::now();
+        let s = Duration::from_secs(1);
+        let e = Every::starting(s, t0 + s);
+        assert_eq!(e.next_due(t0), t0 + s);
+        assert_eq!(e.next_due(t0 + s), t0 + s);
+        assert_eq!(e.next_due(t0 + s * 3 + s / 2), t0 + s * 4);
+    }
+
+    #[test]
+    fn next_expiry_is_the_first_dynamic_peer_to_fall_silent() {
+        let t0 = Instant::now();
+        let timeout = Duration::from_secs(30);
+        let mut p = Peers::new(&[addr(9)], timeout);
+        assert_eq!(p.next_expiry(), None, "static peers never expire");
+        p.seen(addr(1), 0x4001, 0, t0 + Duration::from_secs(5));
+        p.seen(addr(2), 0x4002, 0, t0);
+        assert_eq!(p.next_expiry(), Some(t0 + timeout));
     }
 
     #[test]

@@ -48,7 +48,7 @@ impl core::fmt::Debug for Ports {
 impl Ports {
     /// Opens (or creates) every topic of vehicle `id`.
     pub fn open(bus: &Bus, id: u8) -> anyhow::Result<Ports> {
-        Ok(Ports {
+        let mut ports = Ports {
             from_app: bus
                 .subscriber(&topics::shot_from_app())
                 .context("opening the from-app topic")?,
@@ -91,7 +91,12 @@ impl Ports {
             shot_status: bus
                 .publisher(&topics::shot_status())
                 .context("opening the shot status topic")?,
-        })
+        };
+        // Read with `latest()` at the engine's tick (or slower while idle): older
+        // samples overwritten in between are by design, not lost.
+        ports.state.set_newest_only();
+        ports.payload.set_newest_only();
+        Ok(ports)
     }
 }
 

@@ -10,6 +10,16 @@
 //! shot and publishes what the engine asks for. A tick that takes longer than the
 //! period, or starts more than a period late, counts as an overrun.
 //!
+//! Idle: while [`Engine::idle_until`] says nothing needs every tick (no shot, the
+//! vehicle disarmed, no fence hold), the loop does not tick at `loop_hz`: it sleeps
+//! until the engine's next time-driven deadline (the 5 Hz `ShotStatus`, the
+//! app-session timeout) and also wakes for the vehicle's status, authority,
+//! arbiter events and acks (a few per second: an arm or an authority change is
+//! handled at once, as the periodic tick did within a period). The vehicle state
+//! and payload (50 Hz and 10 Hz) are not waited for: only the newest matters and it
+//! is read at every tick and before every app message or button. Once something
+//! needs ticks the interval restarts, a period after that moment.
+//!
 //! Event steps: when an app message or button changed a flying shot's guidance
 //! (`Engine::take_step_request`), the loop ticks at once instead of draining, and
 //! keeps its phase: the next periodic tick comes when it was due anyway (see
@@ -22,7 +32,9 @@ use skymesh_runtime::{Counter, IpcError};
 use tokio::time::MissedTickBehavior;
 use tokio_util::sync::CancellationToken;
 
-use skymesh_ipc_types::{AppGeofence, AppMessage};
+use skymesh_ipc_types::{
+    AppGeofence, AppMessage, ArbiterEvent, AuthorityState, CommandAck, VehicleStatus,
+};
 
 use crate::engine::{Engine, Outputs};
 use crate::ipc::{app_message, Ports};
@@ -34,6 +46,17 @@ enum Wake {
     Fence(Result<Box<AppGeofence>, IpcError>),
     Session(Result<skymesh_ipc_types::AppSession, IpcError>),
     Button(Result<skymesh_ipc_types::ButtonEvent, IpcError>),
+    /// Idle only: a vehicle sample the idle loop waited for; handled in its place
+    /// in the drain order, then a tick.
+    Vehicle(Result<VehicleInput, IpcError>),
+}
+
+/// A vehicle sample the idle loop received while waiting (see the module doc).
+enum VehicleInput {
+    Status(VehicleStatus),
+    Authority(AuthorityState),
+    Event(ArbiterEvent),
+    Ack(CommandAck),
 }
 
 /// Runs until `shutdown`; then ends an active shot and publishes the last outputs.
@@ -48,23 +71,60 @@ pub(crate) async fn run_loop(
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
     let mut last_tick: Option<u64> = None;
+    let mut was_idle = false;
     let result = loop {
-        let wake = tokio::select! {
-            biased;
-            _ = shutdown.cancelled() => break Ok(()),
-            _ = interval.tick() => Wake::Tick,
-            m = ports.from_app.recv() => Wake::App(m),
-            g = ports.app_geofence.recv() => Wake::Fence(g.map(Box::new)),
-            s = ports.app_session.recv() => Wake::Session(s),
-            b = ports.buttons.recv() => Wake::Button(b),
+        let idle_until = engine.idle_until();
+        match idle_until {
+            Some(_) => {
+                // Slow idle ticks are not overruns.
+                last_tick = None;
+                was_idle = true;
+            }
+            None if was_idle => {
+                // Ticking again: the first periodic tick a period from now.
+                interval.reset();
+                was_idle = false;
+            }
+            None => {}
+        }
+        let wake = match idle_until {
+            None => tokio::select! {
+                biased;
+                _ = shutdown.cancelled() => break Ok(()),
+                _ = interval.tick() => Wake::Tick,
+                m = ports.from_app.recv() => Wake::App(m),
+                g = ports.app_geofence.recv() => Wake::Fence(g.map(Box::new)),
+                s = ports.app_session.recv() => Wake::Session(s),
+                b = ports.buttons.recv() => Wake::Button(b),
+            },
+            Some(until_ns) => {
+                let wait = Duration::from_nanos(until_ns.saturating_sub(monotonic_ns()));
+                tokio::select! {
+                    biased;
+                    _ = shutdown.cancelled() => break Ok(()),
+                    _ = tokio::time::sleep(wait) => Wake::Tick,
+                    m = ports.from_app.recv() => Wake::App(m),
+                    g = ports.app_geofence.recv() => Wake::Fence(g.map(Box::new)),
+                    s = ports.app_session.recv() => Wake::Session(s),
+                    b = ports.buttons.recv() => Wake::Button(b),
+                    v = ports.status.recv() => Wake::Vehicle(v.map(VehicleInput::Status)),
+                    v = ports.authority.recv() => Wake::Vehicle(v.map(VehicleInput::Authority)),
+                    v = ports.events.recv() => Wake::Vehicle(v.map(VehicleInput::Event)),
+                    v = ports.acks.recv() => Wake::Vehicle(v.map(VehicleInput::Ack)),
+                }
+            }
         };
         let now = monotonic_ns();
         let step = match wake {
+            Wake::Vehicle(v) => v.and_then(|v| {
+                drain_vehicle_with(&mut engine, &ports, now, Some(v))
+                    .and_then(|()| publish(&mut ports, engine.tick(now)))
+            }),
             Wake::Tick => {
                 if last_tick.is_some_and(|t| now.saturating_sub(t) > 2 * period_ns) {
                     overruns.inc();
                 }
-                last_tick = Some(now);
+                last_tick = idle_until.is_none().then_some(now);
                 let r = drain_vehicle(&mut engine, &ports, now)
                     .and_then(|()| publish(&mut ports, engine.tick(now)));
                 if monotonic_ns().saturating_sub(now) > period_ns {
@@ -117,8 +177,30 @@ fn event_outputs(engine: &mut Engine, now: u64) -> Outputs {
 
 /// Everything the vehicle topics hold, oldest first (the newest state wins).
 fn drain_vehicle(engine: &mut Engine, ports: &Ports, now: u64) -> Result<(), IpcError> {
+    drain_vehicle_with(engine, ports, now, None)
+}
+
+/// [`drain_vehicle`], with `first` (already taken from its topic by the idle wait)
+/// handled before the rest of its topic, in the same topic order.
+fn drain_vehicle_with(
+    engine: &mut Engine,
+    ports: &Ports,
+    now: u64,
+    first: Option<VehicleInput>,
+) -> Result<(), IpcError> {
+    let (mut status, mut authority, mut event, mut ack) = (None, None, None, None);
+    match first {
+        Some(VehicleInput::Status(s)) => status = Some(s),
+        Some(VehicleInput::Authority(a)) => authority = Some(a),
+        Some(VehicleInput::Event(e)) => event = Some(e),
+        Some(VehicleInput::Ack(a)) => ack = Some(a),
+        None => {}
+    }
     if let Some(s) = ports.state.latest()? {
         engine.handle_state(&s, now);
+    }
+    if let Some(s) = status {
+        engine.handle_status(&s, now);
     }
     while let Some(s) = ports.status.try_recv()? {
         engine.handle_status(&s, now);
@@ -126,11 +208,20 @@ fn drain_vehicle(engine: &mut Engine, ports: &Ports, now: u64) -> Result<(), Ipc
     if let Some(p) = ports.payload.latest()? {
         engine.handle_payload(&p, now);
     }
+    if let Some(a) = authority {
+        engine.handle_authority(&a, now);
+    }
     while let Some(a) = ports.authority.try_recv()? {
         engine.handle_authority(&a, now);
     }
+    if let Some(e) = event {
+        engine.handle_arbiter_event(&e, now);
+    }
     while let Some(e) = ports.events.try_recv()? {
         engine.handle_arbiter_event(&e, now);
+    }
+    if let Some(a) = ack {
+        engine.handle_ack(&a, now);
     }
     while let Some(a) = ports.acks.try_recv()? {
         engine.handle_ack(&a, now);

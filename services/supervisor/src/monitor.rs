@@ -48,6 +48,15 @@ impl LivenessRule {
         period * self.missed
     }
 
+    /// The first instant (`CLOCK_MONOTONIC` ns) at which [`LivenessRule::evaluate`]
+    /// says `Hung` if no heartbeat newer than `last` arrives; `None` without one.
+    pub fn hung_at(&self, last: Option<&Heartbeat>) -> Option<u64> {
+        let h = last?;
+        let allowed = u64::try_from(self.allowed_silence(last).as_nanos()).unwrap_or(u64::MAX);
+        // `evaluate` wants the silence strictly longer than the allowance.
+        Some(h.stamp_ns.saturating_add(allowed).saturating_add(1))
+    }
+
     /// Liveness of a process spawned at `spawned_ns` whose newest heartbeat is `last`.
     pub fn evaluate(&self, spawned_ns: u64, last: Option<&Heartbeat>, now_ns: u64) -> Liveness {
         match last {
@@ -228,6 +237,22 @@ mod tests {
             period_ms,
             uptime_ms: 1000,
         }
+    }
+
+    #[test]
+    fn hung_at_is_the_first_instant_evaluate_says_hung() {
+        let r = rule();
+        let spawned = 100 * S;
+        for period_ms in [0, 500, 2000] {
+            let last = hb(101 * S, period_ms);
+            let at = r.hung_at(Some(&last)).unwrap();
+            assert_eq!(r.evaluate(spawned, Some(&last), at - 1), Liveness::Alive);
+            assert!(matches!(
+                r.evaluate(spawned, Some(&last), at),
+                Liveness::Hung { .. }
+            ));
+        }
+        assert_eq!(r.hung_at(None), None);
     }
 
     #[test]

@@ -89,16 +89,25 @@ async fn hang_watch(sh: &Shared, idx: usize, heartbeat: bool) -> Liveness {
     if !heartbeat {
         return std::future::pending().await;
     }
+    // Until the first heartbeat: a short tick (it may arrive any time and bring the
+    // deadline forward from the startup timeout to its own silence allowance).
     let tick = (sh.rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(250));
-    let mut interval = tokio::time::interval(tick);
-    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
-        interval.tick().await;
         let (spawned_ns, hb) = sh.mesh.with(idx, |e| (e.spawned_ns, e.heartbeat));
-        match sh.rule.evaluate(spawned_ns, hb.as_ref(), monotonic_ns()) {
-            Liveness::Alive | Liveness::AwaitingFirst => {}
+        let now_ns = monotonic_ns();
+        let wait = match sh.rule.evaluate(spawned_ns, hb.as_ref(), now_ns) {
+            Liveness::AwaitingFirst => tick,
+            // Then no periodic polling: the verdict can only change once the newest
+            // heartbeat is older than its allowance, so sleep until exactly then and
+            // look again (heartbeats that came meanwhile push the deadline on; a
+            // process keeps the period it reports for its whole life).
+            Liveness::Alive => sh
+                .rule
+                .hung_at(hb.as_ref())
+                .map_or(tick, |at| Duration::from_nanos(at.saturating_sub(now_ns))),
             verdict => return verdict,
-        }
+        };
+        tokio::time::sleep(wait).await;
     }
 }
 

@@ -43,6 +43,16 @@ fn proc_usage(pid: u32) -> Option<(u64, u64)> {
 }
 
 fn main() -> anyhow::Result<()> {
+    if std::env::args().any(|a| a == "-h" || a == "--help") {
+        println!(
+            "usage: mesh-bench [--kills N] [--idle-secs S]\n\
+             \x20      mesh-bench --default-mesh [--kills N] [--window-secs S] [--settle-secs S] [--restart a,b,...]\n\
+             Without --default-mesh: the minimal mesh (supervisor, vehicle-sim, autopilot-link):\n\
+             idle CPU/RSS and autopilot-link restart latency. With it: the whole deploy/skymesh.toml\n\
+             mesh and the control mesh: per-process CPU, RSS, wake-ups/s, restart latency."
+        );
+        return Ok(());
+    }
     if std::env::args().any(|a| a == "--default-mesh") {
         return default_mesh::run();
     }

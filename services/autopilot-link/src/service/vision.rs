@@ -102,9 +102,11 @@ impl Vision {
         }
     }
 
-    fn deadline(&self) -> Instant {
-        let due = self.gimbals.next_deadline_ns();
-        Instant::now() + Duration::from_nanos(due.saturating_sub(monotonic_ns()))
+    /// `None`: nothing due until a sample or frame arrives.
+    fn deadline(&self) -> Option<Instant> {
+        let now_ns = monotonic_ns();
+        let due = self.gimbals.next_deadline_ns(now_ns);
+        (due != u64::MAX).then(|| Instant::now() + Duration::from_nanos(due.saturating_sub(now_ns)))
     }
 
     /// Sends, publishes, counts and logs what the gimbals produced.
@@ -183,7 +185,7 @@ impl<L: Lifecycle> Service<L> {
     }
 
     pub(super) fn vision_deadline(&self) -> Option<Instant> {
-        self.vision.as_ref().map(Vision::deadline)
+        self.vision.as_ref().and_then(Vision::deadline)
     }
 
     /// An accepted camera/gimbal command also goes to the virtual cameras.

@@ -292,6 +292,11 @@ impl Engine {
         self.fence.pending = Some(set);
     }
 
+    /// A hold is stepped on every tick, armed or not (see `Engine::idle_until`).
+    pub(crate) fn geofence_needs_ticks(&self) -> bool {
+        self.fence.hold.is_some()
+    }
+
     /// The predictive check and the hold, once per tick (before the shot steps).
     pub(crate) fn geofence_tick(&mut self, now_ns: u64) {
         if self.fence.fence.is_empty() {

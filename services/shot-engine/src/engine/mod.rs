@@ -344,6 +344,38 @@ impl Engine {
         std::mem::take(&mut self.step_requested) && self.is_flying()
     }
 
+    /// Until when the service loop may sleep instead of ticking at `loop_hz`
+    /// (`CLOCK_MONOTONIC` ns): `None` while something needs every tick — a shot in
+    /// setup or flying, an armed vehicle (rewind breadcrumbs, the geofence check), a
+    /// fence hold, breadcrumbs a disarm must still clear. Otherwise a tick only has
+    /// time-driven work: the 5 Hz `ShotStatus` and the app-session timeout, so the
+    /// earlier of the two is the next instant a tick does anything. Everything else
+    /// an idle engine reacts to arrives as a sample the loop waits for.
+    pub fn idle_until(&self) -> Option<u64> {
+        let armed = self
+            .inputs
+            .status
+            .as_ref()
+            .is_some_and(VehicleStatus::is_armed);
+        if self.active.is_some()
+            || armed
+            || self.geofence_needs_ticks()
+            || !self.rewind.crumbs.is_empty()
+        {
+            return None;
+        }
+        let status_due = self
+            .last_status
+            .map_or(0, |(_, at)| at.saturating_add(STATUS_PERIOD_NS));
+        let session_timeout = self.out.app_connected.then(|| {
+            let timeout =
+                u64::try_from(self.settings.app_session_timeout.as_nanos()).unwrap_or(u64::MAX);
+            // `tick` acts once the silence is strictly longer than the timeout.
+            self.app_heard_ns.saturating_add(timeout).saturating_add(1)
+        });
+        Some(session_timeout.map_or(status_due, |t| t.min(status_due)))
+    }
+
     /// Steps the flying shot and returns everything pending.
     pub fn tick(&mut self, now_ns: u64) -> Outputs {
         self.step_requested = false;

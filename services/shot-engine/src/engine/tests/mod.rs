@@ -7,6 +7,7 @@ mod exits;
 mod follow;
 mod geofence;
 mod gopro;
+mod idle;
 mod multipoint;
 mod pano;
 mod persistence;
