@@ -13,6 +13,7 @@ use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, ensure, Result};
+use skymesh_ipc_types::VehicleState;
 use skymesh_runtime::Domain;
 
 /// p50, p99 and p999 (nearest rank) of `v` in ns; NaN when `v` is empty.
@@ -239,6 +240,40 @@ impl SendCpu {
     /// CPU per counted message so far, ns.
     pub fn per_msg(&self) -> f64 {
         process_cpu_ns().saturating_sub(self.cpu0) as f64 / self.counted.max(1) as f64
+    }
+}
+
+/// Sends `n` messages at `rate` through `send(k)`; returns the sender's CPU per
+/// message after the first `warmup`, ns.
+pub fn send_loop(
+    rate: Rate,
+    n: usize,
+    warmup: usize,
+    mut send: impl FnMut(usize) -> Result<()>,
+) -> Result<f64> {
+    let mut pace = Pacer::new(rate);
+    let mut cpu = SendCpu::new(warmup);
+    for k in 0..n {
+        pace.wait();
+        cpu.at(k);
+        send(k)?;
+    }
+    Ok(cpu.per_msg())
+}
+
+/// The `VehicleState` the small-sample benches send: a hovering vehicle with valid
+/// position and attitude (contents do not matter to the transport; its size does).
+pub fn bench_state(vehicle_id: u8) -> VehicleState {
+    VehicleState {
+        vehicle_id,
+        position_valid: 1,
+        attitude_valid: 1,
+        lat_deg: 47.397_742,
+        lon_deg: 8.545_594,
+        alt_msl_m: 488.0,
+        alt_rel_m: 20.0,
+        attitude_q: [1.0, 0.0, 0.0, 0.0],
+        ..VehicleState::default()
     }
 }
 

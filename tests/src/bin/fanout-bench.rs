@@ -29,8 +29,8 @@ use std::time::Duration;
 
 use anyhow::{bail, ensure, Result};
 use skymesh_e2e::transport_bench::{
-    expect_line, finish_child, percentiles, read_line, spawn_child, DomainGuard, Pacer, Rate,
-    RxReport, SendCpu, Tally,
+    bench_state, expect_line, finish_child, percentiles, read_line, send_loop, spawn_child,
+    DomainGuard, Rate, RxReport, Tally,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -194,33 +194,6 @@ fn driver(scale: usize) -> Result<()> {
     Ok(())
 }
 
-/// A plausible state (values do not matter to either transport, size does).
-fn sample_state() -> VehicleState {
-    VehicleState {
-        vehicle_id: VEHICLE,
-        position_valid: 1,
-        attitude_valid: 1,
-        lat_deg: 47.397_742,
-        lon_deg: 8.545_594,
-        alt_msl_m: 488.0,
-        alt_rel_m: 20.0,
-        attitude_q: [1.0, 0.0, 0.0, 0.0],
-        ..VehicleState::default()
-    }
-}
-
-/// Sends `n` messages at `rate` through `send(k)`; returns sender CPU per counted one.
-fn send_loop(rate: Rate, n: usize, mut send: impl FnMut(usize) -> Result<()>) -> Result<f64> {
-    let mut pace = Pacer::new(rate);
-    let mut cpu = SendCpu::new(WARMUP);
-    for k in 0..n {
-        pace.wait();
-        cpu.at(k);
-        send(k)?;
-    }
-    Ok(cpu.per_msg())
-}
-
 fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize) -> Result<Phase> {
     // A fresh bus and publisher per phase, so nothing of a previous phase lingers.
     let bus = Bus::open(domain, "bench-fanout-pub", ServiceId::Tool, 0, Stats::new())?;
@@ -233,8 +206,8 @@ fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize) -> Result<Phase> 
         children.push((child, out));
     }
     std::thread::sleep(Duration::from_millis(100));
-    let mut state = sample_state();
-    let tx_cpu = send_loop(rate, n, |k| {
+    let mut state = bench_state(VEHICLE);
+    let tx_cpu = send_loop(rate, n, WARMUP, |k| {
         state.time_boot_ms = k as u32;
         // The bus stamps `header.seq` (k + 1) and `header.stamp_ns` as it sends.
         publ.publish(state)?;
@@ -302,7 +275,7 @@ fn udp_run(rate: Rate, n: usize, subs: usize) -> Result<Phase> {
     // The same bytes a VehicleState has; sequence and send time where its header keeps them.
     let mut buf = [0u8; LEN];
     buf[24] = VEHICLE;
-    let tx_cpu = send_loop(rate, n, |k| {
+    let tx_cpu = send_loop(rate, n, WARMUP, |k| {
         buf[..8].copy_from_slice(&(k as u64 + 1).to_le_bytes());
         buf[8..16].copy_from_slice(&monotonic_ns().to_le_bytes());
         for to in &ports {

@@ -32,9 +32,12 @@
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::UdpSocket;
-use std::process::{Child, ChildStdout, Command, Stdio};
+use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
+use skymesh_e2e::transport_bench::{
+    bench_state, percentiles, process_cpu_ns, read_line, send_loop, spawn_child, DomainGuard, Rate,
+};
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Bus, Domain, Stats};
@@ -49,23 +52,6 @@ const IDLE_END: Duration = Duration::from_secs(2);
 const LEN: usize = std::mem::size_of::<VehicleState>();
 /// Spin budget of the low-latency ping-pong.
 const SPIN: Duration = Duration::from_micros(200);
-
-/// How fast the sender goes.
-#[derive(Debug, Clone, Copy)]
-enum Rate {
-    Hz(f64),
-    BackToBack,
-}
-
-impl Rate {
-    fn label(self) -> String {
-        match self {
-            Rate::Hz(hz) if hz >= 1000.0 => format!("{} kHz", hz / 1000.0),
-            Rate::Hz(hz) => format!("{hz} Hz"),
-            Rate::BackToBack => "b2b".to_string(),
-        }
-    }
-}
 
 /// How a one-way receiver waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,15 +184,6 @@ fn bench_topic(name: &str, n: usize) -> Topic {
     }
 }
 
-/// Removes the domain's shared-memory files however the run ends.
-struct DomainGuard(Domain);
-
-impl Drop for DomainGuard {
-    fn drop(&mut self) {
-        self.0.remove_leftover_files();
-    }
-}
-
 fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
     let name = format!("sb{}", std::process::id());
     let domain = DomainGuard(Domain::load(&name, None)?);
@@ -302,90 +279,6 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// p50, p99, p999 in ns (NaN when nothing was counted).
-fn percentiles(v: &[u64]) -> [f64; 3] {
-    if v.is_empty() {
-        return [f64::NAN; 3];
-    }
-    let mut v = v.to_vec();
-    v.sort_unstable();
-    let at = |q: f64| v[((v.len() as f64 * q) as usize).min(v.len() - 1)] as f64;
-    [at(0.50), at(0.99), at(0.999)]
-}
-
-/// CPU time of this process (all threads, user + system), ns.
-fn process_cpu_ns() -> u64 {
-    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID) {
-        Ok(ts) => (ts.tv_sec() as u64).saturating_mul(1_000_000_000) + ts.tv_nsec() as u64,
-        Err(_) => 0,
-    }
-}
-
-/// Paces a send loop (absolute deadlines, so a late message does not shift the rest).
-struct Pacer {
-    start: Instant,
-    period: Option<Duration>,
-    n: u32,
-}
-
-impl Pacer {
-    fn new(rate: Rate) -> Pacer {
-        Pacer {
-            start: Instant::now(),
-            period: match rate {
-                Rate::Hz(hz) => Some(Duration::from_secs_f64(1.0 / hz)),
-                Rate::BackToBack => None,
-            },
-            n: 0,
-        }
-    }
-
-    fn wait(&mut self) {
-        let Some(period) = self.period else { return };
-        let due = self.start + period * self.n;
-        self.n += 1;
-        if let Some(d) = due.checked_duration_since(Instant::now()) {
-            std::thread::sleep(d);
-        }
-    }
-}
-
-fn spawn_child(args: &[String]) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
-    let mut child = Command::new(std::env::current_exe()?)
-        .args(args)
-        .stdout(Stdio::piped())
-        .spawn()?;
-    let Some(out) = child.stdout.take() else {
-        anyhow::bail!("child has no stdout");
-    };
-    Ok((child, BufReader::new(out)))
-}
-
-fn read_line(out: &mut BufReader<ChildStdout>) -> anyhow::Result<String> {
-    let mut line = String::new();
-    out.read_line(&mut line)?;
-    Ok(line.trim().to_string())
-}
-
-/// Sends `n` messages at `rate` through `send(k)`; returns sender CPU per counted one.
-fn send_loop(
-    rate: Rate,
-    n: usize,
-    mut send: impl FnMut(usize) -> anyhow::Result<()>,
-) -> anyhow::Result<f64> {
-    let mut pace = Pacer::new(rate);
-    let mut cpu0 = process_cpu_ns();
-    for k in 0..n {
-        pace.wait();
-        if k == WARMUP {
-            cpu0 = process_cpu_ns();
-        }
-        send(k)?;
-    }
-    let cpu = process_cpu_ns().saturating_sub(cpu0);
-    Ok(cpu as f64 / (n - WARMUP) as f64)
-}
-
 /// Reads the receiver's report: `got <n> <cpu_ns> <counted>`, then one latency per line.
 fn finish(
     mut child: Child,
@@ -460,21 +353,6 @@ impl Tally {
     }
 }
 
-/// A plausible state (values do not matter to either transport, size does).
-fn sample_state() -> VehicleState {
-    VehicleState {
-        vehicle_id: VEHICLE,
-        position_valid: 1,
-        attitude_valid: 1,
-        lat_deg: 47.397_742,
-        lon_deg: 8.545_594,
-        alt_msl_m: 488.0,
-        alt_rel_m: 20.0,
-        attitude_q: [1.0, 0.0, 0.0, 0.0],
-        ..VehicleState::default()
-    }
-}
-
 /// The datagram the UDP sender writes: a `VehicleState`'s size, with the sequence
 /// (k + 1) and send time where its header keeps them.
 fn udp_datagram(buf: &mut [u8; LEN], k: usize) {
@@ -509,8 +387,8 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
         let ready = read_line(&mut out)?;
         anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
         std::thread::sleep(Duration::from_millis(100));
-        let mut state = sample_state();
-        let tx_cpu = send_loop(rate, n, |k| {
+        let mut state = bench_state(VEHICLE);
+        let tx_cpu = send_loop(rate, n, WARMUP, |k| {
             state.time_boot_ms = k as u32;
             // The bus stamps `header.seq` (k + 1) and `header.stamp_ns` as it sends.
             publ.publish(state)?;
@@ -529,7 +407,7 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
         sock.connect(("127.0.0.1", port))?;
         std::thread::sleep(Duration::from_millis(100));
         let mut buf = [0u8; LEN];
-        let tx_cpu = send_loop(rate, n, |k| {
+        let tx_cpu = send_loop(rate, n, WARMUP, |k| {
             udp_datagram(&mut buf, k);
             let sent = sock.send(&buf)?;
             anyhow::ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
@@ -696,7 +574,7 @@ fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>,
         let ready = read_line(&mut out)?;
         anyhow::ensure!(ready == "ready", "pong said `{ready}`");
         std::thread::sleep(Duration::from_millis(200));
-        let mut state = sample_state();
+        let mut state = bench_state(VEHICLE);
         let mut cpu0 = 0;
         for k in 0..total {
             if k == WARMUP {
