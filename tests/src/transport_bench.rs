@@ -277,6 +277,52 @@ pub fn bench_state(vehicle_id: u8) -> VehicleState {
     }
 }
 
+/// Bytes of the UDP baseline's datagram: exactly a `VehicleState`, so both
+/// transports carry the same payload.
+pub const DATAGRAM_LEN: usize = std::mem::size_of::<VehicleState>();
+
+/// Writes the UDP baseline's datagram for message `k` of `vehicle_id`: the sequence
+/// (k + 1) and the send time (`CLOCK_MONOTONIC` ns, taken now) where a
+/// `VehicleState`'s header keeps them, and the vehicle id where it keeps it.
+pub fn stamp_datagram(buf: &mut [u8; DATAGRAM_LEN], vehicle_id: u8, k: usize) {
+    buf[24] = vehicle_id;
+    buf[..8].copy_from_slice(&(k as u64 + 1).to_le_bytes());
+    buf[8..16].copy_from_slice(&skymesh_runtime::clock::monotonic_ns().to_le_bytes());
+}
+
+/// (sequence, send stamp) of a received baseline datagram of `len` bytes, checked
+/// for its size and vehicle id.
+pub fn datagram_fields(buf: &[u8], len: usize, vehicle_id: u8) -> Result<(u64, u64)> {
+    ensure!(
+        len == DATAGRAM_LEN,
+        "datagram of {len} bytes, expected {DATAGRAM_LEN}"
+    );
+    ensure!(buf[24] == vehicle_id, "sample of vehicle {}", buf[24]);
+    let field = |i: usize| {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&buf[i..i + 8]);
+        u64::from_le_bytes(b)
+    };
+    Ok((field(0), field(8)))
+}
+
+/// A blocking receive on a socket with a read timeout: `None` once nothing came for
+/// that long (the phase is over, or its last message was lost).
+pub fn recv_until_idle(sock: &std::net::UdpSocket, buf: &mut [u8]) -> Result<Option<usize>> {
+    match sock.recv(buf) {
+        Ok(len) => Ok(Some(len)),
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ) =>
+        {
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 /// An iceoryx2 domain whose shared-memory files are removed however the run ends.
 #[derive(Debug)]
 pub struct DomainGuard(pub Domain);

@@ -62,6 +62,20 @@ impl Tool {
     }
 
     /// Waits for the app message `want`, skipping others.
+    /// The vehicle in LOITER and an app connecting: the engine greets it with
+    /// "no shot" (GetCurrentShot(-1)).
+    async fn connect_app(&mut self) {
+        self.vehicle(FlightMode::Loiter);
+        self.session
+            .publish(AppSession {
+                session: 1,
+                connected: 1,
+                ..AppSession::default()
+            })
+            .unwrap();
+        self.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    }
+
     async fn expect_app(&mut self, want: &SoloMessage) {
         let wait = async {
             loop {
@@ -101,15 +115,7 @@ async fn an_orbit_over_the_bus_from_entry_to_exit() {
     let mut tool = Tool::open(&tool_bus);
     let engine = Engine::start(&domain, settings(dir.path())).await;
 
-    tool.vehicle(FlightMode::Loiter);
-    tool.session
-        .publish(AppSession {
-            session: 1,
-            connected: 1,
-            ..AppSession::default()
-        })
-        .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    tool.connect_app().await;
 
     tool.from_app
         .publish(app_msg(&SoloMessage::SetCurrentShot(1)))
@@ -176,15 +182,7 @@ async fn guidance_changes_send_a_setpoint_without_waiting_for_the_loop() {
     s.loop_period = std::time::Duration::from_secs(3600);
     let engine = Engine::start(&domain, s).await;
 
-    tool.vehicle(FlightMode::Loiter);
-    tool.session
-        .publish(AppSession {
-            session: 1,
-            connected: 1,
-            ..AppSession::default()
-        })
-        .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    tool.connect_app().await;
     tool.from_app
         .publish(app_msg(&SoloMessage::SetCurrentShot(1)))
         .unwrap();

@@ -29,8 +29,9 @@ use std::time::Duration;
 
 use anyhow::{bail, ensure, Result};
 use skymesh_e2e::transport_bench::{
-    bench_state, expect_line, finish_child, percentiles, read_line, send_loop, spawn_child,
-    DomainGuard, Rate, RxReport, Tally,
+    bench_state, datagram_fields, expect_line, finish_child, percentiles, read_line,
+    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, RxReport, Tally,
+    DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -43,7 +44,7 @@ const VEHICLE: u8 = 202;
 /// A receiver stops when nothing arrived for this long (the last message was lost).
 const IDLE_END: Duration = Duration::from_secs(2);
 /// Bytes per UDP datagram: exactly a `VehicleState`.
-const LEN: usize = std::mem::size_of::<VehicleState>();
+const LEN: usize = DATAGRAM_LEN;
 /// Subscriber counts.
 const FANOUT: [usize; 4] = [1, 2, 4, 8];
 
@@ -274,10 +275,8 @@ fn udp_run(rate: Rate, n: usize, subs: usize) -> Result<Phase> {
     std::thread::sleep(Duration::from_millis(100));
     // The same bytes a VehicleState has; sequence and send time where its header keeps them.
     let mut buf = [0u8; LEN];
-    buf[24] = VEHICLE;
     let tx_cpu = send_loop(rate, n, WARMUP, |k| {
-        buf[..8].copy_from_slice(&(k as u64 + 1).to_le_bytes());
-        buf[8..16].copy_from_slice(&monotonic_ns().to_le_bytes());
+        stamp_datagram(&mut buf, VEHICLE, k);
         for to in &ports {
             let sent = sock.send_to(&buf, to)?;
             ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
@@ -301,29 +300,11 @@ fn udp_receiver(n: usize) -> Result<()> {
     let mut tally = Tally::new(n, WARMUP);
     println!("ready {}", sock.local_addr()?.port());
     let mut buf = [0u8; LEN + 1];
-    loop {
-        let len = match sock.recv(&mut buf) {
-            Ok(len) => len,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                break
-            }
-            Err(e) => return Err(e.into()),
-        };
+    while let Some(len) = recv_until_idle(&sock, &mut buf)? {
         let t1 = monotonic_ns();
-        ensure!(len == LEN, "datagram of {len} bytes, expected {LEN}");
-        ensure!(buf[24] == VEHICLE, "sample of vehicle {}", buf[24]);
-        let field = |i: usize| {
-            let mut b = [0u8; 8];
-            b.copy_from_slice(&buf[i..i + 8]);
-            u64::from_le_bytes(b)
-        };
-        let k = field(0).saturating_sub(1) as usize;
-        tally.add(k, field(8), t1);
+        let (seq, t0) = datagram_fields(&buf, len, VEHICLE)?;
+        let k = seq.saturating_sub(1) as usize;
+        tally.add(k, t0, t1);
         if k + 1 >= n {
             break;
         }

@@ -36,7 +36,8 @@ use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
 use skymesh_e2e::transport_bench::{
-    bench_state, percentiles, process_cpu_ns, read_line, send_loop, spawn_child, DomainGuard, Rate,
+    bench_state, datagram_fields, percentiles, process_cpu_ns, read_line, recv_until_idle,
+    send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -49,7 +50,7 @@ const VEHICLE: u8 = 201;
 /// The receiver stops when nothing arrived for this long (the last message was lost).
 const IDLE_END: Duration = Duration::from_secs(2);
 /// Bytes per UDP datagram: exactly a `VehicleState`.
-const LEN: usize = std::mem::size_of::<VehicleState>();
+const LEN: usize = DATAGRAM_LEN;
 /// Spin budget of the low-latency ping-pong.
 const SPIN: Duration = Duration::from_micros(200);
 
@@ -353,26 +354,6 @@ impl Tally {
     }
 }
 
-/// The datagram the UDP sender writes: a `VehicleState`'s size, with the sequence
-/// (k + 1) and send time where its header keeps them.
-fn udp_datagram(buf: &mut [u8; LEN], k: usize) {
-    buf[24] = VEHICLE;
-    buf[..8].copy_from_slice(&(k as u64 + 1).to_le_bytes());
-    buf[8..16].copy_from_slice(&monotonic_ns().to_le_bytes());
-}
-
-/// (sequence, send stamp) of a received datagram, checked.
-fn udp_fields(buf: &[u8], len: usize) -> anyhow::Result<(u64, u64)> {
-    anyhow::ensure!(len == LEN, "datagram of {len} bytes, expected {LEN}");
-    anyhow::ensure!(buf[24] == VEHICLE, "sample of vehicle {}", buf[24]);
-    let field = |i: usize| {
-        let mut b = [0u8; 8];
-        b.copy_from_slice(&buf[i..i + 8]);
-        u64::from_le_bytes(b)
-    };
-    Ok((field(0), field(8)))
-}
-
 fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
     if via.is_iox() {
         // A fresh bus and publisher per phase, so no phase inherits another's samples.
@@ -408,7 +389,7 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
         std::thread::sleep(Duration::from_millis(100));
         let mut buf = [0u8; LEN];
         let tx_cpu = send_loop(rate, n, WARMUP, |k| {
-            udp_datagram(&mut buf, k);
+            stamp_datagram(&mut buf, VEHICLE, k);
             let sent = sock.send(&buf)?;
             anyhow::ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
             Ok(())
@@ -431,7 +412,7 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
     };
     let udp_sample = |tally: &mut Tally, buf: &[u8], len: usize| -> anyhow::Result<bool> {
         let t1 = monotonic_ns();
-        let (seq, t0) = udp_fields(buf, len)?;
+        let (seq, t0) = datagram_fields(buf, len, VEHICLE)?;
         Ok(tally.add(seq.saturating_sub(1) as usize, t0, t1, n))
     };
     let rt = || {
@@ -467,19 +448,7 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             sock.set_read_timeout(Some(IDLE_END))?;
             println!("ready {}", sock.local_addr()?.port());
             let mut buf = [0u8; LEN + 1];
-            loop {
-                let len = match sock.recv(&mut buf) {
-                    Ok(len) => len,
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                        ) =>
-                    {
-                        break
-                    }
-                    Err(e) => return Err(e.into()),
-                };
+            while let Some(len) = recv_until_idle(&sock, &mut buf)? {
                 if udp_sample(&mut tally, &buf, len)? {
                     break;
                 }
@@ -547,11 +516,11 @@ fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>,
             if k == WARMUP {
                 cpu0 = process_cpu_ns();
             }
-            udp_datagram(&mut buf, k);
+            stamp_datagram(&mut buf, VEHICLE, k);
             sock.send(&buf)?;
             let len = sock.recv(&mut back)?;
             let t1 = monotonic_ns();
-            let (seq, t0) = udp_fields(&back, len)?;
+            let (seq, t0) = datagram_fields(&back, len, VEHICLE)?;
             anyhow::ensure!(seq == k as u64 + 1, "pong {seq} for ping {}", k + 1);
             if k >= WARMUP {
                 lat.push(t1.saturating_sub(t0) / 2);
