@@ -22,6 +22,7 @@ use std::time::Duration;
 use bytes::BytesMut;
 use digiview_proto::{Frame, FrameCodec, MessageType, ParamType, FRAME_LEN};
 use skymesh_ipc_types::{VisionReply, VisionResult};
+use skymesh_runtime::TokenBucket;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::TcpStream;
@@ -121,36 +122,6 @@ pub async fn run(stream: TcpStream, ctx: SessionCtx, cancel: CancellationToken) 
     end
 }
 
-/// A token bucket: `rate` frames per second, bursts of `rate`.
-#[derive(Debug)]
-struct RateLimit {
-    rate: f64,
-    tokens: f64,
-    last: Instant,
-}
-
-impl RateLimit {
-    fn new(rate: u32) -> Self {
-        RateLimit {
-            rate: f64::from(rate),
-            tokens: f64::from(rate),
-            last: Instant::now(),
-        }
-    }
-
-    fn take(&mut self, now: Instant) -> bool {
-        let dt = now.saturating_duration_since(self.last).as_secs_f64();
-        self.last = now;
-        self.tokens = (self.tokens + dt * self.rate).min(self.rate);
-        if self.tokens >= 1.0 {
-            self.tokens -= 1.0;
-            true
-        } else {
-            false
-        }
-    }
-}
-
 /// One periodic GET: the request and when it is next answered.
 #[derive(Debug)]
 struct PeriodicGet {
@@ -175,7 +146,8 @@ struct Reader<'a> {
     tx: mpsc::Sender<Reply>,
     codec: FrameCodec,
     buf: BytesMut,
-    rate: RateLimit,
+    /// `max_frames_per_s`, bursts of as many.
+    rate: TokenBucket,
     /// By parameter type: a new periodic GET of a type replaces the old one.
     periodic: BTreeMap<ParamType, PeriodicGet>,
     /// The SET waiting for the pipeline; no further frame is read meanwhile.
@@ -191,7 +163,11 @@ impl<'a> Reader<'a> {
             tx,
             codec: FrameCodec::new(),
             buf: BytesMut::with_capacity(READ_CHUNK),
-            rate: RateLimit::new(ctx.settings.max_frames_per_s),
+            rate: TokenBucket::new(
+                ctx.settings.max_frames_per_s,
+                ctx.settings.max_frames_per_s,
+                Instant::now().into_std(),
+            ),
             periodic: BTreeMap::new(),
             pending: None,
             partial_since: None,
@@ -268,7 +244,7 @@ impl<'a> Reader<'a> {
             consumed = true;
             let metrics = self.ctx.drops.metrics();
             metrics.frame_in(item.as_ref().ok().map(|f| f.message_type));
-            if !self.rate.take(Instant::now()) {
+            if !self.rate.take(Instant::now().into_std()) {
                 self.ctx.drops.refused(
                     Refusal::RateLimited,
                     self.ctx.client,

@@ -185,4 +185,83 @@ mod tests {
         let (_, i) = classify(SN, 1000, &mut l, &t, b"junk", t0 + Duration::from_secs(1));
         assert!(matches!(i, Inbound::Dropped { .. }), "next second");
     }
+
+    /// A services request with `data`.
+    fn request(method: &str, data: &str) -> Vec<u8> {
+        format!(r#"{{"tid":"t","bid":"b","timestamp":1,"method":"{method}","data":{data}}}"#)
+            .into_bytes()
+    }
+
+    #[test]
+    fn huge_and_out_of_range_numbers_are_refused_with_out_of_range() {
+        let mut l = RateLimiter::new(1000);
+        let point = |lat: &str, lon: &str, h: &str| {
+            format!(r#"{{"latitude":{lat},"longitude":{lon},"height":{h}}}"#)
+        };
+        let fly = |speed: &str, p: String| {
+            request(
+                "fly_to_point",
+                &format!(r#"{{"fly_to_id":"f","max_speed":{speed},"points":[{p}]}}"#),
+            )
+        };
+        let good = fly("12", point("12.23", "12.23", "100"));
+        assert!(matches!(
+            run(&mut l, &services(), &good),
+            Inbound::Request(_, Ok(_))
+        ));
+        let zoom = |z: &str| {
+            request(
+                "camera_focal_length_set",
+                &format!(r#"{{"payload_index":"39-0-7","camera_type":"zoom","zoom_factor":{z}}}"#),
+            )
+        };
+        assert!(matches!(
+            run(&mut l, &services(), &zoom("5")),
+            Inbound::Request(_, Ok(_))
+        ));
+        let wrong_type = codes::WRONG_TYPE;
+        let out_of_range = codes::OUT_OF_RANGE;
+        for (bad, code) in [
+            // max_speed is an integer field: a huge float (or an integer beyond u64,
+            // which JSON parsers read as one) is the wrong type, a huge integer
+            // (beyond i64 too) out of range.
+            (fly("1e308", point("12.23", "12.23", "100")), wrong_type),
+            (
+                fly("99999999999999999999", point("12.23", "12.23", "100")),
+                wrong_type,
+            ),
+            (fly("100000", point("12.23", "12.23", "100")), out_of_range),
+            (
+                fly("18446744073709551615", point("12.23", "12.23", "100")),
+                out_of_range,
+            ),
+            (fly("-5", point("12.23", "12.23", "100")), out_of_range),
+            (fly("12", point("1e308", "12.23", "100")), out_of_range),
+            (
+                fly("12", point("12.23", "-1.7976931348623157e308", "100")),
+                out_of_range,
+            ),
+            (fly("12", point("12.23", "12.23", "1e300")), out_of_range),
+            (fly("12", point("12.23", "12.23", "-5")), out_of_range),
+            (zoom("1e308"), out_of_range),
+            (zoom("-1e-308"), out_of_range),
+            (zoom("100000"), out_of_range),
+        ] {
+            match run(&mut l, &services(), &bad) {
+                Inbound::Request(env, Err(r)) => {
+                    assert_eq!(r.code, code, "{r}");
+                    // The envelope is kept: the refusal is replied with this code.
+                    assert_eq!(env.tid, "t");
+                }
+                other => panic!("{}: {other:?}", String::from_utf8_lossy(&bad)),
+            }
+        }
+        // Beyond f64 (JSON has no NaN/inf; 1e999 is what comes closest): not a
+        // parseable document, dropped and counted (no envelope to reply to).
+        let beyond = fly("1e999", point("12.23", "12.23", "100"));
+        assert!(matches!(
+            run(&mut l, &services(), &beyond),
+            Inbound::Dropped { .. }
+        ));
+    }
 }

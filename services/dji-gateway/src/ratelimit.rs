@@ -1,59 +1,61 @@
-//! Inbound rate limit: at most `max_per_s` messages per topic in each one-second
-//! window; the excess is dropped (and counted by the caller). Pure, explicit time.
+//! Inbound rate limit: a token bucket per topic (the runtime's
+//! [`skymesh_runtime::TokenBucket`]), `max_per_s` messages per second with bursts of
+//! as many; the excess is dropped (and counted by the caller). Pure, explicit time.
 
 use std::collections::HashMap;
 use std::hash::Hash;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-const WINDOW: Duration = Duration::from_secs(1);
+use skymesh_runtime::TokenBucket;
 
 #[derive(Debug)]
 pub struct RateLimiter<K> {
     max_per_s: u32,
-    /// Key → (window start, messages admitted in it).
-    windows: HashMap<K, (Instant, u32)>,
+    /// Key → its bucket (keys are topic kinds: a bounded set).
+    buckets: HashMap<K, TokenBucket>,
 }
 
 impl<K: Eq + Hash> RateLimiter<K> {
     pub fn new(max_per_s: u32) -> Self {
         RateLimiter {
             max_per_s,
-            windows: HashMap::new(),
+            buckets: HashMap::new(),
         }
     }
 
     /// `true` if one more message of `key` may be handled at `now`.
     pub fn admit(&mut self, key: K, now: Instant) -> bool {
-        let (start, count) = self.windows.entry(key).or_insert((now, 0));
-        if now.saturating_duration_since(*start) >= WINDOW {
-            (*start, *count) = (now, 0);
-        }
-        if *count >= self.max_per_s {
-            return false;
-        }
-        *count += 1;
-        true
+        let per_s = self.max_per_s;
+        self.buckets
+            .entry(key)
+            .or_insert_with(|| TokenBucket::new(per_s, per_s, now))
+            .take(now)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
 
     #[test]
     fn per_key_budget_per_second() {
         let t0 = Instant::now();
         let mut r = RateLimiter::new(3);
         assert!((0..3).all(|_| r.admit("services", t0)));
-        assert!(!r.admit("services", t0 + Duration::from_millis(500)));
+        assert!(!r.admit("services", t0 + Duration::from_millis(300)));
         assert!(
-            r.admit("events_reply", t0 + Duration::from_millis(500)),
+            r.admit("events_reply", t0 + Duration::from_millis(300)),
             "own budget"
         );
-        assert!(!r.admit("services", t0 + Duration::from_millis(999)));
-        assert!(r.admit("services", t0 + WINDOW), "a new window");
-        assert!(r.admit("services", t0 + WINDOW));
-        assert!(r.admit("services", t0 + WINDOW));
-        assert!(!r.admit("services", t0 + WINDOW));
+        // One token per 333 ms refills.
+        assert!(r.admit("services", t0 + Duration::from_millis(334)));
+        assert!(!r.admit("services", t0 + Duration::from_millis(600)));
+        let later = t0 + Duration::from_secs(5);
+        assert!(
+            (0..3).all(|_| r.admit("services", later)),
+            "a full burst again"
+        );
+        assert!(!r.admit("services", later));
     }
 }

@@ -36,6 +36,14 @@ pub struct Settings {
     pub max_clients: usize,
     /// Records waiting to be written to one client; a full queue closes it.
     pub outgoing_queue: usize,
+    /// Records per second one client may send (sustained); the excess is dropped
+    /// and counted (`rate_limited`).
+    pub max_records_per_s: u32,
+    /// Records one client may send at once above the sustained rate.
+    pub record_burst: u32,
+    /// A record whose bytes started arriving this long ago and is still incomplete
+    /// closes the connection (`partial_record_timeout`: a slow-loris client).
+    pub partial_record_timeout: Duration,
     /// Clients allowed every command; the others send only `CMD_EXT_*` and PING.
     pub privileged: AddrSet,
     /// Where each pose datagram goes.
@@ -57,6 +65,9 @@ pub struct RawConfig {
     pub listen: String,
     pub max_clients: i64,
     pub outgoing_queue: i64,
+    pub max_records_per_s: i64,
+    pub record_burst: i64,
+    pub partial_record_timeout_s: f64,
     pub privileged: Vec<String>,
     pub broadcast_destinations: Vec<String>,
     pub broadcast_bind: String,
@@ -71,6 +82,9 @@ impl Default for RawConfig {
             listen: "127.0.0.1:8000".to_string(),
             max_clients: 64,
             outgoing_queue: 1024,
+            max_records_per_s: 200,
+            record_burst: 400,
+            partial_record_timeout_s: 10.0,
             privileged: vec!["127.0.0.1".to_string()],
             broadcast_destinations: vec!["127.0.0.1:6666".to_string()],
             broadcast_bind: "0.0.0.0:0".to_string(),
@@ -144,10 +158,20 @@ impl ServiceConfig for RawConfig {
             0.1,
             600.0,
         )?;
+        let partial_record_timeout = in_range(
+            "partial_record_timeout_s",
+            finite("partial_record_timeout_s", self.partial_record_timeout_s)?,
+            0.01,
+            600.0,
+        )?;
         Ok(Settings {
             listen,
             max_clients: in_range("max_clients", self.max_clients, 1, 4096)? as usize,
             outgoing_queue: in_range("outgoing_queue", self.outgoing_queue, 16, 65_536)? as usize,
+            max_records_per_s: in_range("max_records_per_s", self.max_records_per_s, 1, 100_000)?
+                as u32,
+            record_burst: in_range("record_burst", self.record_burst, 1, 100_000)? as u32,
+            partial_record_timeout: Duration::from_secs_f64(partial_record_timeout),
             privileged: AddrSet::new(privileged),
             broadcast_destinations,
             broadcast_bind,
@@ -201,6 +225,11 @@ mod tests {
         assert_eq!(shipped.listen, SocketAddr::from(([127, 0, 0, 1], 8000)));
         assert_eq!(shipped.max_clients, 64);
         assert_eq!(
+            (shipped.max_records_per_s, shipped.record_burst),
+            (200, 400)
+        );
+        assert_eq!(shipped.partial_record_timeout, Duration::from_secs(10));
+        assert_eq!(
             shipped.broadcast_period,
             Duration::from_secs_f64(1.0 / 30.0)
         );
@@ -235,6 +264,11 @@ mod tests {
             ("broadcast_hz = nan", "broadcast_hz"),
             ("liveness = \"maybe\"", "liveness"),
             ("state_timeout_s = 0.0", "state_timeout_s"),
+            ("max_records_per_s = 0", "max_records_per_s"),
+            ("max_records_per_s = 1000000", "max_records_per_s"),
+            ("record_burst = -1", "record_burst"),
+            ("partial_record_timeout_s = 0.0", "partial_record_timeout_s"),
+            ("partial_record_timeout_s = inf", "partial_record_timeout_s"),
         ] {
             let e = parse::<RawConfig>(text, "t").unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");

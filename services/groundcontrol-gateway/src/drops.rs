@@ -66,4 +66,24 @@ impl Drops {
             ),
         }
     }
+
+    /// Logs a connection closed inside a record that stalled (slow-loris); the
+    /// disconnect itself is counted by the hub (`partial_record_timeout`).
+    pub fn stalled(&self, client: u16, peer: SocketAddr, buffered: usize) {
+        match self.allow("partial_record_timeout") {
+            Some(hidden) => tracing::warn!(
+                %peer,
+                client,
+                buffered,
+                similar_since_last_warning = hidden,
+                "GroundControl client closed: a record stayed incomplete for partial_record_timeout_s"
+            ),
+            None => tracing::debug!(
+                %peer,
+                client,
+                buffered,
+                "GroundControl client closed: a record stayed incomplete"
+            ),
+        }
+    }
 }

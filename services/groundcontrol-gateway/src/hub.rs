@@ -22,7 +22,7 @@ use crate::config::Settings;
 use crate::drops::Drops;
 use crate::ipc::Commands;
 use crate::metrics::{ConnectionResult, DisconnectReason, ReplyDrop};
-use crate::session::{self, End, SessionCtx};
+use crate::session::{self, End, Limits, SessionCtx};
 
 /// After a failed `accept` (out of file descriptors, ...), wait this long.
 const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
@@ -179,6 +179,7 @@ impl Hub {
             commands: self.commands.clone(),
             drops: self.drops.clone(),
             replies: tx.clone(),
+            limits: Limits::of(&self.settings),
         };
         let events = self.events.clone();
         let token = cancel.clone();

@@ -34,6 +34,8 @@ pub enum DisconnectReason {
     Truncated,
     /// The client stopped reading and its outgoing queue filled.
     Overflow,
+    /// A record stayed incomplete for `partial_record_timeout_s` (slow-loris).
+    PartialRecordTimeout,
     /// The connection failed.
     Io,
     /// The gateway is stopping.
@@ -46,6 +48,7 @@ impl DisconnectReason {
             DisconnectReason::Closed => "closed",
             DisconnectReason::Truncated => "truncated",
             DisconnectReason::Overflow => "overflow",
+            DisconnectReason::PartialRecordTimeout => "partial_record_timeout",
             DisconnectReason::Io => "io",
             DisconnectReason::Shutdown => "shutdown",
         }

@@ -6,22 +6,29 @@
 //! that disconnects inside a record, floods garbage or stops reading affects only
 //! itself: its partial record is dropped and counted, and a full outgoing queue
 //! closes it without ever blocking the hub or another client.
+//!
+//! Input limits, per connection: records beyond a token bucket of `record_burst`
+//! refilled at `max_records_per_s` are dropped and counted (`rate_limited`), the
+//! connection stays; a record left incomplete for `partial_record_timeout_s`
+//! (slow-loris) closes the connection.
 
 use std::fmt;
 use std::net::SocketAddr;
+use std::time::Duration;
 
 use bytes::BytesMut;
 use gc_proto::{Record, RecordCodec, RECORD_LEN};
-use skymesh_runtime::IpcError;
+use skymesh_runtime::{IpcError, TokenBucket};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
+use tokio::time::Instant;
 use tokio_util::codec::Decoder;
 use tokio_util::sync::CancellationToken;
 
 use crate::drops::Drops;
-use crate::inbound::{Inbound, Verdict};
+use crate::inbound::{Inbound, RefuseReason, Verdict};
 use crate::ipc::Commands;
 use crate::metrics::DisconnectReason;
 
@@ -39,6 +46,9 @@ pub enum End {
     Truncated(usize),
     /// The client stopped reading: its outgoing queue filled.
     Overflow,
+    /// A record stayed incomplete for `partial_record_timeout` (this many bytes of
+    /// it had arrived): a slow-loris client.
+    Stalled(usize),
     /// The hub closed it (shutdown, or the hub found the queue full).
     Cancelled,
     Io(std::io::Error),
@@ -53,6 +63,7 @@ impl End {
             End::Closed => DisconnectReason::Closed,
             End::Truncated(_) => DisconnectReason::Truncated,
             End::Overflow => DisconnectReason::Overflow,
+            End::Stalled(_) => DisconnectReason::PartialRecordTimeout,
             End::Cancelled => DisconnectReason::Shutdown,
             End::Io(_) | End::Bus(_) => DisconnectReason::Io,
         }
@@ -68,6 +79,10 @@ impl fmt::Display for End {
                 "closed by the client inside a record ({n} of {RECORD_LEN} bytes dropped)"
             ),
             End::Overflow => f.write_str("outgoing queue full: the client stopped reading"),
+            End::Stalled(n) => write!(
+                f,
+                "a record stayed incomplete for partial_record_timeout_s ({n} of {RECORD_LEN} bytes)"
+            ),
             End::Cancelled => f.write_str("closed by the gateway"),
             End::Io(e) => write!(f, "connection error: {e}"),
             End::Bus(e) => write!(f, "bus error: {e}"),
@@ -86,6 +101,25 @@ pub struct SessionCtx {
     pub drops: Drops,
     /// The session's own outgoing queue (PING_RESPONSE goes straight back).
     pub replies: mpsc::Sender<Record>,
+    pub limits: Limits,
+}
+
+/// The per-connection input limits (from [`crate::Settings`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub max_records_per_s: u32,
+    pub record_burst: u32,
+    pub partial_record_timeout: Duration,
+}
+
+impl Limits {
+    pub fn of(settings: &crate::Settings) -> Limits {
+        Limits {
+            max_records_per_s: settings.max_records_per_s,
+            record_burst: settings.record_burst,
+            partial_record_timeout: settings.partial_record_timeout,
+        }
+    }
 }
 
 /// Serves one connection until the client leaves, its input or reading forces a
@@ -108,19 +142,61 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
     let mut inbound = Inbound::new(ctx.client, ctx.privileged);
     let mut codec = RecordCodec::new();
     let mut buf = BytesMut::with_capacity(READ_CHUNK);
+    let limits = ctx.limits;
+    let mut rate = TokenBucket::new(
+        limits.max_records_per_s,
+        limits.record_burst,
+        Instant::now().into_std(),
+    );
+    // When the first byte of the incomplete record in `buf` arrived.
+    let mut partial_since: Option<Instant> = None;
     loop {
+        let mut consumed = false;
         loop {
             let record = match codec.decode(&mut buf) {
                 Ok(Some(r)) => r,
                 Ok(None) => break,
                 Err(e) => return End::Io(std::io::Error::other(e)),
             };
+            consumed = true;
+            if !rate.take(Instant::now().into_std()) {
+                ctx.drops.metrics().record_in(record.kind);
+                ctx.drops.refused(
+                    RefuseReason::RateLimited,
+                    ctx.client,
+                    ctx.peer,
+                    &format_args!(
+                        "more than {} records per second (burst {}); dropped unanswered",
+                        limits.max_records_per_s, limits.record_burst
+                    ),
+                );
+                continue;
+            }
             if let Some(end) = handle(&mut inbound, &record, ctx) {
                 return end;
             }
         }
+        // The bytes left over started arriving in the last read, at the latest.
+        if buf.is_empty() {
+            partial_since = None;
+        } else if consumed || partial_since.is_none() {
+            partial_since = Some(Instant::now());
+        }
         buf.reserve(READ_CHUNK);
-        match read.read_buf(&mut buf).await {
+        let read = match partial_since {
+            None => read.read_buf(&mut buf).await,
+            Some(since) => {
+                let deadline = since + limits.partial_record_timeout;
+                match tokio::time::timeout_at(deadline, read.read_buf(&mut buf)).await {
+                    Ok(r) => r,
+                    Err(_) => {
+                        ctx.drops.stalled(ctx.client, ctx.peer, buf.len());
+                        return End::Stalled(buf.len());
+                    }
+                }
+            }
+        };
+        match read {
             Ok(0) if buf.is_empty() => return End::Closed,
             Ok(0) => return End::Truncated(buf.len()),
             Ok(_) => {}

@@ -382,7 +382,13 @@ async fn clients_beyond_max_clients_are_closed() {
 
 #[tokio::test]
 async fn a_client_that_stops_reading_is_closed_and_blocks_nobody() {
-    let gw = Gateway::start_with(|s| s.outgoing_queue = 16).await;
+    let gw = Gateway::start_with(|s| {
+        s.outgoing_queue = 16;
+        // Only the queue is under test here: no rate limit in the way.
+        s.max_records_per_s = 100_000;
+        s.record_burst = 100_000;
+    })
+    .await;
     let mut reader = GcClient::connect(gw.tcp).await.expect("reader");
     let mut stalled = GcClient::connect(gw.tcp).await.expect("stalled");
     // Pings without ever reading the answers: the socket buffers fill, then the
@@ -408,5 +414,139 @@ async fn a_client_that_stops_reading_is_closed_and_blocks_nobody() {
     let r = reader.recv(PATIENCE).await.expect("open").expect("pong");
     assert_eq!(r.int1, 5);
     let _ = flood.await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn a_client_beyond_its_record_rate_is_throttled_and_others_are_not() {
+    let mut gw = Gateway::start_with(|s| {
+        s.max_records_per_s = 1;
+        s.record_burst = 10;
+    })
+    .await;
+    let mut flooder = GcClient::connect(gw.tcp).await.expect("flooder");
+    let mut polite = GcClient::connect_from(other_host(), gw.tcp)
+        .await
+        .expect("polite");
+    let flood: Vec<Record> = (0..100)
+        .map(|_| Record::new(NetCmdType::CmdExtHalt, 1))
+        .collect();
+    flooder.send_all(&flood).await.expect("send");
+    gw.wait_metric("skymesh_gc_records_in_total", "type=cmd_ext_halt", 100.0)
+        .await;
+    // Every record of the flood was either published or dropped as rate_limited,
+    // and the burst (at least) got through.
+    let limited = gw
+        .metric("skymesh_gc_refused_total", "reason=rate_limited")
+        .expect("rate_limited counted");
+    let mut published = 0;
+    while let Some(c) = gw
+        .commands
+        .recv_timeout(Duration::from_millis(300))
+        .await
+        .expect("swarm_command")
+    {
+        assert_eq!(c.kind(), Ok(SwarmCommandKind::ExtHalt));
+        published += 1;
+    }
+    assert_eq!(published as f64 + limited, 100.0, "{published} published");
+    assert!(published >= 10, "the burst passes: {published}");
+    assert!(limited >= 50.0, "the flood is throttled: {limited}");
+    // The flooder is still connected, and the other client has its own budget.
+    assert!(!flooder.is_closed());
+    let before = gw.metric("skymesh_gc_refused_total", "reason=rate_limited");
+    let polite_records: Vec<Record> = (0..5)
+        .map(|i| waypoint(2, [0.0, 0.0, 1.0 + i as f32], 1.0, 0))
+        .collect();
+    polite.send_all(&polite_records).await.expect("send");
+    for i in 0..5 {
+        let c = gw.next_command().await;
+        assert_eq!((c.drone, c.f[2]), (2, 1.0 + i as f32));
+    }
+    assert_eq!(
+        gw.metric("skymesh_gc_refused_total", "reason=rate_limited"),
+        before
+    );
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn a_record_left_incomplete_closes_only_that_client() {
+    let mut gw =
+        Gateway::start_with(|s| s.partial_record_timeout = Duration::from_millis(300)).await;
+    let mut loris = GcClient::connect(gw.tcp).await.expect("loris");
+    let mut other = GcClient::connect_from(other_host(), gw.tcp)
+        .await
+        .expect("other");
+    // One whole record, then 10 bytes of the next and silence.
+    let mut bytes = Record::new(NetCmdType::CmdExtHalt, 1).encode().to_vec();
+    bytes.extend_from_slice(&Record::new(NetCmdType::CmdExtHalt, 2).encode()[..10]);
+    loris.send_raw(&bytes).await.expect("send");
+    let c = gw.next_command().await;
+    assert_eq!(c.drone, 1);
+    assert!(
+        loris.wait_closed(PATIENCE).await,
+        "the stalled client is closed"
+    );
+    gw.wait_metric(
+        "skymesh_gc_disconnects_total",
+        "reason=partial_record_timeout",
+        1.0,
+    )
+    .await;
+    gw.no_command_for(Duration::from_millis(100)).await;
+    // The other client, idle meanwhile (no partial record), is still served.
+    other
+        .send(&waypoint(3, [0.0, 0.0, 1.0], 1.0, 0))
+        .await
+        .expect("send");
+    assert_eq!(gw.next_command().await.drone, 3);
+    gw.wait_metric("skymesh_gc_clients", "", 1.0).await;
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn non_finite_numbers_never_reach_the_bus() {
+    let mut gw = Gateway::start().await;
+    let mut client = GcClient::connect(gw.tcp).await.expect("connect");
+    let mut records = Vec::new();
+    for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        // A kind whose floats mean nothing, and one whose floats are positions.
+        records.push(Record::floats(
+            NetCmdType::CmdExtHalt,
+            1,
+            0,
+            0,
+            [0.0, v, 0.0, 0.0],
+        ));
+        records.push(waypoint(1, [0.0, 0.0, v], 1.0, 0));
+        records.push(waypoint(1, [0.0, 0.0, 1.0], v, 0));
+        // Through a parameter record into the colour of the next command.
+        records.push(Record::floats(
+            NetCmdType::ExtParam1,
+            1,
+            0,
+            0,
+            [v, 0.0, 0.0, 0.0],
+        ));
+        records.push(Record::floats(
+            NetCmdType::CmdExtColor,
+            1,
+            0,
+            0,
+            [1.0, 0.0, 0.0, 0.0],
+        ));
+    }
+    // Absurd magnitudes where the value has a meaning.
+    records.push(waypoint(1, [f32::MAX, 0.0, 1.0], 1.0, 0));
+    records.push(waypoint(1, [0.0, 0.0, 1.0], 1e30, 0));
+    let refused = records.len() - 3; // the three ExtParam1 records are stored
+    client.send_all(&records).await.expect("send");
+    gw.wait_refused("invalid_value", refused as f64).await;
+    gw.no_command_for(Duration::from_millis(200)).await;
+    assert_eq!(
+        gw.metric("skymesh_gc_commands_published_total", ""),
+        Some(0.0)
+    );
     gw.stop().await;
 }

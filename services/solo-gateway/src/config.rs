@@ -26,6 +26,14 @@ pub struct Settings {
     pub outgoing_queue: usize,
     /// How often the `AppSession` sample is republished (besides every change).
     pub session_publish: Duration,
+    /// Frames per second the app may send (sustained); the excess is dropped and
+    /// counted (`rate_limited`).
+    pub max_messages_per_s: u32,
+    /// Frames the app may send at once above the sustained rate.
+    pub message_burst: u32,
+    /// Follow-stream datagrams per second (and burst) from the app's address; the
+    /// excess is dropped and counted (`follow_rate_limited`).
+    pub follow_max_per_s: u32,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -37,6 +45,9 @@ pub struct RawConfig {
     pub frame_timeout_s: f64,
     pub outgoing_queue: i64,
     pub session_publish_ms: i64,
+    pub max_messages_per_s: i64,
+    pub message_burst: i64,
+    pub follow_max_per_s: i64,
 }
 
 impl Default for RawConfig {
@@ -47,6 +58,9 @@ impl Default for RawConfig {
             frame_timeout_s: 10.0,
             outgoing_queue: 256,
             session_publish_ms: 1000,
+            max_messages_per_s: 200,
+            message_burst: 400,
+            follow_max_per_s: 50,
         }
     }
 }
@@ -74,6 +88,11 @@ impl ServiceConfig for RawConfig {
                 50,
                 10_000,
             )? as u64),
+            max_messages_per_s: in_range("max_messages_per_s", self.max_messages_per_s, 1, 100_000)?
+                as u32,
+            message_burst: in_range("message_burst", self.message_burst, 1, 100_000)? as u32,
+            follow_max_per_s: in_range("follow_max_per_s", self.follow_max_per_s, 1, 10_000)?
+                as u32,
         })
     }
 }
@@ -88,6 +107,9 @@ impl Default for Settings {
             frame_timeout: Duration::from_secs_f64(raw.frame_timeout_s),
             outgoing_queue: raw.outgoing_queue as usize,
             session_publish: Duration::from_millis(raw.session_publish_ms as u64),
+            max_messages_per_s: raw.max_messages_per_s as u32,
+            message_burst: raw.message_burst as u32,
+            follow_max_per_s: raw.follow_max_per_s as u32,
         }
     }
 }
@@ -130,6 +152,9 @@ mod tests {
             ("frame_timeout_s = nan", "frame_timeout_s"),
             ("outgoing_queue = 1", "outgoing_queue"),
             ("session_publish_ms = 20000", "session_publish_ms"),
+            ("max_messages_per_s = 0", "max_messages_per_s"),
+            ("message_burst = 1000000", "message_burst"),
+            ("follow_max_per_s = -5", "follow_max_per_s"),
         ] {
             let e = parse::<RawConfig>(text, "t").unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");

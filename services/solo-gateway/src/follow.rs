@@ -5,9 +5,11 @@
 
 use std::net::{IpAddr, SocketAddr};
 
+use skymesh_runtime::TokenBucket;
 use solo_proto::{ids, SoloMessage};
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::drops::Drops;
@@ -34,7 +36,10 @@ pub fn check(
         ));
     }
     match solo_proto::decode_datagram(datagram) {
-        Ok(SoloMessage::Location(_)) => Ok(app.session),
+        Ok(m @ SoloMessage::Location(_)) => match crate::inbound::magnitudes(&m) {
+            Ok(()) => Ok(app.session),
+            Err(reason) => Err((Malformed::BadDatagram, reason)),
+        },
         Ok(other) => Err((
             Malformed::BadDatagram,
             format!(
@@ -48,14 +53,18 @@ pub fn check(
 }
 
 /// Receives follow datagrams until `stop`; returns an error only if the bus fails.
+/// Good datagrams beyond `max_per_s` (one bucket of as many, for the app's address:
+/// no other address gets this far) are dropped and counted `follow_rate_limited`.
 pub(crate) async fn run(
     socket: UdpSocket,
     app: watch::Receiver<Option<AppAddr>>,
     from_app: FromApp,
     drops: Drops,
+    max_per_s: u32,
     stop: CancellationToken,
 ) -> Result<(), PublishError> {
     let mut buf = vec![0u8; DATAGRAM_BUF];
+    let mut rate = TokenBucket::new(max_per_s, max_per_s, Instant::now().into_std());
     loop {
         let (n, from): (usize, SocketAddr) = tokio::select! {
             _ = stop.cancelled() => return Ok(()),
@@ -70,6 +79,14 @@ pub(crate) async fn run(
         let datagram = &buf[..n];
         let current = *app.borrow();
         match check(datagram, from.ip(), current) {
+            Ok(_) if !rate.take(Instant::now().into_std()) => {
+                drops.metrics().follow_datagram(false);
+                drops.record(
+                    Malformed::FollowRateLimited,
+                    from,
+                    &format_args!("more than {max_per_s} follow datagrams per second"),
+                );
+            }
             Ok(session) => {
                 from_app.publish(
                     session,

@@ -199,6 +199,10 @@ impl Hub {
             from_app: self.ports.from_app.clone(),
             drops: self.drops.clone(),
             replies: tx.clone(),
+            rate: (
+                self.settings.max_messages_per_s,
+                self.settings.message_burst,
+            ),
         };
         let events = self.events.clone();
         let token = cancel.clone();

@@ -59,6 +59,12 @@ pub fn check(frame: &RawFrame) -> Verdict {
             ),
         };
     }
+    if let Err(reason) = magnitudes(&message) {
+        return Verdict::Drop {
+            kind: Malformed::InvalidValue,
+            reason,
+        };
+    }
     if let SoloMessage::GeofenceSetData(data) = &message {
         return geofence(data, &message);
     }
@@ -66,6 +72,89 @@ pub fn check(frame: &RawFrame) -> Verdict {
         return too_large(message, frame.value.len());
     }
     Verdict::Forward(message)
+}
+
+/// Largest altitude or distance the gateway forwards, metres (either sign).
+pub const MAX_DISTANCE_M: f32 = 50_000.0;
+/// Largest angle or angular rate, degrees (either sign: ten turns).
+pub const MAX_ANGLE_DEG: f32 = 3_600.0;
+/// Largest duration, seconds (a day).
+pub const MAX_TIME_S: f32 = 86_400.0;
+/// Largest spline parameter (normalised 0..1; the reference clamps, so only an
+/// absurd value is refused here).
+pub const MAX_U: f32 = 1_000.0;
+
+/// `solo-proto` refuses NaN/±∞ in every float and range-checks latitudes,
+/// longitudes and speeds; the other floats (altitudes, angles, durations, spline
+/// positions) it only requires finite, because the reference ShotManager clamps
+/// them. An absurd magnitude is still no value to put on the bus: refused here.
+pub fn magnitudes(m: &SoloMessage) -> Result<(), String> {
+    use SoloMessage as M;
+    let check = |name: &str, v: f32, max: f32| {
+        if v.is_finite() && v.abs() <= max {
+            Ok(())
+        } else {
+            Err(format!("{}: {name} {v} is beyond ±{max}", m.name()))
+        }
+    };
+    match m {
+        M::Location(l) | M::HomeLocation(l) => check("altitude", l.alt_m, MAX_DISTANCE_M),
+        M::PanoOptions {
+            deg_second_yaw,
+            lens_fov,
+            ..
+        } => {
+            check("deg_second_yaw", *deg_second_yaw, MAX_ANGLE_DEG)?;
+            check("lens_fov", *lens_fov, MAX_ANGLE_DEG)
+        }
+        M::RewindOptions {
+            rewind_distance, ..
+        } => check("rewind_distance", *rewind_distance, MAX_DISTANCE_M),
+        M::SplinePoint(p) => {
+            check("abs_alt_ref", p.abs_alt_ref_m, MAX_DISTANCE_M)?;
+            check("altitude", p.alt_m, MAX_DISTANCE_M)?;
+            check("pitch", p.pitch_deg, MAX_ANGLE_DEG)?;
+            check("yaw", p.yaw_deg, MAX_ANGLE_DEG)?;
+            check("u_position", p.u_position, MAX_U)
+        }
+        M::SplineSeek { u_position, .. } | M::SplinePlaybackStatus { u_position, .. } => {
+            check("u_position", *u_position, MAX_U)
+        }
+        M::SplinePathSettings { desired_time_s, .. } => {
+            check("desired_time", *desired_time_s, MAX_TIME_S)
+        }
+        M::SplineDurations {
+            min_time_s,
+            max_time_s,
+        } => {
+            check("min_time", *min_time_s, MAX_TIME_S)?;
+            check("max_time", *max_time_s, MAX_TIME_S)
+        }
+        M::CableCamWaypoint {
+            alt_m,
+            yaw_deg,
+            pitch_deg,
+            ..
+        } => {
+            check("altitude", *alt_m, MAX_DISTANCE_M)?;
+            check("yaw", *yaw_deg, MAX_ANGLE_DEG)?;
+            check("pitch", *pitch_deg, MAX_ANGLE_DEG)
+        }
+        M::GoProPhoto { alt_m, .. } | M::InspectSetWaypoint { alt_m, .. } => {
+            check("altitude", *alt_m, MAX_DISTANCE_M)
+        }
+        M::InspectStart { takeoff_alt_m } => check("takeoff_alt", *takeoff_alt_m, MAX_DISTANCE_M),
+        M::InspectMoveGimbal {
+            pitch_deg,
+            roll_deg,
+            yaw_deg,
+        } => {
+            check("pitch", *pitch_deg, MAX_ANGLE_DEG)?;
+            check("roll", *roll_deg, MAX_ANGLE_DEG)?;
+            check("yaw", *yaw_deg, MAX_ANGLE_DEG)
+        }
+        _ => Ok(()),
+    }
 }
 
 /// GEOFENCE_SET_DATA → one `AppGeofence`, or the answer when it cannot be carried.

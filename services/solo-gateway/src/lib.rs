@@ -102,8 +102,10 @@ pub async fn run(settings: Settings, sockets: Sockets, ctx: Context) -> anyhow::
             events_tx.clone(),
         );
         let socket = sockets.follow;
+        let follow_max_per_s = settings.follow_max_per_s;
         tracker.spawn(async move {
-            if let Err(e) = follow::run(socket, app_rx, from_app, drops, stop).await {
+            let follow = follow::run(socket, app_rx, from_app, drops, follow_max_per_s, stop);
+            if let Err(e) = follow.await {
                 let e = anyhow::Error::new(e).context("publishing a follow-stream location");
                 let _ = events.send(hub::Event::Fatal(e)).await;
             }

@@ -32,10 +32,14 @@ pub enum Malformed {
     Unauthorised,
     /// A follow-stream datagram while no app is connected.
     NoApp,
+    /// A frame beyond the app's `max_messages_per_s`/`message_burst`: dropped.
+    RateLimited,
+    /// A follow-stream datagram beyond `follow_max_per_s`: dropped.
+    FollowRateLimited,
 }
 
 impl Malformed {
-    pub const ALL: [Malformed; 11] = [
+    pub const ALL: [Malformed; 13] = [
         Malformed::TooLong,
         Malformed::WrongLength,
         Malformed::UnknownType,
@@ -47,6 +51,8 @@ impl Malformed {
         Malformed::BadDatagram,
         Malformed::Unauthorised,
         Malformed::NoApp,
+        Malformed::RateLimited,
+        Malformed::FollowRateLimited,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -62,6 +68,8 @@ impl Malformed {
             Malformed::BadDatagram => "bad_datagram",
             Malformed::Unauthorised => "unauthorised",
             Malformed::NoApp => "no_app",
+            Malformed::RateLimited => "rate_limited",
+            Malformed::FollowRateLimited => "follow_rate_limited",
         }
     }
 

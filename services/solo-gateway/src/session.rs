@@ -11,11 +11,13 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use bytes::{Bytes, BytesMut};
+use skymesh_runtime::TokenBucket;
 use solo_proto::{FrameError, TlvCodec};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::drops::Drops;
@@ -73,6 +75,8 @@ pub struct SessionCtx {
     pub drops: Drops,
     /// The session's own outgoing queue, for the gateway's direct answers.
     pub replies: mpsc::Sender<Outgoing>,
+    /// `max_messages_per_s` and `message_burst`.
+    pub rate: (u32, u32),
 }
 
 /// Serves one connection until the app leaves, its input forces a close, or `cancel`.
@@ -93,6 +97,8 @@ pub async fn run(
 
 async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) -> End {
     let metrics = ctx.drops.metrics();
+    let (per_s, burst) = ctx.rate;
+    let mut rate = TokenBucket::new(per_s, burst, Instant::now().into_std());
     loop {
         let frame = match reader.next_frame().await {
             Ok(Some(frame)) => frame,
@@ -108,6 +114,17 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
             Err(ReadError::TruncatedFrame { buffered }) => return End::Truncated(buffered),
             Err(ReadError::Frame(FrameError::Io(e))) => return End::Io(e),
         };
+        if !rate.take(Instant::now().into_std()) {
+            ctx.drops.record(
+                Malformed::RateLimited,
+                ctx.peer,
+                &format_args!(
+                    "type {}: more than {per_s} frames per second (burst {burst}); dropped",
+                    frame.msg_type
+                ),
+            );
+            continue;
+        }
         match inbound::check(&frame) {
             Verdict::Forward(_) => {
                 metrics.message(Direction::In, frame.msg_type);

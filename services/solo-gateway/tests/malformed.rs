@@ -6,7 +6,7 @@ mod common;
 use std::time::Duration;
 
 use common::{value_of, Gateway, PATIENCE};
-use skymesh_solo_gateway::client::AppClient;
+use skymesh_solo_gateway::client::{AppClient, FollowStreamer};
 use skymesh_solo_gateway::Settings;
 use solo_proto::{ids, GeofenceData, Location, SoloMessage};
 
@@ -173,5 +173,189 @@ async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
         .expect("send");
     assert_eq!(gw.next_from_app().await.msg_type, ids::SET_CURRENT_SHOT);
     assert!(gw.geofence.try_recv().expect("app_geofence").is_none());
+    gw.stop().await;
+}
+
+/// `value` with the 4 bytes at `at` replaced by `v`.
+fn with_f32(m: &SoloMessage, at: usize, v: f32) -> Vec<u8> {
+    let mut value = value_of(m);
+    value[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    value
+}
+
+#[tokio::test]
+async fn non_finite_and_absurd_numbers_never_reach_the_bus() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let here = SoloMessage::Location(Location {
+        lat_deg: 1.0,
+        lon_deg: 2.0,
+        alt_m: 3.0,
+    });
+    let gimbal = SoloMessage::InspectMoveGimbal {
+        pitch_deg: -10.0,
+        roll_deg: 0.0,
+        yaw_deg: 90.0,
+    };
+    let seek = SoloMessage::SplineSeek {
+        u_position: 0.5,
+        cruise_state: 0,
+    };
+    let bad: Vec<(u32, Vec<u8>)> = vec![
+        // LOCATION altitude (after two f64): ∞, NaN, absurd.
+        (ids::LOCATION, with_f32(&here, 16, f32::INFINITY)),
+        (ids::LOCATION, with_f32(&here, 16, f32::NAN)),
+        (ids::LOCATION, with_f32(&here, 16, 1e30)),
+        // INSPECT_MOVE_GIMBAL yaw: −∞, absurd.
+        (gimbal.msg_type(), with_f32(&gimbal, 8, f32::NEG_INFINITY)),
+        (gimbal.msg_type(), with_f32(&gimbal, 8, -1e12)),
+        // SPLINE_SEEK u: NaN, absurd.
+        (seek.msg_type(), with_f32(&seek, 0, f32::NAN)),
+        (seek.msg_type(), with_f32(&seek, 0, 5e9)),
+        // INSPECT_MOVE_VEHICLE vx beyond any speed.
+        (
+            ids::INSPECT_MOVE_VEHICLE,
+            value_of(&SoloMessage::InspectMoveVehicle {
+                vx: 1e30,
+                vy: 0.0,
+                vz: 0.0,
+            }),
+        ),
+        // SPLINE_PATH_SETTINGS desired time of 30 years.
+        (
+            ids::SPLINE_PATH_SETTINGS,
+            value_of(&SoloMessage::SplinePathSettings {
+                camera_control: 0,
+                desired_time_s: 1e9,
+            }),
+        ),
+    ];
+    let mut bytes = Vec::new();
+    for (t, v) in &bad {
+        bytes.extend(frame(*t, v));
+    }
+    bytes.extend(SoloMessage::SetCurrentShot(2).to_bytes()); // valid
+    app.send_raw(&bytes).await.expect("send");
+    // The valid frame is the first thing on the bus: none of the bad ones went.
+    let got = gw.next_from_app().await;
+    assert_eq!(got.msg_type, ids::SET_CURRENT_SHOT);
+    gw.wait_malformed("invalid_value", bad.len() as f64).await;
+    assert!(!app.is_closed());
+
+    // The follow stream applies the same limits.
+    let follow = FollowStreamer::bind(common::localhost(), gw.udp)
+        .await
+        .expect("udp");
+    let mut datagram = here.to_bytes().to_vec();
+    datagram[solo_proto::HEADER_LEN + 16..].copy_from_slice(&1e30f32.to_le_bytes());
+    follow.send_raw(&datagram).await.expect("send");
+    gw.wait_malformed("bad_datagram", 1.0).await;
+    app.send(&SoloMessage::Pause).await.expect("send");
+    assert_eq!(gw.next_from_app().await.msg_type, ids::PAUSE);
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn an_app_beyond_its_frame_rate_is_throttled_and_stays_connected() {
+    let mut settings = Settings::loopback_any_port();
+    settings.max_messages_per_s = 1;
+    settings.message_burst = 10;
+    let mut gw = Gateway::start_with(settings).await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let flood: Vec<u8> = (0..100)
+        .flat_map(|_| SoloMessage::Pause.to_bytes().to_vec())
+        .collect();
+    app.send_raw(&flood).await.expect("send");
+    // Every frame is either forwarded or dropped as rate_limited.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let mut forwarded = 0;
+    loop {
+        let limited = gw
+            .metric("skymesh_solo_malformed_total", "kind=rate_limited")
+            .unwrap_or(0.0);
+        if forwarded as f64 + limited == 100.0 {
+            assert!(limited >= 50.0, "the flood is throttled: {limited}");
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "{forwarded} forwarded, {limited} limited"
+        );
+        if let Some(m) = gw
+            .from_app
+            .recv_timeout(Duration::from_millis(100))
+            .await
+            .expect("from_app")
+        {
+            assert_eq!(m.msg_type, ids::PAUSE);
+            forwarded += 1;
+        }
+    }
+    assert!(forwarded >= 10, "the burst passes: {forwarded}");
+    // Still connected; the follow stream has its own budget.
+    assert!(!app.is_closed());
+    let follow = FollowStreamer::bind(common::localhost(), gw.udp)
+        .await
+        .expect("udp");
+    let here = Location {
+        lat_deg: 37.0,
+        lon_deg: -122.0,
+        alt_m: 2.0,
+    };
+    follow.send(here).await.expect("send");
+    let got = gw.next_from_app().await;
+    assert!(got.is_follow_stream());
+    gw.stop().await;
+}
+
+#[tokio::test]
+async fn follow_datagrams_beyond_the_rate_are_dropped_and_the_app_is_unaffected() {
+    let mut settings = Settings::loopback_any_port();
+    settings.follow_max_per_s = 5;
+    let mut gw = Gateway::start_with(settings).await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let follow = FollowStreamer::bind(common::localhost(), gw.udp)
+        .await
+        .expect("udp");
+    let here = Location {
+        lat_deg: 37.0,
+        lon_deg: -122.0,
+        alt_m: 2.0,
+    };
+    for _ in 0..60 {
+        follow.send(here).await.expect("send");
+    }
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let mut forwarded = 0;
+    loop {
+        let limited = gw
+            .metric("skymesh_solo_malformed_total", "kind=follow_rate_limited")
+            .unwrap_or(0.0);
+        if forwarded as f64 + limited == 60.0 {
+            assert!(limited >= 30.0, "the flood is throttled: {limited}");
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "{forwarded} forwarded, {limited} limited"
+        );
+        if let Some(m) = gw
+            .from_app
+            .recv_timeout(Duration::from_millis(100))
+            .await
+            .expect("from_app")
+        {
+            assert!(m.is_follow_stream());
+            forwarded += 1;
+        }
+    }
+    assert!(forwarded >= 5, "the burst passes: {forwarded}");
+    // The app's own connection is untouched.
+    app.send(&SoloMessage::Pause).await.expect("send");
+    let got = gw.next_from_app().await;
+    assert_eq!((got.msg_type, got.is_follow_stream()), (ids::PAUSE, false));
     gw.stop().await;
 }

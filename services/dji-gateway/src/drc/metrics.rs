@@ -29,7 +29,8 @@ pub struct DrcMetrics {
     pub reconnects: Counter,
     /// `skymesh_dji_drc_connection_errors_total`: drops and failed reconnects.
     pub connection_errors: Counter,
-    /// `skymesh_dji_drc_malformed_total{reason}`: drc/down payloads that are no envelope.
+    /// `skymesh_dji_drc_malformed_total{reason}`: drc/down payloads that are no envelope,
+    /// or refused before parsing (`oversized`, `rate_limited`).
     malformed: CounterFamily,
     /// `skymesh_dji_drc_brakes_total{reason}`: brakes the link sent itself
     /// (stale, exit, heartbeat_timeout, credentials_expired, shutdown, replaced).

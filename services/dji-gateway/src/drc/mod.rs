@@ -76,6 +76,13 @@ pub struct DrcConfig {
     /// A return or landing with the battery at or below this percentage is a low
     /// battery failsafe for joystick_invalid_notify (reasons 1 and 2). 0..=100.
     pub low_battery_pct: u8,
+    /// Larger drc/down payloads are dropped unparsed (malformed `oversized`): a
+    /// drone_control is ~150 bytes. 256..=65536.
+    pub max_payload_bytes: u32,
+    /// drc/down messages per second (and burst) handled; the excess is dropped
+    /// unparsed (malformed `rate_limited`). The cloud sends sticks at 5..=10 Hz
+    /// plus a heart_beat per second. 1..=1000.
+    pub max_messages_per_s: u32,
 }
 
 impl Default for DrcConfig {
@@ -88,6 +95,8 @@ impl Default for DrcConfig {
             reconnect_initial_ms: 200,
             reconnect_max_ms: 5000,
             low_battery_pct: 20,
+            max_payload_bytes: 4096,
+            max_messages_per_s: 50,
         }
     }
 }
@@ -118,6 +127,8 @@ impl DrcConfig {
             300_000,
         )?;
         range("low_battery_pct", self.low_battery_pct.into(), 0, 100)?;
+        range("max_payload_bytes", self.max_payload_bytes, 256, 65_536)?;
+        range("max_messages_per_s", self.max_messages_per_s, 1, 1000)?;
         if let Some(ca) = &self.ca_file {
             crate::tls::load_roots(ca).map_err(|e| format!("ca_file: {e}"))?;
         }
@@ -315,6 +326,16 @@ mod tests {
             ..d()
         })
         .contains("stick_max_age_ms"));
+        assert!(bad(DrcConfig {
+            max_payload_bytes: 100,
+            ..d()
+        })
+        .contains("max_payload_bytes"));
+        assert!(bad(DrcConfig {
+            max_messages_per_s: 0,
+            ..d()
+        })
+        .contains("max_messages_per_s"));
         assert!(bad(DrcConfig {
             stick_max_age_ms: 2001,
             ..d()

@@ -23,7 +23,7 @@ use rumqttc::{AsyncClient, QoS};
 use serde_json::{json, Value};
 use skymesh_ipc_types::{AckResult, ArbiterEvent, Command, CommandAck, FlightMode};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{CancellationToken, WarnLimiter};
+use skymesh_runtime::{CancellationToken, TokenBucket, WarnLimiter};
 use tokio::sync::{broadcast, mpsc};
 use tokio::time::MissedTickBehavior;
 
@@ -161,6 +161,25 @@ struct Task {
     expiry: Instant,
     acks: mpsc::UnboundedSender<AckReport>,
     warnings: WarnLimiter<&'static str>,
+    /// `max_messages_per_s` of drc/down.
+    rate: TokenBucket,
+}
+
+/// The edge checks of one drc/down payload before it is parsed: its size, then the
+/// rate. `Err` is the malformed reason it is dropped and counted under.
+fn admit(
+    payload_len: usize,
+    max_payload_bytes: u32,
+    rate: &mut TokenBucket,
+    now: Instant,
+) -> Result<(), &'static str> {
+    if payload_len > max_payload_bytes as usize {
+        return Err("oversized");
+    }
+    if !rate.take(now) {
+        return Err("rate_limited");
+    }
+    Ok(())
 }
 
 /// Runs one session until its owner stops it or it leaves by itself.
@@ -194,6 +213,7 @@ pub(super) async fn run(start: Start) {
     };
     let mut vehicle = link.watch();
     let mut arbiter = link.arbiter_events();
+    let rate = TokenBucket::new(config.max_messages_per_s, config.max_messages_per_s, now());
     let mut task = Task {
         invalid: InvalidWatch::new(config.low_battery_pct),
         session: Session::new(limits, now()),
@@ -209,6 +229,7 @@ pub(super) async fn run(start: Start) {
         expiry,
         acks,
         warnings: WarnLimiter::default(),
+        rate,
     };
     let (mut osd, mut hsi, mut delay) = (
         push_interval(osd_hz),
@@ -340,6 +361,25 @@ impl Task {
     }
 
     fn on_message(&mut self, payload: &[u8], at: Instant) {
+        if let Err(reason) = admit(
+            payload.len(),
+            self.config.max_payload_bytes,
+            &mut self.rate,
+            now(),
+        ) {
+            self.metrics.malformed(reason);
+            if let Some(hidden) = self.warnings.allow(reason, now()) {
+                tracing::warn!(
+                    reason,
+                    bytes = payload.len(),
+                    max_payload_bytes = self.config.max_payload_bytes,
+                    max_messages_per_s = self.config.max_messages_per_s,
+                    hidden,
+                    "DRC: dropped a drc/down payload unparsed"
+                );
+            }
+            return;
+        }
         let env = match parse_envelope(TopicKind::DrcDown, payload) {
             Ok(env) => env,
             Err(e) => {
@@ -613,6 +653,24 @@ mod tests {
     fn method_labels_are_bounded() {
         assert_eq!(method_label("heart_beat"), "heart_beat");
         assert_eq!(method_label("x".repeat(1000).as_str()), "unknown");
+    }
+
+    #[test]
+    fn oversized_and_flooding_payloads_are_refused_before_parsing() {
+        let t0 = Instant::now();
+        let mut rate = TokenBucket::new(10, 10, t0);
+        assert_eq!(admit(4097, 4096, &mut rate, t0), Err("oversized"));
+        assert_eq!(
+            rate.available(t0),
+            10,
+            "an oversized payload costs no token"
+        );
+        assert!((0..10).all(|_| admit(150, 4096, &mut rate, t0).is_ok()));
+        assert_eq!(admit(150, 4096, &mut rate, t0), Err("rate_limited"));
+        // 10 per second: one more after 100 ms.
+        let later = t0 + Duration::from_millis(100);
+        assert_eq!(admit(150, 4096, &mut rate, later), Ok(()));
+        assert_eq!(admit(150, 4096, &mut rate, later), Err("rate_limited"));
     }
 
     #[test]

@@ -69,10 +69,13 @@ pub enum RefuseReason {
     Unsupported,
     /// Parameter records for more than [`MAX_PENDING_CONTEXTS`] contexts.
     TooManyPending,
+    /// Beyond the client's `max_records_per_s`/`record_burst` (decided by the
+    /// session, before this module sees the record).
+    RateLimited,
 }
 
 impl RefuseReason {
-    pub const ALL: [RefuseReason; 8] = [
+    pub const ALL: [RefuseReason; 9] = [
         RefuseReason::NotPrivileged,
         RefuseReason::UnknownType,
         RefuseReason::InvalidValue,
@@ -81,6 +84,7 @@ impl RefuseReason {
         RefuseReason::WrongDirection,
         RefuseReason::Unsupported,
         RefuseReason::TooManyPending,
+        RefuseReason::RateLimited,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -93,6 +97,7 @@ impl RefuseReason {
             RefuseReason::WrongDirection => "wrong_direction",
             RefuseReason::Unsupported => "unsupported",
             RefuseReason::TooManyPending => "too_many_pending",
+            RefuseReason::RateLimited => "rate_limited",
         }
     }
 }
@@ -323,6 +328,12 @@ impl Inbound {
                 }
             }
         }
+        if let Some(why) = non_finite(t, &cmd) {
+            return refused(
+                RefuseReason::InvalidValue,
+                format!("{t} for drone {}: {why}", r.context),
+            );
+        }
         match cmd.validate() {
             Ok(()) => Verdict::Publish(Box::new(cmd)),
             Err(e) => {
@@ -337,6 +348,24 @@ impl Inbound {
             }
         }
     }
+}
+
+/// The first NaN/±∞ among the numbers a command carries to the bus, whether or not
+/// its kind gives them a meaning (`validate` range-checks the meaningful ones; the
+/// others must still never reach a consumer as NaN/∞).
+fn non_finite(t: NetCmdType, cmd: &SwarmCommand) -> Option<String> {
+    if let Some((i, v)) = cmd.f.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Some(format!("float parameter {i} is {v}"));
+    }
+    if t.param_kind() == ParamKind::Doubles {
+        for (i, bits) in cmd.d.iter().enumerate() {
+            let v = f64::from_bits(*bits);
+            if !v.is_finite() {
+                return Some(format!("double parameter {i} is {v}"));
+            }
+        }
+    }
+    None
 }
 
 #[cfg(test)]

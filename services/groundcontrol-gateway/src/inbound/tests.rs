@@ -167,6 +167,28 @@ fn bad_contexts_types_and_values() {
 }
 
 #[test]
+fn non_finite_numbers_are_refused_even_where_the_kind_ignores_them() {
+    let mut ib = Inbound::new(1, true);
+    // CMD_EXT_HALT gives its floats no meaning (validate does not look at them).
+    for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let halt = wp(NetCmdType::CmdExtHalt, 1, [0.0, v, 0.0, 0.0], 0);
+        assert_eq!(
+            reason(ib.on_record(&halt)),
+            RefuseReason::InvalidValue,
+            "{v}"
+        );
+    }
+    // A NaN in a parameter record reaches the command's ext slots: refused there.
+    let p1 = wp(NetCmdType::ExtParam1, 2, [0.5, f32::NAN, 0.5, 0.0], 0);
+    assert_eq!(ib.on_record(&p1), Verdict::Stored);
+    let halt = wp(NetCmdType::CmdExtHalt, 2, [0.0; 4], 0);
+    assert_eq!(reason(ib.on_record(&halt)), RefuseReason::InvalidValue);
+    // Finite values in the same places pass.
+    let halt = wp(NetCmdType::CmdExtHalt, 2, [0.0, 1e30, 0.0, 0.0], 0);
+    assert_eq!(published(ib.on_record(&halt)).drone, 2);
+}
+
+#[test]
 fn text() {
     let mut ib = Inbound::new(1, false);
     let (int2, longs) = pack_text("GO TEAM").unwrap();
