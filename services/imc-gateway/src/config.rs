@@ -13,6 +13,7 @@ use imc_proto::{parse_tuple_list, ADDR_NONE, ENTITY_ANY};
 use serde::Deserialize;
 use skymesh_ipc_types::command::limits;
 use skymesh_ipc_types::Button;
+use skymesh_runtime::addresses::{AddressList, IpNet};
 use skymesh_runtime::config::{in_range, socket_addr};
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
@@ -28,6 +29,10 @@ pub const ANNOUNCE_PORTS: std::ops::RangeInclusive<u16> = 30100..=30104;
 pub struct Settings {
     /// UDP address IMC peers send to.
     pub listen: SocketAddr,
+    /// The peers whose datagrams are read at all (addresses and networks); a
+    /// datagram from anyone else is dropped (`not_allowed`) before it is decoded.
+    /// Empty: nobody.
+    pub allowed_peers: AddressList,
     /// Our IMC system address (header `src`).
     pub address: u16,
     /// Our IMC entity (header `src_ent`).
@@ -163,6 +168,7 @@ impl Default for RawTeleop {
 #[serde(deny_unknown_fields, default)]
 pub struct RawConfig {
     pub listen: String,
+    pub allowed_peers: Vec<String>,
     pub address: i64,
     pub entity: i64,
     pub system_name: String,
@@ -187,6 +193,7 @@ impl Default for RawConfig {
     fn default() -> Self {
         RawConfig {
             listen: "127.0.0.1:6002".to_string(),
+            allowed_peers: vec!["127.0.0.1".to_string(), "::1".to_string()],
             address: 0x2c01,
             entity: 0,
             system_name: "skymesh-1".to_string(),
@@ -455,6 +462,19 @@ impl ServiceConfig for RawConfig {
 
     fn validate(self) -> Result<Settings, ConfigError> {
         let listen = socket_addr("listen", &self.listen)?;
+        let allowed_peers = self
+            .allowed_peers
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                s.parse::<IpNet>().map_err(|e| {
+                    ConfigError::invalid(
+                        format!("allowed_peers[{i}]"),
+                        format!("`{s}`: {e} (an IP address or a network such as 10.0.0.0/24)"),
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let address = in_range("address", self.address, 0, i64::from(ADDR_NONE) - 1)? as u16;
         let entity = byte("entity", self.entity, 0, ENTITY_ANY - 1)?;
         if self.system_name.is_empty() || self.system_name.len() > 64 {
@@ -485,6 +505,7 @@ impl ServiceConfig for RawConfig {
         }
         Ok(Settings {
             listen,
+            allowed_peers: AddressList::new(allowed_peers),
             address,
             entity,
             vehicle_id: byte("vehicle_id", self.vehicle_id, 1, 255)?,
@@ -623,6 +644,11 @@ mod tests {
             ("vehicle_id = 0", "vehicle_id"),
             ("advertise_address = \"example.org\"", "advertise_address"),
             ("static_peers = [\"1.2.3.4\"]", "static_peers[0]"),
+            ("allowed_peers = [\"10.0.0.0/33\"]", "allowed_peers[0]"),
+            (
+                "allowed_peers = [\"127.0.0.1\", \"neptus.local\"]",
+                "allowed_peers[1]",
+            ),
             (
                 "announce_destinations = [\"x\"]",
                 "announce_destinations[0]",
@@ -695,5 +721,36 @@ mod tests {
         let t = Settings::loopback_any_port().unwrap();
         assert_eq!(t.listen.port(), 0);
         assert!(t.announce_destinations.is_empty());
+        assert_eq!(t.allowed_peers.to_string(), "[127.0.0.1, ::1]");
+    }
+
+    #[test]
+    fn allowed_peers_default_to_loopback_and_take_networks() {
+        let ip = |s: &str| s.parse::<IpAddr>().unwrap();
+        let d = Settings::defaults().unwrap().allowed_peers;
+        for ok in ["127.0.0.1", "::1", "::ffff:127.0.0.1"] {
+            assert!(d.contains(ip(ok)), "{ok}");
+        }
+        for no in ["127.0.0.2", "10.0.0.2", "0.0.0.0", "::2"] {
+            assert!(!d.contains(ip(no)), "{no}");
+        }
+        let s = parse::<RawConfig>(
+            "listen = \"0.0.0.0:6002\"\nallowed_peers = [\"10.0.0.0/24\", \"192.168.1.7\"]",
+            "t",
+        )
+        .unwrap();
+        assert!(s.allowed_peers.contains(ip("10.0.0.200")));
+        assert!(s.allowed_peers.contains(ip("192.168.1.7")));
+        assert!(!s.allowed_peers.contains(ip("192.168.1.8")));
+        assert!(
+            !s.allowed_peers.contains(ip("127.0.0.1")),
+            "replaced, not added"
+        );
+        let none = parse::<RawConfig>("allowed_peers = []", "t").unwrap();
+        assert!(none.allowed_peers.entries().is_empty());
+        assert!(
+            !none.allowed_peers.contains(ip("127.0.0.1")),
+            "empty: nobody"
+        );
     }
 }

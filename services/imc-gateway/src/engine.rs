@@ -124,8 +124,23 @@ impl Engine {
         &self.peers
     }
 
-    /// One datagram from `from`.
+    /// One datagram from `from`. A peer outside `allowed_peers` is dropped
+    /// (`not_allowed`) before anything is decoded: it commands nothing and does not
+    /// become a known peer (no heartbeats, no replies).
     pub fn on_datagram(&mut self, from: SocketAddr, bytes: &[u8], now: Instant, out: &mut Outputs) {
+        if !self.settings.allowed_peers.contains(from.ip()) {
+            out.drops.push(Dropped::new(
+                "not_allowed",
+                from,
+                format!(
+                    "{} bytes from {}, which is not in allowed_peers {}",
+                    bytes.len(),
+                    from.ip(),
+                    self.settings.allowed_peers
+                ),
+            ));
+            return;
+        }
         let packet = match decode_datagram(bytes) {
             Ok(p) => p,
             Err(e) => {

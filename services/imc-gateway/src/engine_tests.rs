@@ -139,6 +139,54 @@ fn broken_and_foreign_datagrams_change_nothing() {
 }
 
 #[test]
+fn peers_outside_allowed_peers_are_dropped_before_decoding() {
+    let t0 = Instant::now();
+    let mut engine = engine_with(settings(), t0);
+    let stranger = SocketAddr::from(([10, 0, 0, 2], 6001));
+    for m in [
+        Message::SetServoPosition { id: 0, value: 0.0 },
+        Message::ButtonEvent {
+            button: 1,
+            value: 1,
+        },
+        Message::Heartbeat,
+    ] {
+        let mut out = Outputs::default();
+        engine.on_datagram(stranger, &dgram(&m), t0, &mut out);
+        assert_eq!(reasons(&out), vec!["not_allowed"], "{m:?}");
+        assert_eq!(out.drops[0].peer, Some(stranger));
+        assert!(out.received.is_empty() && out.sends.is_empty());
+        assert!(out.commands.is_empty() && out.buttons.is_empty() && out.hardware.is_empty());
+    }
+    // Garbage too: refused for who sent it, not for what it is.
+    let mut out = Outputs::default();
+    engine.on_datagram(stranger, b"xx", t0, &mut out);
+    assert_eq!(reasons(&out), vec!["not_allowed"]);
+    assert_eq!(engine.peer_count(), 0, "a refused peer gets no heartbeats");
+
+    let mut s = settings();
+    s.allowed_peers =
+        skymesh_runtime::addresses::AddressList::new(vec!["10.0.0.0/24".parse().unwrap()]);
+    let mut engine = engine_with(s, t0);
+    let mut out = Outputs::default();
+    engine.on_datagram(
+        stranger,
+        &dgram(&Message::SetServoPosition { id: 0, value: 0.0 }),
+        t0,
+        &mut out,
+    );
+    assert!(out.drops.is_empty(), "{:?}", out.drops);
+    assert_eq!(out.commands.len(), 1);
+    let mut out = Outputs::default();
+    engine.on_datagram(peer(), &dgram(&Message::Heartbeat), t0, &mut out);
+    assert_eq!(
+        reasons(&out),
+        vec!["not_allowed"],
+        "the list replaces loopback"
+    );
+}
+
+#[test]
 fn servo_commands_go_to_the_arbiter_and_refusals_are_counted() {
     let t0 = Instant::now();
     let mut engine = engine_with(settings(), t0);

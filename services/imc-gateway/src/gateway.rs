@@ -163,6 +163,40 @@ fn refresh_vehicle(ports: &Ports, engine: &mut Engine) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The allow-list settings that are valid but probably not what was meant.
+fn warn_about_allowed_peers(settings: &Settings, local: SocketAddr) {
+    let allowed = &settings.allowed_peers;
+    if allowed.entries().is_empty() {
+        tracing::warn!("allowed_peers is empty: every IMC datagram is dropped (not_allowed)");
+        return;
+    }
+    // An entry's network address is loopback only for a network inside the loopback
+    // (0.0.0.0/0 starts at 0.0.0.0).
+    let only_loopback = allowed.entries().iter().all(|n| {
+        let text = n.to_string();
+        let addr = text.split('/').next().unwrap_or_default();
+        addr.parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.to_canonical().is_loopback())
+    });
+    if !local.ip().is_loopback() && only_loopback {
+        tracing::warn!(
+            listen = %local,
+            %allowed,
+            "imc-gateway listens beyond the loopback but allowed_peers admits only loopback peers: \
+             remote peers are dropped (not_allowed); add their addresses or networks to allowed_peers"
+        );
+    }
+    for p in &settings.static_peers {
+        if !allowed.contains(p.ip()) {
+            tracing::warn!(
+                peer = %p,
+                %allowed,
+                "static peer is not in allowed_peers: it gets heartbeats but its messages are dropped"
+            );
+        }
+    }
+}
+
 /// Runs the gateway on an already-bound socket until `ctx.shutdown` is cancelled
 /// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once its bus
 /// ports exist.
@@ -183,11 +217,13 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
         entity = settings.entity,
         system_name = %settings.system_name,
         vehicle_id = settings.vehicle_id,
+        allowed_peers = %settings.allowed_peers,
         static_peers = ?settings.static_peers,
         announce_to = ?settings.announce_destinations,
         buttons = %crate::engine::button_ids(&settings.buttons),
         "imc-gateway serving IMC over UDP"
     );
+    warn_about_allowed_peers(&settings, local);
     let mut engine = Engine::new(settings, local, ports.origin, Instant::now());
     metrics.peers.set(engine.peer_count() as f64);
     ctx.ready();

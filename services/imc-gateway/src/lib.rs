@@ -1,6 +1,10 @@
 //! skymesh imc-gateway: lets an LSTS tool (Neptus, DUNE, any IMC peer) operate
 //! skymesh hardware over IMC on UDP.
 //!
+//! IMC has no authentication: only datagrams from `allowed_peers` (addresses and
+//! networks, loopback by default) are read at all; the rest are dropped
+//! (`not_allowed`) before decoding.
+//!
 //! The gateway *translates*: one datagram is one IMC message, decoded and checked
 //! with the `imc-proto` codec; what is valid and addressed to us becomes a bus
 //! sample, and the answers come back as IMC replies to the sender. Actuators become

@@ -37,6 +37,8 @@ pub enum BrokerError {
         addr: SocketAddr,
         source: std::io::Error,
     },
+    #[error("TLS: {0}")]
+    Tls(#[from] crate::tls::TlsError),
     #[error("cannot build the rumqttd configuration: {0}")]
     Config(String),
     #[error("cannot start the broker thread: {0}")]
@@ -45,6 +47,14 @@ pub enum BrokerError {
     Meters(String),
     #[error("the broker stopped ({0}); rumqttd's log above says why")]
     Stopped(String),
+}
+
+/// Binds `addr` (non-blocking, for tokio), or the clear [`BrokerError::Listen`].
+fn std_listener(addr: SocketAddr) -> Result<std::net::TcpListener, BrokerError> {
+    let listen_err = |source| BrokerError::Listen { addr, source };
+    let l = std::net::TcpListener::bind(addr).map_err(listen_err)?;
+    l.set_nonblocking(true).map_err(listen_err)?;
+    Ok(l)
 }
 
 /// Segments of one topic's log kept in memory (rumqttd keeps every topic's recent
@@ -113,12 +123,23 @@ pub async fn serve(
 ) -> Result<(), BrokerError> {
     let metrics = Metrics::new(&stats);
     // Fail clearly on a port in use: rumqttd would only log it on its thread.
-    drop(
-        std::net::TcpListener::bind(settings.listen).map_err(|source| BrokerError::Listen {
-            addr: settings.listen,
-            source,
-        })?,
-    );
+    drop(std_listener(settings.listen)?);
+    // The TLS listener is bound before the broker starts, so a port in use fails
+    // the same clear way; its files were checked by the config and are read again.
+    let tls = match &settings.tls {
+        None => None,
+        Some(t) => {
+            let config = crate::tls::server_config(t)?;
+            let listener = std_listener(t.listen)?;
+            let listener = tokio::net::TcpListener::from_std(listener).map_err(|source| {
+                BrokerError::Listen {
+                    addr: t.listen,
+                    source,
+                }
+            })?;
+            Some((listener, config))
+        }
+    };
     let config = rumqttd_config(&settings)?;
     let mut broker = Broker::new(config);
     let meters = broker
@@ -145,6 +166,30 @@ pub async fn serve(
         users = settings.users.len(),
         "MQTT broker started (plain TCP, MQTT 3.1.1)"
     );
+    if let Some((listener, config)) = tls {
+        let t = settings
+            .tls
+            .as_ref()
+            .map(|t| (t.listen, t.client_ca_file.is_some()));
+        let upstream = crate::tls::upstream_of(settings.listen);
+        tracing::info!(
+            listen = ?t.map(|t| t.0),
+            forwards_to = %upstream,
+            client_certificates = t.is_some_and(|t| t.1),
+            "MQTT over TLS listener started"
+        );
+        tokio::spawn(crate::tls::serve(
+            listener,
+            crate::tls::Terminator {
+                acceptor: tokio_rustls::TlsAcceptor::from(config),
+                upstream,
+                handshake_timeout: settings.connection_timeout,
+                max_connections: settings.max_connections,
+            },
+            crate::tls::TlsMetrics::new(&stats),
+            shutdown.clone(),
+        ));
+    }
     ready();
     loop {
         tokio::select! {

@@ -5,11 +5,14 @@
 use std::collections::{BTreeMap, HashSet};
 use std::fmt;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use serde::Deserialize;
 use skymesh_runtime::config::{in_range, socket_addr};
 use skymesh_runtime::{ConfigError, ServiceConfig};
+
+use crate::tls::TlsSettings;
 
 /// The shipped default configuration, with every option commented.
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../deploy/mqtt-broker.toml");
@@ -32,6 +35,8 @@ pub struct Settings {
     pub meters_interval: Duration,
     /// username → password; empty = no authentication.
     pub users: BTreeMap<String, String>,
+    /// The TLS listener (a terminator forwarding to `listen`), if configured.
+    pub tls: Option<TlsSettings>,
 }
 
 impl fmt::Debug for Settings {
@@ -45,6 +50,7 @@ impl fmt::Debug for Settings {
             .field("connection_timeout", &self.connection_timeout)
             .field("meters_interval", &self.meters_interval)
             .field("users", &self.users.keys().collect::<Vec<_>>())
+            .field("tls", &self.tls)
             .finish()
     }
 }
@@ -55,6 +61,24 @@ impl fmt::Debug for Settings {
 pub struct RawUser {
     pub name: String,
     pub password: String,
+}
+
+/// `[tls]` as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawTls {
+    #[serde(default = "d_tls_listen")]
+    pub listen: String,
+    #[serde(default)]
+    pub cert_file: String,
+    #[serde(default)]
+    pub key_file: String,
+    #[serde(default)]
+    pub client_ca_file: String,
+}
+
+fn d_tls_listen() -> String {
+    "127.0.0.1:8883".into()
 }
 
 /// The TOML file as written.
@@ -75,6 +99,8 @@ pub struct RawConfig {
     pub meters_interval_s: u32,
     #[serde(default)]
     pub user: Vec<RawUser>,
+    #[serde(default)]
+    pub tls: Option<RawTls>,
 }
 
 fn d_listen() -> String {
@@ -147,7 +173,12 @@ impl ServiceConfig for RawConfig {
             }
             users.insert(u.name, u.password);
         }
+        let tls = match self.tls {
+            None => None,
+            Some(raw) => Some(tls(raw, listen)?),
+        };
         Ok(Settings {
+            tls,
             listen,
             max_connections: max_connections as usize,
             max_payload_size: usize::try_from(max_payload_size).unwrap_or(MQTT_MAX_PACKET),
@@ -157,6 +188,63 @@ impl ServiceConfig for RawConfig {
             users,
         })
     }
+}
+
+fn required_path(field: &str, v: &str) -> Result<PathBuf, ConfigError> {
+    if v.is_empty() {
+        return Err(ConfigError::invalid(
+            field,
+            "required in [tls] (a path to a PEM file)",
+        ));
+    }
+    Ok(PathBuf::from(v))
+}
+
+/// `[tls]`: addresses checked against the plain listener, and every file read,
+/// parsed and matched (the key belongs to the certificate) as at start.
+fn tls(raw: RawTls, plain: SocketAddr) -> Result<TlsSettings, ConfigError> {
+    let listen = socket_addr("tls.listen", &raw.listen)?;
+    if listen.port() == 0 {
+        return Err(ConfigError::invalid(
+            "tls.listen",
+            "port 0 is not allowed: clients need a fixed port",
+        ));
+    }
+    if listen.port() == plain.port()
+        && (listen.ip() == plain.ip()
+            || listen.ip().is_unspecified()
+            || plain.ip().is_unspecified())
+    {
+        return Err(ConfigError::invalid(
+            "tls.listen",
+            format!("overlaps the plain listener `listen` ({plain})"),
+        ));
+    }
+    let client_ca_file = if raw.client_ca_file.is_empty() {
+        None
+    } else {
+        // Client certificates mean nothing if the plain listener, which the TLS
+        // listener forwards to, is reachable from elsewhere without one.
+        if !plain.ip().is_loopback() {
+            return Err(ConfigError::invalid(
+                "tls.client_ca_file",
+                format!(
+                    "requires the plain listener `listen` on the loopback (it is {plain}): \
+                     clients without a certificate could use it"
+                ),
+            ));
+        }
+        Some(PathBuf::from(&raw.client_ca_file))
+    };
+    let settings = TlsSettings {
+        listen,
+        cert_file: required_path("tls.cert_file", &raw.cert_file)?,
+        key_file: required_path("tls.key_file", &raw.key_file)?,
+        client_ca_file,
+    };
+    crate::tls::server_config(&settings)
+        .map_err(|e| ConfigError::invalid(e.key(), e.to_string()))?;
+    Ok(settings)
 }
 
 #[cfg(test)]
@@ -173,6 +261,7 @@ mod tests {
         assert_eq!(s.max_inflight, 100);
         assert_eq!(s.connection_timeout, Duration::from_secs(5));
         assert!(s.users.is_empty());
+        assert_eq!(s.tls, None, "TLS is off unless [tls] is configured");
     }
 
     #[test]

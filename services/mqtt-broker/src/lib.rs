@@ -1,13 +1,15 @@
 //! The `mqtt-broker` service: an embedded MQTT 3.1.1 broker ([rumqttd]) on
 //! 127.0.0.1:1883 by default, so `skymesh up` has a broker for the DJI Cloud API
 //! gateway with nothing installed. It is not on the iceoryx2 bus beyond the
-//! runtime's heartbeat and stats.
+//! runtime's heartbeat and stats. An optional TLS listener ([`tls`]) terminates
+//! TLS in this service and forwards each connection to the plain listener.
 //!
 //! [rumqttd]: https://docs.rs/rumqttd
 
 pub mod broker;
 pub mod config;
 pub mod metrics;
+pub mod tls;
 
 pub use broker::{serve, BrokerError};
 pub use config::{RawConfig, Settings};
