@@ -14,6 +14,7 @@ use skymesh_runtime::{ConfigError, ServiceConfig};
 
 use crate::arbiter::ArbiterSettings;
 use crate::gimbal_v2::VisionSettings;
+use crate::signing::{SigningKey, SigningSettings};
 
 /// Where the autopilot is, as written in `connection`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -168,6 +169,8 @@ pub struct Settings {
     pub arbiter: ArbiterSettings,
     /// Gimbal protocol v2 for the vision pipeline's virtual cameras.
     pub vision: VisionSettings,
+    /// MAVLink 2 message signing on some endpoints; `None` = no signing.
+    pub signing: Option<SigningSettings>,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -203,6 +206,8 @@ pub struct RawConfig {
     pub arbiter: RawArbiter,
     /// `[vision]`: the virtual cameras as MAVLink gimbals.
     pub vision: RawVision,
+    /// `[signing]`: MAVLink 2 message signing on router endpoints.
+    pub signing: RawSigning,
 }
 
 impl Default for RawConfig {
@@ -230,6 +235,7 @@ impl Default for RawConfig {
             gimbal_attitude_hz: 10.0,
             arbiter: RawArbiter::default(),
             vision: RawVision::default(),
+            signing: RawSigning::default(),
         }
     }
 }
@@ -315,9 +321,11 @@ impl ServiceConfig for RawConfig {
         } else {
             Some(seconds("silence_reconnect_s", silence, 1.0, 600.0)?)
         };
+        let endpoints = router_endpoints(&self.endpoints, &self.connection)?;
+        let signing = self.signing.validate(&endpoints)?;
         Ok(Settings {
             connection: Endpoint::parse("connection", &self.connection)?,
-            endpoints: router_endpoints(&self.endpoints, &self.connection)?,
+            endpoints,
             vehicle_id,
             system_id,
             link_timeout: seconds("link_timeout_s", self.link_timeout_s, 0.5, 60.0)?,
@@ -349,7 +357,65 @@ impl ServiceConfig for RawConfig {
             request_data_streams: self.request_data_streams,
             arbiter: self.arbiter.validate()?,
             vision: self.vision.validate()?,
+            signing,
         })
+    }
+}
+
+/// The `[signing]` table as written (see `deploy/autopilot-link.toml`).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RawSigning {
+    /// A file holding the 32-byte secret key as 64 hex digits.
+    pub key_file: Option<String>,
+    /// Entries of `endpoints` (as written there) that require signing.
+    pub endpoints: Vec<String>,
+}
+
+impl RawSigning {
+    /// `endpoints` are the validated router endpoints the entries must name.
+    fn validate(self, endpoints: &[Endpoint]) -> Result<Option<SigningSettings>, ConfigError> {
+        const FIELD: &str = "signing.endpoints";
+        let Some(path) = self.key_file else {
+            if self.endpoints.is_empty() {
+                return Ok(None);
+            }
+            return Err(ConfigError::invalid(
+                "signing.key_file",
+                "signing.endpoints are listed but no key_file is given",
+            ));
+        };
+        if path.trim().is_empty() {
+            return Err(ConfigError::invalid("signing.key_file", "is empty"));
+        }
+        if self.endpoints.is_empty() {
+            return Err(ConfigError::invalid(
+                FIELD,
+                "a key_file is given but no endpoint requires signing; list them here",
+            ));
+        }
+        let mut indices = Vec::new();
+        for s in &self.endpoints {
+            let e = Endpoint::parse(FIELD, s)?;
+            let i = endpoints.iter().position(|x| *x == e).ok_or_else(|| {
+                ConfigError::invalid(FIELD, format!("`{s}` is not one of `endpoints`"))
+            })?;
+            if indices.contains(&i) {
+                return Err(ConfigError::invalid(
+                    FIELD,
+                    format!("`{s}` is listed twice"),
+                ));
+            }
+            indices.push(i);
+        }
+        indices.sort_unstable();
+        // The key's bytes never appear in an error.
+        let key = SigningKey::load(std::path::Path::new(&path))
+            .map_err(|e| ConfigError::invalid("signing.key_file", e.to_string()))?;
+        Ok(Some(SigningSettings {
+            key,
+            endpoints: indices,
+        }))
     }
 }
 
@@ -654,6 +720,101 @@ mod tests {
             let e = parse_str(bad).unwrap_err();
             assert!(e.to_string().contains("endpoints"), "{bad}: {e}");
         }
+    }
+
+    /// A key file in the temp dir, removed on drop.
+    struct KeyFile(std::path::PathBuf);
+
+    impl KeyFile {
+        fn new(content: &str) -> KeyFile {
+            use std::sync::atomic::{AtomicU32, Ordering};
+            static N: AtomicU32 = AtomicU32::new(0);
+            let path = std::env::temp_dir().join(format!(
+                "apl-signing-{}-{}.key",
+                std::process::id(),
+                N.fetch_add(1, Ordering::Relaxed)
+            ));
+            std::fs::write(&path, content).unwrap();
+            KeyFile(path)
+        }
+    }
+
+    impl Drop for KeyFile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+
+    const HEX_KEY: &str = "000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f";
+
+    #[test]
+    fn signing_is_off_by_default_and_its_keys_are_checked() {
+        assert_eq!(parse_str("").unwrap().signing, None);
+        assert_eq!(parse_str(RawConfig::DEFAULT_TOML).unwrap().signing, None);
+        let good = KeyFile::new(&format!("{HEX_KEY}\n"));
+        let config = |key_file: &str, signed: &str| {
+            format!(
+                "endpoints = [\"udpout:127.0.0.1:14550\", \"udpin:0.0.0.0:14560\", \"tcpin:127.0.0.1:5790\"]\n\
+                 [signing]\nkey_file = \"{key_file}\"\nendpoints = [{signed}]\n"
+            )
+        };
+        let path = good.0.display().to_string();
+        let s = parse_str(&config(
+            &path,
+            r#""udpin:0.0.0.0:14560", "tcpin:127.0.0.1:5790""#,
+        ))
+        .unwrap();
+        let signing = s.signing.unwrap();
+        assert_eq!(signing.endpoints, vec![1, 2]);
+        assert_eq!(
+            signing.key,
+            crate::signing::SigningKey::from_hex(HEX_KEY).unwrap()
+        );
+        // Refused with the key named, and never with the key's bytes in the message.
+        let short = KeyFile::new(&HEX_KEY[..40]);
+        let not_hex = KeyFile::new(&HEX_KEY.replace('a', "x"));
+        let zero = KeyFile::new(&"0".repeat(64));
+        for (text, field) in [
+            (
+                config(&short.0.display().to_string(), r#""udpin:0.0.0.0:14560""#),
+                "signing.key_file",
+            ),
+            (
+                config(&not_hex.0.display().to_string(), r#""udpin:0.0.0.0:14560""#),
+                "signing.key_file",
+            ),
+            (
+                config(&zero.0.display().to_string(), r#""udpin:0.0.0.0:14560""#),
+                "signing.key_file",
+            ),
+            (
+                config("/nonexistent/skymesh.key", r#""udpin:0.0.0.0:14560""#),
+                "signing.key_file",
+            ),
+            (config("", r#""udpin:0.0.0.0:14560""#), "signing.key_file"),
+            (config(&path, ""), "signing.endpoints"),
+            (
+                config(&path, r#""udpin:0.0.0.0:14561""#),
+                "signing.endpoints",
+            ),
+            (
+                config(&path, r#""udpin:0.0.0.0:14560", "udpin:0.0.0.0:14560""#),
+                "signing.endpoints",
+            ),
+            (config(&path, r#""bogus""#), "signing.endpoints"),
+            (
+                "[signing]\nendpoints = [\"udpout:127.0.0.1:14550\"]".to_string(),
+                "signing.key_file",
+            ),
+        ] {
+            let e = parse_str(&text).unwrap_err();
+            assert!(e.to_string().contains(field), "{text}: {e}");
+            assert!(!e.to_string().contains("0a0b0c"), "{e}");
+        }
+        assert!(matches!(
+            parse_str("[signing]\nkey = \"00\"").unwrap_err(),
+            ConfigError::Parse { .. }
+        ));
     }
 
     #[test]

@@ -18,6 +18,12 @@
 //!
 //! All peers of one endpoint are one link for routing (as in mavlink-router): a
 //! frame from one of them is not sent to the others.
+//!
+//! Endpoints listed in `[signing] endpoints` check every frame they receive before
+//! it reaches the hub and sign every frame they send ([`crate::signing`]). A
+//! `udpin` signing endpoint only learns (and sends to) peers that have sent a
+//! correctly signed frame, so unauthenticated senders can neither read the
+//! vehicle's traffic there nor push the ground station out of its peer list.
 
 use std::io;
 use std::net::SocketAddr;
@@ -35,6 +41,10 @@ use crate::config::Endpoint;
 use crate::frame::{FrameParser, RawFrame};
 use crate::hub::{label, DropReason, EndpointMetrics, Hub};
 use crate::router::MAX_ENDPOINTS;
+use crate::signing::{EndpointSigning, Signing, SigningSettings};
+
+/// The signing of one endpoint, if it requires signing.
+type Sig = Option<Arc<EndpointSigning>>;
 
 /// Frames waiting for one endpoint (or one TCP client); beyond this they are dropped.
 pub const ENDPOINT_QUEUE: usize = 256;
@@ -126,41 +136,60 @@ impl Bound {
     }
 }
 
-/// Starts every endpoint. The returned task ends once `shutdown` fires and every
-/// endpoint task has closed its sockets.
+/// Starts every endpoint; `signing` says which of them (indices into the bound
+/// endpoints, in configuration order) require MAVLink 2 signing, with which key.
+/// The returned task ends once `shutdown` fires and every endpoint task has closed
+/// its sockets.
 pub fn start(
     bound: Bound,
     local: (u8, u8),
+    signing: Option<&SigningSettings>,
     stats: &Stats,
     shutdown: CancellationToken,
 ) -> (Arc<Hub>, JoinHandle<()>) {
     let mut ports = Vec::new();
     let mut receivers = Vec::new();
+    let mut signers = Vec::new();
+    let shared = signing.map(|s| Signing::new(s.key.clone()));
     for (i, (endpoint, socket)) in bound.endpoints.iter().enumerate() {
         let (tx, rx) = mpsc::channel(ENDPOINT_QUEUE);
-        let metrics = EndpointMetrics::new(stats, label(i, &socket.shown(endpoint)));
-        ports.push((tx, metrics));
+        let label = label(i, &socket.shown(endpoint));
+        let signs = signing.is_some_and(|s| s.endpoints.contains(&i));
+        signers.push(match (&shared, signs) {
+            // The link id is the endpoint's index (< MAX_ENDPOINTS).
+            (Some(shared), true) => Some(Arc::new(EndpointSigning::new(
+                shared.clone(),
+                i as u8,
+                stats,
+                label.clone(),
+            ))),
+            _ => None,
+        });
+        ports.push((tx, EndpointMetrics::new(stats, label)));
         receivers.push(rx);
     }
     let hub = Arc::new(Hub::new(local, ports, stats));
     let mut tasks = JoinSet::new();
-    for (i, ((endpoint, socket), rx)) in bound.endpoints.into_iter().zip(receivers).enumerate() {
+    let all = bound.endpoints.into_iter().zip(receivers).zip(signers);
+    for (i, (((endpoint, socket), rx), sig)) in all.enumerate() {
         let index = i as u8;
         let (hub, stop) = (hub.clone(), shutdown.clone());
         tracing::info!(
             %endpoint,
             bound = %socket.shown(&endpoint),
             label = hub.metrics(index).label(),
+            signing = sig.is_some(),
+            link_id = sig.as_ref().map(|s| s.link_id()),
             "MAVLink router endpoint"
         );
         match (endpoint, socket) {
-            (_, Socket::UdpIn(s)) => tasks.spawn(udp_in(index, s, hub, rx, stop)),
-            (_, Socket::TcpIn(l)) => tasks.spawn(tcp_in(index, l, hub, rx, stop)),
+            (_, Socket::UdpIn(s)) => tasks.spawn(udp_in(index, s, hub, rx, sig, stop)),
+            (_, Socket::TcpIn(l)) => tasks.spawn(tcp_in(index, l, hub, rx, sig, stop)),
             (Endpoint::UdpOut { host, port }, Socket::Out) => {
-                tasks.spawn(udp_out(index, host, port, hub, rx, stop))
+                tasks.spawn(udp_out(index, host, port, hub, rx, sig, stop))
             }
             (Endpoint::TcpOut { host, port }, Socket::Out) => {
-                tasks.spawn(tcp_out(index, host, port, hub, rx, stop))
+                tasks.spawn(tcp_out(index, host, port, hub, rx, sig, stop))
             }
             (other, Socket::Out) => {
                 // Config validation refuses these; nothing to run.
@@ -179,11 +208,24 @@ pub fn start(
     (hub, task)
 }
 
-/// Feeds bytes from endpoint `index` through `parser` into the hub.
-fn deliver(hub: &Hub, index: u8, parser: &mut FrameParser, bytes: &[u8], datagram: bool) {
+/// Feeds bytes from endpoint `index` through `parser` into the hub; on a signing
+/// endpoint only the frames that pass the check. Returns how many frames went in.
+fn deliver(
+    hub: &Hub,
+    index: u8,
+    parser: &mut FrameParser,
+    bytes: &[u8],
+    datagram: bool,
+    signing: Option<&EndpointSigning>,
+) -> usize {
     parser.push(bytes);
+    let mut delivered = 0;
     while let Some(frame) = parser.next_frame() {
+        if signing.is_some_and(|s| !s.accept(&frame)) {
+            continue;
+        }
         hub.from_endpoint(index, &frame);
+        delivered += 1;
     }
     if datagram {
         parser.end_datagram();
@@ -191,6 +233,15 @@ fn deliver(hub: &Hub, index: u8, parser: &mut FrameParser, bytes: &[u8], datagra
     let bad = parser.take_malformed();
     if bad > 0 {
         hub.metrics(index).dropped(DropReason::Malformed, bad);
+    }
+    delivered
+}
+
+/// `frame` as endpoint `signing` sends it (signed there).
+fn outgoing(frame: RawFrame, signing: Option<&EndpointSigning>) -> RawFrame {
+    match signing {
+        Some(s) => s.outgoing(&frame),
+        None => frame,
     }
 }
 
@@ -230,8 +281,10 @@ async fn udp_in(
     socket: UdpSocket,
     hub: Arc<Hub>,
     mut rx: mpsc::Receiver<RawFrame>,
+    signing: Sig,
     shutdown: CancellationToken,
 ) {
+    let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
     let mut peers = Peers::default();
     let mut parser = FrameParser::new();
@@ -245,17 +298,22 @@ async fn udp_in(
                 if peers.expire(Instant::now()) > 0 {
                     metrics.peers(peers.heard.len());
                 }
+                if peers.heard.is_empty() {
+                    continue;
+                }
+                let frame = outgoing(frame, signing);
                 for (peer, _) in &peers.heard {
                     send_datagram(&socket, frame.as_bytes(), *peer, metrics).await;
                 }
             }
             r = socket.recv_from(&mut buf) => match r {
                 Ok((n, from)) => {
-                    if peers.heard(from, Instant::now()) {
+                    let delivered = deliver(&hub, index, &mut parser, &buf[..n], true, signing);
+                    // On a signing endpoint only an authenticated sender is a peer.
+                    if (signing.is_none() || delivered > 0) && peers.heard(from, Instant::now()) {
                         tracing::info!(endpoint = metrics.label(), peer = %from, "udp peer joined");
                         metrics.peers(peers.heard.len());
                     }
-                    deliver(&hub, index, &mut parser, &buf[..n], true);
                 }
                 // E.g. ICMP port unreachable from a vanished peer: not fatal.
                 Err(e) => tracing::debug!(endpoint = metrics.label(), error = %e, "udp receive failed"),
@@ -310,8 +368,10 @@ async fn udp_out(
     port: u16,
     hub: Arc<Hub>,
     mut rx: mpsc::Receiver<RawFrame>,
+    signing: Sig,
     shutdown: CancellationToken,
 ) {
+    let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
     let mut delay = RECONNECT_MIN;
     let (socket, to) = loop {
@@ -343,10 +403,13 @@ async fn udp_out(
             _ = shutdown.cancelled() => return,
             frame = rx.recv() => {
                 let Some(frame) = frame else { return };
+                let frame = outgoing(frame, signing);
                 send_datagram(&socket, frame.as_bytes(), to, metrics).await;
             }
             r = socket.recv_from(&mut buf) => match r {
-                Ok((n, _)) => deliver(&hub, index, &mut parser, &buf[..n], true),
+                Ok((n, _)) => {
+                    deliver(&hub, index, &mut parser, &buf[..n], true, signing);
+                }
                 // ICMP port unreachable while no ground station listens: expected.
                 Err(e) => tracing::trace!(error = %e, "udp receive failed"),
             },
@@ -359,6 +422,7 @@ async fn tcp_in(
     listener: TcpListener,
     hub: Arc<Hub>,
     mut rx: mpsc::Receiver<RawFrame>,
+    signing: Sig,
     shutdown: CancellationToken,
 ) {
     let metrics = &hub.metrics(index);
@@ -371,6 +435,10 @@ async fn tcp_in(
             _ = shutdown.cancelled() => break,
             frame = rx.recv() => {
                 let Some(frame) = frame else { break };
+                if clients.is_empty() {
+                    continue;
+                }
+                let frame = outgoing(frame, signing.as_deref());
                 for (_, tx) in &clients {
                     if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                         metrics.dropped(DropReason::QueueFull, 1);
@@ -389,9 +457,9 @@ async fn tcp_in(
                     next_id += 1;
                     clients.push((id, tx));
                     metrics.peers(clients.len());
-                    let (hub, stop) = (hub.clone(), shutdown.clone());
+                    let (hub, stop, sig) = (hub.clone(), shutdown.clone(), signing.clone());
                     tasks.spawn(async move {
-                        let reason = serve_stream(index, stream, &hub, crx, &stop).await;
+                        let reason = serve_stream(index, stream, &hub, crx, sig.as_deref(), &stop).await;
                         tracing::info!(endpoint = hub.metrics(index).label(), %peer, reason, "tcp client disconnected");
                         id
                     });
@@ -423,8 +491,10 @@ async fn tcp_out(
     port: u16,
     hub: Arc<Hub>,
     mut rx: mpsc::Receiver<RawFrame>,
+    signing: Sig,
     shutdown: CancellationToken,
 ) {
+    let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
     let mut delay = RECONNECT_MIN;
     metrics.peers(0);
@@ -445,13 +515,14 @@ async fn tcp_out(
                 delay = RECONNECT_MIN;
                 metrics.peers(1);
                 let (tx, crx) = mpsc::channel(ENDPOINT_QUEUE);
-                let serve = serve_stream(index, stream, &hub, crx, &shutdown);
+                let serve = serve_stream(index, stream, &hub, crx, signing, &shutdown);
                 tokio::pin!(serve);
                 let reason = loop {
                     tokio::select! {
                         reason = &mut serve => break reason,
                         frame = rx.recv() => match frame {
                             Some(frame) => {
+                                let frame = outgoing(frame, signing);
                                 if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                                     metrics.dropped(DropReason::QueueFull, 1);
                                 }
@@ -487,6 +558,7 @@ async fn serve_stream(
     stream: TcpStream,
     hub: &Hub,
     mut rx: mpsc::Receiver<RawFrame>,
+    signing: Option<&EndpointSigning>,
     shutdown: &CancellationToken,
 ) -> &'static str {
     let metrics = &hub.metrics(index);
@@ -515,7 +587,9 @@ async fn serve_stream(
             }
             r = reader.read(&mut buf) => match r {
                 Ok(0) => return "closed by the other end",
-                Ok(n) => deliver(hub, index, &mut parser, &buf[..n], false),
+                Ok(n) => {
+                    deliver(hub, index, &mut parser, &buf[..n], false, signing);
+                }
                 Err(_) => return "read failed",
             },
         }

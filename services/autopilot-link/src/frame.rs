@@ -144,6 +144,12 @@ impl RawFrame {
         }
     }
 
+    /// Wraps one whole frame built by this crate (e.g. [`crate::signing::sign`]);
+    /// `frame` must not be longer than [`MAX_FRAME`].
+    pub(crate) fn from_wire(frame: &[u8]) -> RawFrame {
+        RawFrame::copy_from(&frame[..frame.len().min(MAX_FRAME)])
+    }
+
     /// Serialises `msg` as an unsigned MAVLink 2 frame with `header`.
     pub fn encode(header: MavHeader, msg: &MavMessage) -> RawFrame {
         let mut raw = MAVLinkV2MessageRaw::new();

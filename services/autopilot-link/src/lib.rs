@@ -17,6 +17,7 @@
 //! | [`frame`] | raw MAVLink frames: split, check, target (pure) |
 //! | [`router`] | MAVLink routing table and COMMAND_ACK attribution (pure) |
 //! | [`endpoints`] | router endpoints (ground stations): sockets and their tasks |
+//! | [`signing`] | MAVLink 2 message signing on router endpoints |
 //! | [`hub`] | moves frames between autopilot and endpoints; router metrics |
 //! | [`telemetry`] | MAVLink → samples (pure) |
 //! | [`payload`] | gimbal attitude and GoPro → `PayloadState` (pure) |
@@ -43,6 +44,7 @@ pub mod payload;
 pub mod requests;
 pub mod router;
 mod service;
+pub mod signing;
 pub mod telemetry;
 mod transport;
 
@@ -158,6 +160,7 @@ pub async fn run_with_endpoints(
     let (hub, router_task) = endpoints::start(
         endpoints,
         (settings.system_id, requests::OWN_COMPONENT),
+        settings.signing.as_ref(),
         &stats,
         router_stop.clone(),
     );
