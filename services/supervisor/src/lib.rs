@@ -8,12 +8,17 @@
 //! nothing (systemd runs each service as its own unit) and only watches, cleans and
 //! exports.
 //!
+//! If the supervisor itself dies, the services keep running (each leads its own
+//! process group); the next `skymesh up` on the same domain adopts them instead of
+//! starting duplicates ([`adopt`]).
+//!
 //! Layout: [`config`] (TOML → settings), [`policy`] (pure restart decisions),
-//! [`child`] (spawn/stop/reap), [`monitor`] (heartbeats and stats), [`supervise`]
+//! [`child`] (spawn/stop/reap), [`adopt`] (finding and watching survivors), [`monitor`] (heartbeats and stats), [`supervise`]
 //! (one task per service), [`state`] (the shared view), [`procfs`], [`metrics`]
 //! (the Prometheus collector), [`http`], [`table`], [`status_cmd`].
 #![forbid(unsafe_code)]
 
+pub mod adopt;
 pub mod child;
 pub mod config;
 pub mod http;
@@ -258,13 +263,27 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
             grace: settings.grace,
             shutdown: shutdown.clone(),
         });
+        // Services an earlier supervisor of this domain started and left running.
+        let specs = settings.services.clone();
+        let name = domain.name.clone();
+        let found = tokio::task::spawn_blocking(move || adopt::find_running(&name, &specs))
+            .await
+            .context("scanning /proc for running services")?;
         for (idx, spec) in settings.services.iter().enumerate() {
+            let mut instances = found[idx].iter();
+            // Oldest first: the one that has been running the longest is kept.
+            let adopted = instances.by_ref().find_map(adopt::Adopted::watch);
+            let extra: Vec<u32> = instances.map(|i| i.pid).collect();
+            if !extra.is_empty() {
+                tracing::warn!(service = %spec.name, adopted = adopted.as_ref().map(|a| a.pid), others = ?extra, "more than one running instance of the service; adopting the oldest, leaving the others alone (stop them by hand)");
+            }
             let stop = CancellationToken::new();
             let task = tokio::spawn(supervise::supervise(
                 shared.clone(),
                 idx,
                 spec.clone(),
                 stop.clone(),
+                adopted,
             ));
             supervisors.push((spec.name.clone(), task, stop));
         }

@@ -23,7 +23,7 @@ use crate::procfs;
 use crate::state::{Mesh, Phase, ServiceEntry};
 
 /// Families the supervisor itself exports; a service may not report these names.
-const OWN: [(&str, MetricType, &str); 11] = [
+const OWN: [(&str, MetricType, &str); 12] = [
     ("skymesh_service_up", MetricType::GAUGE, "1 if the service is running (or degraded), else 0."),
     ("skymesh_service_state", MetricType::GAUGE, "1 for the service's current supervisor state, 0 for the others."),
     ("skymesh_service_restarts_total", MetricType::COUNTER, "Times the service was restarted (by the supervisor, or seen with a new pid in monitor-only mode)."),
@@ -34,6 +34,7 @@ const OWN: [(&str, MetricType, &str); 11] = [
     ("skymesh_service_resident_memory_bytes", MetricType::GAUGE, "Resident memory of the service's current process."),
     ("skymesh_service_stats_dropped_series", MetricType::GAUGE, "Series the service has but could not fit into its stats sample."),
     ("skymesh_supervisor_stale_nodes_cleaned_total", MetricType::COUNTER, "Dead iceoryx2 nodes whose stale resources the supervisor removed."),
+    ("skymesh_supervisor_adopted_total", MetricType::COUNTER, "Running processes of the service this supervisor adopted (started by an earlier supervisor that died) instead of starting new ones."),
     ("skymesh_supervisor_invalid_stats_entries", MetricType::GAUGE, "Stats entries dropped at the last scrape because their name, labels or type were unusable."),
 ];
 
@@ -230,6 +231,12 @@ impl MeshCollector {
             "skymesh_service_restarts_total",
             counter_metric(svc(), e.restarts as f64),
         );
+        if !self.mesh.monitor_only {
+            fams.own(
+                "skymesh_supervisor_adopted_total",
+                counter_metric(svc(), e.adopted_total as f64),
+            );
+        }
         fams.own(
             "skymesh_service_uptime_seconds",
             gauge_metric(svc(), e.uptime_s(now_ns)),

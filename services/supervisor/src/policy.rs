@@ -63,6 +63,9 @@ pub enum Ending {
     Hung,
     /// The process could not be started at all.
     SpawnFailed,
+    /// An adopted process (started by an earlier supervisor) ended. It is not our
+    /// child, so its exit status went to its new parent: counted as a failure.
+    Lost,
 }
 
 impl Ending {
@@ -72,7 +75,7 @@ impl Ending {
             Ending::Code(c) => Some(c),
             Ending::Signal(s) => Some(128 + s),
             Ending::Hung => Some(128 + nix::sys::signal::Signal::SIGKILL as i32),
-            Ending::SpawnFailed => None,
+            Ending::SpawnFailed | Ending::Lost => None,
         }
     }
 }
@@ -233,6 +236,11 @@ mod tests {
             t.on_exit(now, ms(5), Ending::Code(0), 0.5),
             Decision::Stopped
         );
+        // The end of an adopted process (exit status unknown) is a failure.
+        assert!(matches!(
+            t.on_exit(now, ms(5), Ending::Lost, 0.5),
+            Decision::Restart { .. }
+        ));
         let mut always = RestartTracker::new(RestartPolicy {
             mode: RestartMode::Always,
             ..no_jitter()
@@ -297,5 +305,6 @@ mod tests {
         assert_eq!(Ending::Signal(15).exit_code(), Some(143));
         assert_eq!(Ending::Hung.exit_code(), Some(137));
         assert_eq!(Ending::SpawnFailed.exit_code(), None);
+        assert_eq!(Ending::Lost.exit_code(), None);
     }
 }

@@ -31,6 +31,11 @@ fn units() -> (f64, u64) {
     })
 }
 
+/// Clock ticks per second (`CLK_TCK`), the unit of times in `/proc/<pid>/stat`.
+pub fn ticks_per_second() -> f64 {
+    units().0
+}
+
 /// Usage of `pid`, or `None` if it is gone or its files cannot be read.
 pub fn usage(pid: u32) -> Option<ProcUsage> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;

@@ -115,6 +115,10 @@ pub struct ServiceEntry {
     pub heartbeat: Option<Heartbeat>,
     /// The newest stats sample of the current process.
     pub stats: Option<Box<ServiceStats>>,
+    /// The current process was started by an earlier supervisor and adopted.
+    pub adopted: bool,
+    /// Processes of this service adopted from an earlier supervisor.
+    pub adopted_total: u64,
 }
 
 impl ServiceEntry {
@@ -130,6 +134,8 @@ impl ServiceEntry {
             last_exit_code: None,
             heartbeat: None,
             stats: None,
+            adopted: false,
+            adopted_total: 0,
         }
     }
 
@@ -164,6 +170,7 @@ impl ServiceEntry {
             heartbeat_age_s: self.heartbeat_age_s(now_ns).map(round3),
             last_exit_code: self.last_exit_code,
             critical: self.critical,
+            adopted: self.adopted,
         }
     }
 }
@@ -187,6 +194,9 @@ pub struct StatusEntry {
     /// Exit code of the previous process (128 + signal when killed); null if none exited.
     pub last_exit_code: Option<i32>,
     pub critical: bool,
+    /// The current process was started by an earlier supervisor and adopted by this one.
+    #[serde(default)]
+    pub adopted: bool,
 }
 
 /// A state change, kept for the live table.

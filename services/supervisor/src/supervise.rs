@@ -6,13 +6,16 @@
 //! (stop this service's process now). The caller cancels `shutdown` first, then each
 //! service's `stop` in reverse start order.
 
+use std::ops::ControlFlow;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use nix::sys::signal::Signal;
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::Domain;
 use tokio_util::sync::CancellationToken;
 
+use crate::adopt::Adopted;
 use crate::child::{self, Environment, Running};
 use crate::config::ServiceSpec;
 use crate::monitor::{Liveness, LivenessRule};
@@ -85,24 +88,23 @@ async fn wait_for_dependencies(sh: &Shared, spec: &ServiceSpec, stop: &Cancellat
 }
 
 /// Resolves when the heartbeats of `idx` say it is hung (or never started beating).
-async fn hang_watch(sh: &Shared, idx: usize, heartbeat: bool) -> Liveness {
+async fn hang_watch(sh: &Shared, rule: &LivenessRule, idx: usize, heartbeat: bool) -> Liveness {
     if !heartbeat {
         return std::future::pending().await;
     }
     // Until the first heartbeat: a short tick (it may arrive any time and bring the
     // deadline forward from the startup timeout to its own silence allowance).
-    let tick = (sh.rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(250));
+    let tick = (rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(250));
     loop {
         let (spawned_ns, hb) = sh.mesh.with(idx, |e| (e.spawned_ns, e.heartbeat));
         let now_ns = monotonic_ns();
-        let wait = match sh.rule.evaluate(spawned_ns, hb.as_ref(), now_ns) {
+        let wait = match rule.evaluate(spawned_ns, hb.as_ref(), now_ns) {
             Liveness::AwaitingFirst => tick,
             // Then no periodic polling: the verdict can only change once the newest
             // heartbeat is older than its allowance, so sleep until exactly then and
             // look again (heartbeats that came meanwhile push the deadline on; a
             // process keeps the period it reports for its whole life).
-            Liveness::Alive => sh
-                .rule
+            Liveness::Alive => rule
                 .hung_at(hb.as_ref())
                 .map_or(tick, |at| Duration::from_nanos(at.saturating_sub(now_ns))),
             verdict => return verdict,
@@ -127,7 +129,7 @@ async fn run_once(
 ) -> Option<Ending> {
     let outcome = tokio::select! {
         r = run.child.wait() => Outcome::Exited(r),
-        verdict = hang_watch(sh, idx, spec.heartbeat) => Outcome::Hung(verdict),
+        verdict = hang_watch(sh, &sh.rule, idx, spec.heartbeat) => Outcome::Hung(verdict),
         _ = stop.cancelled() => Outcome::Stop,
     };
     let ending = match outcome {
@@ -169,7 +171,7 @@ async fn run_once(
         }
     };
     // Anything the child forked dies with it, so no orphan keeps its shared memory.
-    child::signal_group(run.pid, nix::sys::signal::Signal::SIGKILL);
+    child::signal_group(run.pid, Signal::SIGKILL);
     Some(ending)
 }
 
@@ -184,19 +186,152 @@ fn log_ending(spec: &ServiceSpec, pid: Option<u32>, ending: Ending, ran_for: Dur
         Ending::Hung => {
             tracing::warn!(service = %spec.name, pid, ran_ms, "killed after missing heartbeats")
         }
+        Ending::Lost => {
+            tracing::warn!(service = %spec.name, pid, ran_ms, "adopted process ended (exit status unknown: not our child)")
+        }
         Ending::SpawnFailed => {}
     }
 }
 
+/// Runs an adopted process (started by an earlier supervisor) until it ends. `None`
+/// means it was stopped on request. Returns the ending and how long it ran under us.
+async fn run_adopted(
+    sh: &Shared,
+    idx: usize,
+    spec: &ServiceSpec,
+    adopted: Adopted,
+    stop: &CancellationToken,
+) -> Option<(Ending, Duration)> {
+    let pid = adopted.pid;
+    let since = Instant::now();
+    tracing::info!(
+        service = %spec.name,
+        pid,
+        running_s = adopted.age.as_secs(),
+        program = %spec.program.display(),
+        "adopted the running instance an earlier supervisor started; not starting a new one"
+    );
+    sh.mesh.update(idx, |e| {
+        e.phase = if spec.heartbeat {
+            Phase::Starting
+        } else {
+            Phase::Running
+        };
+        e.pid = Some(pid);
+        e.started_at = since.checked_sub(adopted.age).or(Some(since));
+        e.spawned_ns = monotonic_ns();
+        e.heartbeat = None;
+        e.stats = None;
+        e.adopted = true;
+        e.adopted_total += 1;
+    });
+    // It is already running: its next heartbeat is due within the usual silence
+    // allowance, not the startup timeout.
+    let rule = LivenessRule {
+        startup_timeout: sh.rule.allowed_silence(None),
+        ..sh.rule
+    };
+    enum Seen {
+        Exited,
+        Hung(Liveness),
+        Stop,
+    }
+    let seen = tokio::select! {
+        () = adopted.exited() => Seen::Exited,
+        verdict = hang_watch(sh, &rule, idx, spec.heartbeat) => Seen::Hung(verdict),
+        _ = stop.cancelled() => Seen::Stop,
+    };
+    let ending = match seen {
+        Seen::Exited => Some(Ending::Lost),
+        Seen::Hung(verdict) => {
+            tracing::warn!(service = %spec.name, pid, verdict = ?verdict, "adopted service sends no heartbeats; killing (SIGKILL)");
+            adopted.signal_group(Signal::SIGKILL);
+            if tokio::time::timeout(Duration::from_secs(10), adopted.exited())
+                .await
+                .is_err()
+            {
+                tracing::error!(service = %spec.name, pid, "adopted process survives SIGKILL");
+            }
+            Some(Ending::Hung)
+        }
+        Seen::Stop => {
+            sh.mesh.set_phase(idx, Phase::Stopping);
+            adopted.signal_group(Signal::SIGTERM);
+            if tokio::time::timeout(sh.grace, adopted.exited())
+                .await
+                .is_err()
+            {
+                tracing::warn!(service = %spec.name, pid, grace_ms = sh.grace.as_millis() as u64, "did not stop in time; SIGKILL");
+                adopted.signal_group(Signal::SIGKILL);
+                if tokio::time::timeout(Duration::from_secs(10), adopted.exited())
+                    .await
+                    .is_err()
+                {
+                    tracing::error!(service = %spec.name, pid, "adopted process survives SIGKILL");
+                }
+            }
+            tracing::info!(service = %spec.name, pid, "stopped (adopted; exit status unknown)");
+            None
+        }
+    };
+    // Anything it forked dies with it. Its leader is gone: signal the group by id.
+    child::signal_group(pid, Signal::SIGKILL);
+    // Its new parent (init or a subreaper) reaps it; then iceoryx2 sees its node dead.
+    if !adopted.reaped(Duration::from_secs(2)).await {
+        tracing::warn!(service = %spec.name, pid, "adopted process not reaped by its parent yet; its node is cleaned later");
+    }
+    sh.mesh.update(idx, |e| {
+        e.pid = None;
+        e.started_at = None;
+        e.stats = None;
+        e.adopted = false;
+        if let Some(code) = ending.and_then(Ending::exit_code) {
+            e.last_exit_code = Some(code);
+        }
+    });
+    clean_dead_nodes(&sh.domain, &sh.mesh).await;
+    ending.map(|e| (e, since.elapsed()))
+}
+
 /// Supervises service `idx` until `stop` is cancelled (or it reaches a state it is
-/// not restarted from).
-pub async fn supervise(sh: Arc<Shared>, idx: usize, spec: ServiceSpec, stop: CancellationToken) {
-    if !wait_for_dependencies(&sh, &spec, &stop).await {
+/// not restarted from). With `adopted`, the first run is that process (started by an
+/// earlier supervisor) instead of a new one.
+pub async fn supervise(
+    sh: Arc<Shared>,
+    idx: usize,
+    spec: ServiceSpec,
+    stop: CancellationToken,
+    adopted: Option<Adopted>,
+) {
+    let mut adopted = adopted;
+    // A running instance needs no waiting for its dependencies.
+    if adopted.is_none() && !wait_for_dependencies(&sh, &spec, &stop).await {
         sh.mesh.set_phase(idx, Phase::Stopped);
         return;
     }
     let mut tracker = RestartTracker::new(spec.restart);
     loop {
+        if let Some(a) = adopted.take() {
+            let pid = a.pid;
+            let Some((ending, ran_for)) = run_adopted(&sh, idx, &spec, a, &stop).await else {
+                sh.mesh.set_phase(idx, Phase::Stopped);
+                return;
+            };
+            let next = decide(
+                &sh,
+                idx,
+                &spec,
+                &mut tracker,
+                &stop,
+                ending,
+                ran_for,
+                Some(pid),
+            );
+            match next.await {
+                ControlFlow::Continue(()) => continue,
+                ControlFlow::Break(()) => return,
+            }
+        }
         sh.mesh.update(idx, |e| {
             e.phase = Phase::Starting;
             e.pid = None;
@@ -237,42 +372,62 @@ pub async fn supervise(sh: Arc<Shared>, idx: usize, spec: ServiceSpec, stop: Can
                 (ending, ran_for, Some(run.pid))
             }
         };
-        log_ending(&spec, pid, ending, ran_for);
-        if sh.shutdown.is_cancelled() {
-            sh.mesh.set_phase(idx, Phase::Stopped);
+        let next = decide(&sh, idx, &spec, &mut tracker, &stop, ending, ran_for, pid);
+        if next.await.is_break() {
             return;
         }
-        match tracker.on_exit(Instant::now(), ran_for, ending, fastrand::f64()) {
-            Decision::Restart { after } => {
-                sh.mesh.set_phase(idx, Phase::Backoff);
-                tracing::info!(service = %spec.name, delay_ms = after.as_millis() as u64, "restarting after backoff");
-                tokio::select! {
-                    _ = tokio::time::sleep(after) => {}
-                    _ = stop.cancelled() => { sh.mesh.set_phase(idx, Phase::Stopped); return; }
-                    _ = sh.shutdown.cancelled() => { sh.mesh.set_phase(idx, Phase::Stopped); return; }
-                }
-                sh.mesh.update(idx, |e| e.restarts += 1);
+    }
+}
+
+/// After a run ended: logs it and applies the restart policy (waiting out the
+/// backoff). `Continue` means start again; `Break` means the task is done.
+#[allow(clippy::too_many_arguments)]
+async fn decide(
+    sh: &Shared,
+    idx: usize,
+    spec: &ServiceSpec,
+    tracker: &mut RestartTracker,
+    stop: &CancellationToken,
+    ending: Ending,
+    ran_for: Duration,
+    pid: Option<u32>,
+) -> ControlFlow<()> {
+    let stopped = |phase| {
+        sh.mesh.set_phase(idx, phase);
+        ControlFlow::Break(())
+    };
+    log_ending(spec, pid, ending, ran_for);
+    if sh.shutdown.is_cancelled() {
+        return stopped(Phase::Stopped);
+    }
+    match tracker.on_exit(Instant::now(), ran_for, ending, fastrand::f64()) {
+        Decision::Restart { after } => {
+            sh.mesh.set_phase(idx, Phase::Backoff);
+            tracing::info!(service = %spec.name, delay_ms = after.as_millis() as u64, "restarting after backoff");
+            tokio::select! {
+                _ = tokio::time::sleep(after) => {}
+                _ = stop.cancelled() => return stopped(Phase::Stopped),
+                _ = sh.shutdown.cancelled() => return stopped(Phase::Stopped),
             }
-            Decision::ConfigError => {
-                tracing::error!(service = %spec.name, "exit code 64: bad configuration; not restarting (fix it, then restart the mesh)");
-                sh.mesh.set_phase(idx, Phase::ConfigError);
-                return;
-            }
-            Decision::Failed { restarts_in_window } => {
-                tracing::error!(
-                    service = %spec.name,
-                    restarts_in_window,
-                    window_s = spec.restart.window.as_secs(),
-                    "restart budget spent; not restarting"
-                );
-                sh.mesh.set_phase(idx, Phase::Failed);
-                return;
-            }
-            Decision::Stopped => {
-                tracing::info!(service = %spec.name, "exited cleanly; not restarted (restart mode on-failure)");
-                sh.mesh.set_phase(idx, Phase::Stopped);
-                return;
-            }
+            sh.mesh.update(idx, |e| e.restarts += 1);
+            ControlFlow::Continue(())
+        }
+        Decision::ConfigError => {
+            tracing::error!(service = %spec.name, "exit code 64: bad configuration; not restarting (fix it, then restart the mesh)");
+            stopped(Phase::ConfigError)
+        }
+        Decision::Failed { restarts_in_window } => {
+            tracing::error!(
+                service = %spec.name,
+                restarts_in_window,
+                window_s = spec.restart.window.as_secs(),
+                "restart budget spent; not restarting"
+            );
+            stopped(Phase::Failed)
+        }
+        Decision::Stopped => {
+            tracing::info!(service = %spec.name, "exited cleanly; not restarted (restart mode on-failure)");
+            stopped(Phase::Stopped)
         }
     }
 }

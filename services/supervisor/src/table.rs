@@ -158,6 +158,7 @@ mod tests {
             heartbeat_age_s: Some(0.25),
             last_exit_code: None,
             critical: pid.is_some(),
+            adopted: false,
         }
     }
 
