@@ -168,6 +168,10 @@ pub struct MeshOptions {
     pub vision_extra: String,
     /// TOML appended to the DigiView gateway's config (after `listen`).
     pub digiview_extra: String,
+    /// Per-service restart policies: (service name, TOML inline table for its
+    /// `restart` key), e.g. a slower restart so a test sees what happens meanwhile.
+    /// Not for `mqtt-broker`, which has one already.
+    pub restart: Vec<(String, String)>,
 }
 
 impl Default for MeshOptions {
@@ -200,6 +204,7 @@ impl Default for MeshOptions {
             camera_extra: String::new(),
             vision_extra: String::new(),
             digiview_extra: String::new(),
+            restart: Vec::new(),
         }
     }
 }
@@ -602,6 +607,13 @@ after = ["vision-pipeline"]
             );
         }
 
+        for (name, table) in &opts.restart {
+            let key = format!("name = \"{name}\"\n");
+            if !services.contains(&key) {
+                bail!("restart policy for {name}: no such service in this mesh");
+            }
+            services = services.replace(&key, &format!("{key}restart = {table}\n"));
+        }
         std::fs::write(
             d.join("skymesh.toml"),
             format!(

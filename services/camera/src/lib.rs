@@ -152,8 +152,12 @@ async fn run_synthetic(
         let stamp = stamp_now(frame_seq + 1);
         let t_s = tick.duration_since(start).as_secs_f64();
         let mut truth = None;
-        let sent = ports.frame(len, |header, pixels| {
-            truth = source.render(t_s, stamp, header, pixels).ok();
+        // Rendering is CPU work: off the async worker (see vision-pipeline's frame
+        // step), so the heartbeat keeps beating while a frame is drawn.
+        let sent = tokio::task::block_in_place(|| {
+            ports.frame(len, |header, pixels| {
+                truth = source.render(t_s, stamp, header, pixels).ok();
+            })
         });
         metrics
             .render_seconds

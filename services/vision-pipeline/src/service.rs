@@ -84,8 +84,15 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
             Event::Frame(i) => {
                 let StreamPorts { frames, output } = &mut ports.streams[i];
                 let sinks = &mut ports.sinks;
-                let done = frames.try_latest_with(|header, pixels| {
-                    pipeline.frame(i, header, pixels, output, sinks)
+                // Tens of milliseconds of CPU (seconds in a debug build on a loaded
+                // machine): off the async worker, so the heartbeat task, which may sit
+                // in this worker's LIFO slot where no other worker can steal it,
+                // keeps beating and the supervisor does not take a busy pipeline for
+                // a hung one.
+                let done = tokio::task::block_in_place(|| {
+                    frames.try_latest_with(|header, pixels| {
+                        pipeline.frame(i, header, pixels, output, sinks)
+                    })
                 })?;
                 if let Some((processed, skipped)) = done {
                     processed?;
