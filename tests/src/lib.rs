@@ -632,25 +632,7 @@ grace_period_ms = 3000
                 extra = opts.supervisor_extra,
             ),
         )?;
-        let stdout = std::fs::File::create(d.join("supervisor.stdout"))?;
-        let stderr = std::fs::File::create(d.join("supervisor.stderr"))?;
-        let status_file = d.join("metrics.addr");
-        let child = Command::new(binary("skymesh"))
-            .arg("up")
-            .arg("--config")
-            .arg(d.join("skymesh.toml"))
-            .arg("--metrics")
-            .arg("127.0.0.1:0")
-            .arg("--status-file")
-            .arg(&status_file)
-            .env("SKYMESH_DOMAIN", &domain)
-            .env("RUST_LOG", "info")
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(stdout)
-            .stderr(stderr)
-            .spawn()
-            .context("spawning skymesh up")?;
+        let child = spawn_supervisor(d, &domain)?;
         let mut mesh = Mesh {
             dir,
             domain,
@@ -670,15 +652,46 @@ grace_period_ms = 3000
             metrics_addr: None,
             _serial: serial,
         };
-        let addr = mesh.wait_for(Duration::from_secs(20), "supervisor status file", |m| {
+        mesh.wait_http()?;
+        Ok(mesh)
+    }
+
+    /// Waits until the supervisor has written its HTTP address and answers on it.
+    fn wait_http(&mut self) -> Result<()> {
+        let status_file = self.dir.path().join("metrics.addr");
+        let addr = self.wait_for(Duration::from_secs(20), "supervisor status file", |m| {
             let text = std::fs::read_to_string(&status_file).ok()?;
             text.trim()
                 .parse::<SocketAddr>()
                 .ok()
                 .filter(|_| m.http_get("/status").is_ok())
         })?;
-        mesh.metrics_addr = Some(addr);
-        Ok(mesh)
+        self.metrics_addr = Some(addr);
+        Ok(())
+    }
+
+    /// SIGKILLs the supervisor (its services keep running) and reaps it; returns its pid.
+    pub fn kill_supervisor(&mut self) -> Result<u32> {
+        let mut child = self
+            .supervisor
+            .take()
+            .ok_or_else(|| anyhow!("no supervisor running"))?;
+        let pid = child.id();
+        child.kill()?;
+        child.wait()?;
+        self.metrics_addr = None;
+        let _ = std::fs::remove_file(self.dir.path().join("metrics.addr"));
+        Ok(pid)
+    }
+
+    /// Starts `skymesh up` again on the same config and domain (after
+    /// [`Mesh::kill_supervisor`]); returns once its HTTP endpoint answers.
+    pub fn restart_supervisor(&mut self) -> Result<()> {
+        if self.supervisor.is_some() {
+            bail!("the supervisor is still running");
+        }
+        self.supervisor = Some(spawn_supervisor(self.dir.path(), &self.domain)?);
+        self.wait_http()
     }
 
     /// The supervisor's HTTP address.
@@ -865,6 +878,33 @@ impl Drop for Mesh {
             }
         }
     }
+}
+
+/// Starts `skymesh up` for the mesh in `dir` (output appended to
+/// `supervisor.stdout` / `supervisor.stderr` there, its children's too).
+fn spawn_supervisor(dir: &Path, domain: &str) -> Result<Child> {
+    let append = |name: &str| {
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(dir.join(name))
+    };
+    Command::new(binary("skymesh"))
+        .arg("up")
+        .arg("--config")
+        .arg(dir.join("skymesh.toml"))
+        .arg("--metrics")
+        .arg("127.0.0.1:0")
+        .arg("--status-file")
+        .arg(dir.join("metrics.addr"))
+        .env("SKYMESH_DOMAIN", domain)
+        .env("RUST_LOG", "info")
+        .env_remove("NOTIFY_SOCKET")
+        .stdin(Stdio::null())
+        .stdout(append("supervisor.stdout")?)
+        .stderr(append("supervisor.stderr")?)
+        .spawn()
+        .context("spawning skymesh up")
 }
 
 /// Sends `sig` to `pid`.

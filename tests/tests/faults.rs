@@ -423,7 +423,7 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
     let mut braked = Times::default();
     let stop_teleop = Arc::new(AtomicBool::new(false));
 
-    let (load_files, sup_fds_start) = rt.block_on(async {
+    rt.block_on(async {
         let bus = mesh.bus("e2e-faults").unwrap();
         let mut load = Load {
             v: Vehicle::new(&bus),
@@ -461,7 +461,7 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
         .await;
 
         let files = settled_files(&mesh);
-        let sup_fds = fds(supervisor);
+        let sup_fds_start = fds(supervisor);
         for round in 1..=rounds {
             load.v.take_off(10.0).await;
             let link = mesh.wait_running("autopilot-link", STARTUP).unwrap();
@@ -542,51 +542,125 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
                 "round {round}: connections no live process holds: {orphans:#?}"
             );
         }
+        // Restart counters match the kills, every service is up; nothing piled up
+        // in the supervisor.
+        for name in ORDER {
+            let s = mesh.service(name).unwrap();
+            assert_eq!(s["restarts"], rounds, "{name}: {s}");
+            assert_eq!(s["state"], "running", "{name}: {s}");
+            let up = mesh
+                .metric(&format!("skymesh_service_up{{service=\"{name}\"}}"))
+                .unwrap();
+            assert_eq!(up, Some(1.0), "{name} not up in the metrics");
+            let restarts = mesh
+                .metric(&format!(
+                    "skymesh_service_restarts_total{{service=\"{name}\"}}"
+                ))
+                .unwrap();
+            assert_eq!(restarts, Some(rounds as f64), "{name}: restarts metric");
+        }
+        let sup_fds = fds(supervisor);
+        eprintln!(
+            "faults: supervisor fds {sup_fds_start} → {sup_fds} after {} kills; domain files {}",
+            rounds * ORDER.len(),
+            files.len()
+        );
+        assert!(
+            sup_fds <= sup_fds_start + 2,
+            "the supervisor's fds grew {sup_fds_start} → {sup_fds} over {} kills",
+            rounds * ORDER.len()
+        );
+        let zombies = lasting_zombies(supervisor);
+        assert!(zombies.is_empty(), "zombie children: {zombies:?}");
+
+        // The supervisor itself dies: the services keep flying the vehicle, and a new
+        // supervisor adopts every one of them instead of starting duplicates.
+        supervisor_dies_and_is_replaced(&mut mesh, &mut load).await;
+
         stop_teleop.store(true, Ordering::Relaxed);
         teleop_task.await.unwrap();
         drop(load);
-        (files, sup_fds)
     });
 
     running.print("kill → running again");
     served.print("kill → served again");
     braked.print("kill → stale brake");
 
-    // Restart counters match the kills, every service is up.
-    for name in ORDER {
-        let s = mesh.service(name).unwrap();
-        assert_eq!(s["restarts"], rounds, "{name}: {s}");
-        assert_eq!(s["state"], "running", "{name}: {s}");
-        let up = mesh
-            .metric(&format!("skymesh_service_up{{service=\"{name}\"}}"))
-            .unwrap();
-        assert_eq!(up, Some(1.0), "{name} not up in the metrics");
-        let restarts = mesh
-            .metric(&format!(
-                "skymesh_service_restarts_total{{service=\"{name}\"}}"
-            ))
-            .unwrap();
-        assert_eq!(restarts, Some(rounds as f64), "{name}: restarts metric");
-    }
-    let sup_fds = fds(supervisor);
-    eprintln!(
-        "faults: supervisor fds {sup_fds_start} → {sup_fds} after {} kills; domain files {}",
-        rounds * ORDER.len(),
-        load_files.len()
-    );
-    assert!(
-        sup_fds <= sup_fds_start + 2,
-        "the supervisor's fds grew {sup_fds_start} → {sup_fds} over {} kills",
-        rounds * ORDER.len()
-    );
-    let zombies = lasting_zombies(supervisor);
-    assert!(zombies.is_empty(), "zombie children: {zombies:?}");
-
     mesh.stop(Duration::from_secs(20)).unwrap();
     let left = mesh.processes();
     assert!(left.is_empty(), "processes left after stop: {left:?}");
     let files = mesh.ipc_domain().unwrap().leftover_files();
     assert!(files.is_empty(), "files left after stop: {files:?}");
+}
+
+/// SIGKILLs the supervisor with the vehicle in the air: the command path keeps
+/// working without it (teleoperation through imc-gateway moves the vehicle, the
+/// arbiter brakes when it stops); a new `skymesh up` on the same config adopts
+/// every running service (same pids, no restart) and restarts one that dies later.
+async fn supervisor_dies_and_is_replaced(mesh: &mut Mesh, load: &mut Load) {
+    load.v.take_off(5.0).await;
+    let before: BTreeMap<&str, u64> = ORDER
+        .iter()
+        .map(|n| (*n, mesh.service(n).unwrap()["pid"].as_u64().unwrap()))
+        .collect();
+    let t0 = Instant::now();
+    let old = mesh.kill_supervisor().unwrap();
+    load.teleop_on.store(true, Ordering::Relaxed);
+    vehicle_until(
+        &mut load.v.state,
+        "teleoperation without a supervisor",
+        |s| speed(s) > 1.2,
+    )
+    .await;
+    load.teleop_on.store(false, Ordering::Relaxed);
+    vehicle_until(&mut load.v.state, "braked without a supervisor", |s| {
+        speed(s) < 0.3
+    })
+    .await;
+    for (name, pid) in &before {
+        assert!(
+            std::path::Path::new(&format!("/proc/{pid}")).exists(),
+            "{name} ({pid}) died with the supervisor ({old})"
+        );
+    }
+    mesh.restart_supervisor().unwrap();
+    for (name, pid) in &before {
+        let s = mesh
+            .wait_for(PATIENCE, &format!("{name} adopted"), |m| {
+                let s = m.service(name).ok()?;
+                (s["state"] == "running" || s["state"] == "degraded").then_some(s)
+            })
+            .unwrap();
+        assert_eq!(s["pid"].as_u64(), Some(*pid), "{name} not adopted: {s}");
+        assert_eq!(s["adopted"], true, "{name}: {s}");
+        assert_eq!(s["restarts"], 0, "{name}: {s}");
+        let adopted = mesh
+            .metric(&format!(
+                "skymesh_supervisor_adopted_total{{service=\"{name}\"}}"
+            ))
+            .unwrap();
+        assert_eq!(adopted, Some(1.0), "{name}: adopted metric");
+    }
+    eprintln!(
+        "faults: supervisor {old} killed and replaced, {} services adopted in {:.1} s",
+        before.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    let duplicates: Vec<u32> = mesh
+        .processes()
+        .into_iter()
+        .filter(|p| {
+            !before.values().any(|b| *b == u64::from(*p)) && Some(*p) != mesh.supervisor_pid()
+        })
+        .collect();
+    assert!(
+        duplicates.is_empty(),
+        "processes besides the adopted ones: {duplicates:?}"
+    );
+    // An adopted service that dies is restarted by the new supervisor and served again.
+    let old = kill(mesh, "solo-gateway");
+    restarted(mesh, "solo-gateway", old);
+    solo_answers(mesh.solo_port).await;
 }
 
 /// Kills `name` and checks what its death and restart must (and must not) cause.

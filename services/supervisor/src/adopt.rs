@@ -73,6 +73,14 @@ pub fn parse_stat(stat: &str) -> Option<StatFields> {
     })
 }
 
+/// True if `pid` exited and waits for its parent to reap it (a zombie).
+pub fn is_zombie(pid: i32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|s| parse_stat(&s))
+        .is_some_and(|f| f.state == 'Z')
+}
+
 /// The value of `key` in a NUL-separated `/proc/<pid>/environ`.
 pub fn environ_var<'a>(environ: &'a [u8], key: &str) -> Option<&'a [u8]> {
     environ.split(|&b| b == 0).find_map(|kv| {

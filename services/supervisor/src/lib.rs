@@ -350,7 +350,26 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     watchers.wait().await;
     // Our own node must be gone before asking whether any node of the domain is alive.
     drop(bus);
-    clean_dead_nodes(&domain, &mesh).await;
+    // An adopted service that stopped is reaped by its parent (init), not by us, and
+    // iceoryx2 takes a zombie's node for alive: give init a moment (it may reap only
+    // every few seconds), for all of them at once.
+    let reap_deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        clean_dead_nodes(&domain, &mesh).await;
+        let d = domain.clone();
+        let zombies = tokio::task::spawn_blocking(move || {
+            d.live_nodes()
+                .into_iter()
+                .filter(|(_, pid)| adopt::is_zombie(*pid))
+                .count()
+        })
+        .await
+        .context("zombie check")?;
+        if zombies == 0 || Instant::now() >= reap_deadline {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     let d = domain.clone();
     let (live, removed) = tokio::task::spawn_blocking(move || {
         let live = d.live_nodes();

@@ -241,6 +241,7 @@ async fn run_adopted(
         verdict = hang_watch(sh, &rule, idx, spec.heartbeat) => Seen::Hung(verdict),
         _ = stop.cancelled() => Seen::Stop,
     };
+    let stopping = matches!(seen, Seen::Stop);
     let ending = match seen {
         Seen::Exited => Some(Ending::Lost),
         Seen::Hung(verdict) => {
@@ -277,7 +278,9 @@ async fn run_adopted(
     // Anything it forked dies with it. Its leader is gone: signal the group by id.
     child::signal_group(pid, Signal::SIGKILL);
     // Its new parent (init or a subreaper) reaps it; then iceoryx2 sees its node dead.
-    if !adopted.reaped(Duration::from_secs(2)).await {
+    // Not waited for when the mesh stops: init may reap only every few seconds, and
+    // the final cleanup waits for every such zombie at once instead of one by one.
+    if !stopping && !adopted.reaped(Duration::from_secs(2)).await {
         tracing::warn!(service = %spec.name, pid, "adopted process not reaped by its parent yet; its node is cleaned later");
     }
     sh.mesh.update(idx, |e| {
