@@ -12,66 +12,32 @@ use rumqttc::{Packet, QoS};
 use skymesh_mqtt_broker::{serve, BrokerError, RawConfig};
 use skymesh_runtime::config::parse;
 use skymesh_runtime::{CancellationToken, Stats};
-use tokio::task::JoinHandle;
 
-struct Running {
+/// The in-process broker and its plain listener.
+struct Broker {
     addr: SocketAddr,
-    stats: Stats,
-    shutdown: CancellationToken,
-    task: JoinHandle<Result<(), BrokerError>>,
+    run: Running,
 }
 
-async fn start(extra: &str) -> Running {
-    let addr = free_addr();
-    let settings =
-        parse::<RawConfig>(&config_toml(addr, extra), "test").expect("test config is valid");
-    let stats = Stats::new();
-    let shutdown = CancellationToken::new();
-    let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
-    let task = tokio::spawn(serve(
-        settings,
-        stats.clone(),
-        shutdown.clone(),
-        move || {
-            let _ = ready_tx.send(());
-        },
-    ));
-    tokio::time::timeout(PATIENCE, ready_rx)
-        .await
-        .expect("ready within patience")
-        .expect("ready called");
-    Running {
-        addr,
-        stats,
-        shutdown,
-        task,
+impl std::ops::Deref for Broker {
+    type Target = Running;
+    fn deref(&self) -> &Running {
+        &self.run
     }
 }
 
-impl Running {
+impl Broker {
     async fn stop(self) {
-        self.shutdown.cancel();
-        let r = tokio::time::timeout(PATIENCE, self.task)
-            .await
-            .expect("serve returns after the shutdown request")
-            .expect("serve did not panic");
-        assert!(r.is_ok(), "{r:?}");
+        self.run.stop().await;
     }
+}
 
-    /// Waits until the metric `name` reaches `min`.
-    async fn until_metric(&self, name: &str, min: f64) -> f64 {
-        tokio::time::timeout(PATIENCE, async {
-            loop {
-                if let Some(v) = self.stats.value(name, "") {
-                    if v >= min {
-                        return v;
-                    }
-                }
-                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-            }
-        })
-        .await
-        .unwrap_or_else(|_| panic!("{name} did not reach {min} within {PATIENCE:?}"))
+/// The broker on a free port with `extra` TOML.
+async fn start(extra: &str) -> Broker {
+    let addr = free_addr();
+    Broker {
+        addr,
+        run: Running::start(&config_toml(addr, extra)).await,
     }
 }
 
@@ -100,7 +66,7 @@ async fn a_publish_reaches_a_subscriber_and_is_metered() {
 
     // rumqttd's meters reach the service's stats.
     broker
-        .until_metric("skymesh_mqtt_publishes_total", 1.0)
+        .until_metric("skymesh_mqtt_publishes_total", "", 1.0)
         .await;
     assert_eq!(
         broker.stats.value("skymesh_mqtt_connections", ""),

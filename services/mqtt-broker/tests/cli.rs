@@ -41,10 +41,18 @@ async fn a_port_in_use_is_a_clear_failure() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
     let addr = taken.local_addr().expect("addr");
     let out = broker().run_toml(&config_toml(addr, ""), &[]).await;
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    // 75 (`exit::ADDR_IN_USE`): not a bad config, retried with backoff.
+    assert_eq!(
+        out.status.code(),
+        Some(i32::from(skymesh_runtime::exit::ADDR_IN_USE)),
+        "{}",
+        text(&out)
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("cannot listen on") && stderr.contains(&addr.to_string()),
+        stderr.contains("cannot listen on")
+            && stderr.contains(&addr.to_string())
+            && stderr.matches("Address already in use").count() == 1,
         "{}",
         text(&out)
     );

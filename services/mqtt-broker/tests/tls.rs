@@ -14,12 +14,8 @@ use common::*;
 use rumqttc::{
     AsyncClient, ConnectionError, Event, EventLoop, Packet, QoS, TlsConfiguration, Transport,
 };
-use skymesh_mqtt_broker::{serve, BrokerError, RawConfig};
-use skymesh_runtime::config::parse;
-use skymesh_runtime::{CancellationToken, Stats};
 use skymesh_test_support::{config_file, text, ServiceCli};
 use tokio::io::AsyncWriteExt as _;
-use tokio::task::JoinHandle;
 use tokio_rustls::rustls::{self, pki_types::CertificateDer, ClientConfig, RootCertStore};
 
 fn fixture(name: &str) -> PathBuf {
@@ -70,69 +66,35 @@ fn tls_table(addr: SocketAddr, extra: &str) -> String {
     )
 }
 
-struct Running {
+/// The in-process broker and its TLS listener.
+struct Broker {
     /// The TLS listener.
     tls: SocketAddr,
-    stats: Stats,
-    shutdown: CancellationToken,
-    task: JoinHandle<Result<(), BrokerError>>,
+    run: Running,
+}
+
+impl std::ops::Deref for Broker {
+    type Target = Running;
+    fn deref(&self) -> &Running {
+        &self.run
+    }
 }
 
 /// The broker with `top` (top-level TOML: users, timeouts) and a TLS listener
 /// (`tls_extra` appended to its table).
-async fn start(top: &str, tls_extra: &str) -> Running {
+async fn start(top: &str, tls_extra: &str) -> Broker {
     let plain = free_addr();
     let tls = free_addr();
     let toml = format!("{top}\n{}", tls_table(tls, tls_extra));
-    let settings =
-        parse::<RawConfig>(&config_toml(plain, &toml), "test").expect("test config is valid");
-    let stats = Stats::new();
-    let shutdown = CancellationToken::new();
-    let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
-    let task = tokio::spawn(serve(
-        settings,
-        stats.clone(),
-        shutdown.clone(),
-        move || {
-            let _ = ready_tx.send(());
-        },
-    ));
-    tokio::time::timeout(PATIENCE, ready_rx)
-        .await
-        .expect("ready within patience")
-        .expect("ready called");
-    Running {
+    Broker {
         tls,
-        stats,
-        shutdown,
-        task,
+        run: Running::start(&config_toml(plain, &toml)).await,
     }
 }
 
-impl Running {
+impl Broker {
     async fn stop(self) {
-        self.shutdown.cancel();
-        let r = tokio::time::timeout(PATIENCE, self.task)
-            .await
-            .expect("serve returns after the shutdown request")
-            .expect("serve did not panic");
-        assert!(r.is_ok(), "{r:?}");
-    }
-
-    /// Waits until `name{labels}` reaches at least `min`.
-    async fn until_metric(&self, name: &str, labels: &str, min: f64) {
-        tokio::time::timeout(PATIENCE, async {
-            while self.stats.value(name, labels).unwrap_or(0.0) < min {
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
-        .await
-        .unwrap_or_else(|_| {
-            panic!(
-                "{name}{{{labels}}} is {:?}, expected at least {min}",
-                self.stats.value(name, labels)
-            )
-        })
+        self.run.stop().await;
     }
 
     fn refused(&self, reason: &str) -> f64 {

@@ -6,6 +6,10 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, MqttOptions, Packet, Publish};
+use skymesh_mqtt_broker::{serve, BrokerError, RawConfig};
+use skymesh_runtime::config::parse;
+use skymesh_runtime::{CancellationToken, Stats};
+use tokio::task::JoinHandle;
 
 /// How long a test waits for something that should happen (never a timing claim).
 pub const PATIENCE: Duration = Duration::from_secs(20);
@@ -19,6 +23,69 @@ pub fn free_addr() -> SocketAddr {
 /// A broker config listening on `addr` with `extra` TOML appended.
 pub fn config_toml(addr: SocketAddr, extra: &str) -> String {
     format!("listen = \"{addr}\"\nmeters_interval_s = 1\n{extra}\n")
+}
+
+/// The broker served in-process ([`serve`]) until [`Running::stop`].
+pub struct Running {
+    pub stats: Stats,
+    shutdown: CancellationToken,
+    task: JoinHandle<Result<(), BrokerError>>,
+}
+
+impl Running {
+    /// Serves the broker config `toml`; returns once the broker is ready.
+    pub async fn start(toml: &str) -> Running {
+        let settings = parse::<RawConfig>(toml, "test").expect("test config is valid");
+        let stats = Stats::new();
+        let shutdown = CancellationToken::new();
+        let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
+        let task = tokio::spawn(serve(
+            settings,
+            stats.clone(),
+            shutdown.clone(),
+            move || {
+                let _ = ready_tx.send(());
+            },
+        ));
+        tokio::time::timeout(PATIENCE, ready_rx)
+            .await
+            .expect("ready within patience")
+            .expect("ready called");
+        Running {
+            stats,
+            shutdown,
+            task,
+        }
+    }
+
+    /// Asks the broker to stop and checks that `serve` returned Ok.
+    pub async fn stop(self) {
+        self.shutdown.cancel();
+        let r = tokio::time::timeout(PATIENCE, self.task)
+            .await
+            .expect("serve returns after the shutdown request")
+            .expect("serve did not panic");
+        assert!(r.is_ok(), "{r:?}");
+    }
+
+    /// Waits until `name{labels}` reaches at least `min`; returns its value.
+    pub async fn until_metric(&self, name: &str, labels: &str, min: f64) -> f64 {
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                match self.stats.value(name, labels) {
+                    Some(v) if v >= min => return v,
+                    _ => tokio::time::sleep(Duration::from_millis(20)).await,
+                }
+            }
+        })
+        .await
+        .unwrap_or_else(|_| {
+            panic!(
+                "{name}{{{labels}}} is {:?}, expected at least {min}",
+                self.stats.value(name, labels)
+            )
+        })
+    }
 }
 
 pub fn options(addr: SocketAddr, id: &str, login: Option<(&str, &str)>) -> MqttOptions {
