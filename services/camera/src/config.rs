@@ -545,10 +545,19 @@ impl ServiceConfig for RawConfig {
     }
 }
 
-/// Opens `path` and reads its Y4M header; the error names the file.
+/// Opens `path` and reads its Y4M header; the error names the file. Only a regular
+/// file is opened: a FIFO or `/dev/stdin` would block the config check, and neither
+/// can be read again from the start for `loop`.
 pub fn read_y4m_header(path: &Path) -> Result<Y4mHeader, String> {
-    let file = std::fs::File::open(path)
-        .map_err(|e| format!("cannot open Y4M file {}: {e}", path.display()))?;
+    let cannot_open = |e| format!("cannot open Y4M file {}: {e}", path.display());
+    let meta = std::fs::metadata(path).map_err(cannot_open)?;
+    if !meta.is_file() {
+        return Err(format!(
+            "Y4M file {} is not a regular file (a device, FIFO or directory cannot be read again from its start)",
+            path.display()
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(cannot_open)?;
     Y4mReader::new(std::io::BufReader::new(file))
         .map(|r| *r.header())
         .map_err(|e| format!("Y4M file {}: {e}", path.display()))
@@ -785,5 +794,32 @@ mod y4m_tests {
             config(&ok.0, "looping = true"),
             Err(ConfigError::Parse { .. })
         ));
+    }
+
+    /// Found by the config_files fuzz target's check for readers that can hang: a
+    /// device, FIFO or directory as `y4m.path` is refused without reading it.
+    #[test]
+    fn devices_fifos_and_directories_are_refused_without_reading() {
+        let dir = std::env::temp_dir();
+        let mut refused = vec![PathBuf::from("/dev/zero"), PathBuf::from("/dev/null"), dir];
+        let fifo =
+            std::env::temp_dir().join(format!("skymesh-camera-config-{}.fifo", std::process::id()));
+        let _ = std::fs::remove_file(&fifo);
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            refused.push(fifo.clone());
+        }
+        for p in &refused {
+            let e = config(p, "").unwrap_err();
+            assert!(
+                matches!(&e, ConfigError::Invalid { field, .. } if field == "y4m.path"),
+                "{}: {e}",
+                p.display()
+            );
+            assert!(e.to_string().contains("not a regular file"), "{e}");
+        }
+        let _ = std::fs::remove_file(&fifo);
+        // Whatever stdin is here (a terminal, a pipe, /dev/null, a file), it returns.
+        assert!(config(Path::new("/dev/stdin"), "").is_err());
     }
 }
