@@ -49,7 +49,7 @@ fn check_error(e: &ConfigError) {
             assert!(!origin.is_empty() && !message.is_empty(), "{e}");
         }
         ConfigError::Env { message, .. } => assert!(!message.is_empty()),
-        ConfigError::Read { .. } => {}
+        ConfigError::Read { .. } | ConfigError::File(_) => {}
     }
     assert!(!e.to_string().is_empty());
 }

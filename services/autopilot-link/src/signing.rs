@@ -126,19 +126,13 @@ impl SigningKey {
     /// most [`MAX_KEY_FILE`] bytes of it (a path to a device or a pipe must neither
     /// hang nor fill memory).
     pub fn load(path: &Path) -> Result<SigningKey, KeyError> {
-        use std::io::Read as _;
-        let failed = |reason: String| KeyError::Read {
-            path: path.display().to_string(),
-            reason,
-        };
-        let meta = std::fs::metadata(path).map_err(|e| failed(e.to_string()))?;
-        if !meta.is_file() {
-            return Err(failed("not a regular file".to_string()));
-        }
-        let mut bytes = Vec::new();
-        std::fs::File::open(path)
-            .and_then(|f| f.take(MAX_KEY_FILE).read_to_end(&mut bytes))
-            .map_err(|e| failed(e.to_string()))?;
+        let bytes =
+            skymesh_runtime::config::read_regular_file(path, MAX_KEY_FILE).map_err(|e| {
+                KeyError::Read {
+                    path: path.display().to_string(),
+                    reason: e.to_string(),
+                }
+            })?;
         let text = std::str::from_utf8(&bytes).map_err(|_| KeyError::NotHex)?;
         SigningKey::from_hex(text)
     }

@@ -5,25 +5,20 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use skymesh_runtime::config::{read_regular_file, FileReadError};
 use tokio_rustls::rustls::{self, ClientConfig, RootCertStore};
 
 /// Why a CA bundle cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
-    #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    /// Missing, unreadable, not a regular file, or larger than [`MAX_CA_FILE_BYTES`].
+    #[error("CA bundle: {0}")]
+    File(#[from] FileReadError),
     #[error("{path}: not a PEM file: {source}")]
     Pem {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{0}: not a regular file (a CA bundle must be a file, not a device or FIFO)")]
-    NotAFile(PathBuf),
-    #[error("{path}: larger than {max} bytes, not a CA bundle")]
-    TooLarge { path: PathBuf, max: u64 },
     #[error("{0}: no certificate in the file (expected PEM `BEGIN CERTIFICATE` blocks)")]
     NoCertificate(PathBuf),
     #[error("{path}: no usable CA certificate ({rejected} rejected)")]
@@ -35,39 +30,9 @@ pub enum TlsError {
 /// The largest CA bundle read (the system bundle is about 200 KiB).
 pub const MAX_CA_FILE_BYTES: u64 = 1 << 20;
 
-/// Reads a CA bundle: a regular file of at most [`MAX_CA_FILE_BYTES`]. A device, FIFO
-/// or directory is refused before it is opened (`/dev/zero` would fill memory,
-/// `/dev/stdin` or a FIFO would block the config check forever).
-fn read_bundle(path: &Path) -> Result<Vec<u8>, TlsError> {
-    use std::io::Read as _;
-    let read_err = |source| TlsError::Read {
-        path: path.to_path_buf(),
-        source,
-    };
-    let meta = std::fs::metadata(path).map_err(read_err)?;
-    if !meta.is_file() {
-        return Err(TlsError::NotAFile(path.to_path_buf()));
-    }
-    let too_large = || TlsError::TooLarge {
-        path: path.to_path_buf(),
-        max: MAX_CA_FILE_BYTES,
-    };
-    if meta.len() > MAX_CA_FILE_BYTES {
-        return Err(too_large());
-    }
-    let mut text = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_CA_FILE_BYTES + 1).read_to_end(&mut text))
-        .map_err(read_err)?;
-    if text.len() as u64 > MAX_CA_FILE_BYTES {
-        return Err(too_large());
-    }
-    Ok(text)
-}
-
 /// The trust anchors of a PEM bundle.
 pub fn load_roots(path: &Path) -> Result<RootCertStore, TlsError> {
-    let text = read_bundle(path)?;
+    let text = read_regular_file(path, MAX_CA_FILE_BYTES)?;
     let certs = rustls_pemfile::certs(&mut std::io::Cursor::new(text))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|source| TlsError::Pem {
@@ -139,7 +104,10 @@ mod tests {
     fn unusable_bundles_are_refused_with_the_reason() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("missing.pem");
-        assert!(matches!(load_roots(&missing), Err(TlsError::Read { .. })));
+        assert!(matches!(
+            load_roots(&missing),
+            Err(TlsError::File(FileReadError::Io { .. }))
+        ));
         let empty = dir.path().join("empty.pem");
         std::fs::write(&empty, "").unwrap();
         assert!(matches!(
@@ -165,23 +133,35 @@ mod tests {
     fn devices_and_huge_files_are_refused_without_reading_them() {
         for dev in ["/dev/zero", "/dev/null"] {
             let e = load_roots(Path::new(dev)).unwrap_err();
-            assert!(matches!(e, TlsError::NotAFile(_)), "{dev}: {e}");
+            assert!(
+                matches!(e, TlsError::File(FileReadError::NotAFile(_))),
+                "{dev}: {e}"
+            );
         }
         // Whatever stdin is here (a terminal, a pipe, /dev/null, a file), it returns.
         assert!(load_roots(Path::new("/dev/stdin")).is_err());
         let dir = tempfile::tempdir().unwrap();
-        assert!(matches!(load_roots(dir.path()), Err(TlsError::NotAFile(_))));
+        assert!(matches!(
+            load_roots(dir.path()),
+            Err(TlsError::File(FileReadError::NotAFile(_)))
+        ));
         let fifo = dir.path().join("ca.fifo");
         let made = std::process::Command::new("mkfifo").arg(&fifo).status();
         if made.is_ok_and(|s| s.success()) {
             // Opening a FIFO without a writer would block: refused before opening.
-            assert!(matches!(load_roots(&fifo), Err(TlsError::NotAFile(_))));
+            assert!(matches!(
+                load_roots(&fifo),
+                Err(TlsError::File(FileReadError::NotAFile(_)))
+            ));
         }
         let big = dir.path().join("big.pem");
         let file = std::fs::File::create(&big).unwrap();
         file.set_len(MAX_CA_FILE_BYTES + 1).unwrap();
         let e = load_roots(&big).unwrap_err();
-        assert!(matches!(e, TlsError::TooLarge { .. }), "{e}");
+        assert!(
+            matches!(e, TlsError::File(FileReadError::TooLarge { .. })),
+            "{e}"
+        );
         assert!(e.to_string().contains("larger than"), "{e}");
     }
 }

@@ -12,12 +12,13 @@
 //! `skymesh_mqtt_tls_refused_total{reason}`, and the rustls 0.23 / `ring` stack is
 //! the one the DJI gateway already uses.
 
-use std::io::{BufRead, Cursor, Read as _};
+use std::io::{BufRead, Cursor};
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use skymesh_runtime::config::{read_regular_file, FileReadError};
 use skymesh_runtime::{CancellationToken, Counter, CounterFamily, Gauge, Stats, WarnLimiter};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Semaphore;
@@ -43,19 +44,11 @@ pub struct TlsSettings {
 /// Why the TLS files cannot be used. `key()` names the config key at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
-    #[error("cannot read {path}: {source}")]
-    Read {
+    /// Missing, unreadable, not a regular file, or larger than [`MAX_PEM_BYTES`].
+    #[error("{source}")]
+    File {
         key: &'static str,
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{path}: not a regular file")]
-    NotAFile { key: &'static str, path: PathBuf },
-    #[error("{path}: larger than {max} bytes, not a PEM file")]
-    TooLarge {
-        key: &'static str,
-        path: PathBuf,
-        max: u64,
+        source: FileReadError,
     },
     #[error("{path}: not valid PEM: {source}")]
     Pem {
@@ -80,9 +73,7 @@ impl TlsError {
     /// The config key the error is about (`tls.cert_file`, ...).
     pub fn key(&self) -> &'static str {
         match self {
-            TlsError::Read { key, .. }
-            | TlsError::NotAFile { key, .. }
-            | TlsError::TooLarge { key, .. }
+            TlsError::File { key, .. }
             | TlsError::Pem { key, .. }
             | TlsError::NoCertificate { key, .. }
             | TlsError::NoKey { key, .. }
@@ -98,34 +89,7 @@ pub const MAX_PEM_BYTES: u64 = 1 << 20;
 /// Reads a regular file of at most [`MAX_PEM_BYTES`]; a device, FIFO or directory is
 /// refused before it is opened (it could block or never end).
 fn read_pem(key: &'static str, path: &Path) -> Result<Vec<u8>, TlsError> {
-    let read_err = |source| TlsError::Read {
-        key,
-        path: path.to_path_buf(),
-        source,
-    };
-    let meta = std::fs::metadata(path).map_err(read_err)?;
-    if !meta.is_file() {
-        return Err(TlsError::NotAFile {
-            key,
-            path: path.to_path_buf(),
-        });
-    }
-    let too_large = || TlsError::TooLarge {
-        key,
-        path: path.to_path_buf(),
-        max: MAX_PEM_BYTES,
-    };
-    if meta.len() > MAX_PEM_BYTES {
-        return Err(too_large());
-    }
-    let mut text = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_PEM_BYTES + 1).read_to_end(&mut text))
-        .map_err(read_err)?;
-    if text.len() as u64 > MAX_PEM_BYTES {
-        return Err(too_large());
-    }
-    Ok(text)
+    read_regular_file(path, MAX_PEM_BYTES).map_err(|source| TlsError::File { key, source })
 }
 
 fn certificates(key: &'static str, path: &Path) -> Result<Vec<CertificateDer<'static>>, TlsError> {

@@ -234,10 +234,7 @@ impl Settings {
 
     /// Reads and validates the file at `path`.
     pub fn load(path: &Path) -> Result<Settings, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = skymesh_runtime::config::read_config_text(path)?;
         let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
         let base = abs.parent().unwrap_or(Path::new("/")).to_path_buf();
         Settings::parse(&text, &path.display().to_string(), &base)

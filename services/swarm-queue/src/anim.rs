@@ -336,11 +336,12 @@ impl AnimLibrary {
                 return Ok(anim.clone());
             }
         }
-        if len > MAX_FILE_BYTES {
-            return Err(format!("animation for drone {id}: file too large"));
-        }
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("animation for drone {id}: {e}"))?;
+        // A regular file of bounded size only: a symlink to /dev/zero passes the size
+        // check above (length 0) and would be read until memory runs out.
+        let bytes = skymesh_runtime::config::read_regular_file(&path, MAX_FILE_BYTES)
+            .map_err(|e| format!("animation for drone {id}: {e}"))?;
+        let text = String::from_utf8(bytes)
+            .map_err(|_| format!("animation for drone {id}: not UTF-8 text"))?;
         let anim = Animation::parse(&text).map_err(|e| {
             tracing::warn!(path = %path.display(), error = %e, "animation file refused");
             format!("animation for drone {id}: {e}")
@@ -452,6 +453,16 @@ mod tests {
         assert!(lib.get(3).is_err());
         lib.insert(3, Animation::parse(SQUARE).unwrap());
         assert_eq!(lib.get(3).unwrap().len(), 3);
+    }
+
+    /// A symlink to /dev/zero passes the size check (length 0): refused before reading.
+    #[test]
+    fn a_device_behind_the_file_name_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut lib = AnimLibrary::new(dir.path());
+        std::os::unix::fs::symlink("/dev/zero", lib.path(4)).unwrap();
+        let e = lib.get(4).unwrap_err();
+        assert!(e.contains("not a regular file"), "{e}");
     }
 
     #[test]
