@@ -61,9 +61,9 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 const RECONNECT_MIN: Duration = Duration::from_millis(500);
 const RECONNECT_MAX: Duration = Duration::from_secs(5);
 
-/// Why binding an endpoint failed.
+/// Why binding an endpoint failed (the OS cause is the `source`, shown by `{:#}`).
 #[derive(Debug, thiserror::Error)]
-#[error("cannot listen on router endpoint {endpoint}: {source}")]
+#[error("cannot listen on router endpoint {endpoint}")]
 pub struct BindError {
     pub endpoint: String,
     #[source]

@@ -32,7 +32,8 @@ use crate::metrics::Metrics;
 /// Why the broker could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum BrokerError {
-    #[error("cannot listen on {addr}: {source}")]
+    /// The OS cause is the `source` (shown by `{:#}`), not repeated here.
+    #[error("cannot listen on {addr}")]
     Listen {
         addr: SocketAddr,
         source: std::io::Error,

@@ -12,7 +12,7 @@ use tokio_util::sync::CancellationToken;
 use crate::config::{self, ConfigError, ServiceConfig};
 use crate::exit;
 use crate::health::{self, HealthState};
-use crate::ipc::{Bus, Domain};
+use crate::ipc::{self, Bus, Domain};
 use crate::stats::Stats;
 use crate::{signals, systemd};
 
@@ -113,6 +113,28 @@ fn init_tracing(format: &str) {
     };
 }
 
+/// Refuses to start (`Err(exit code)`) when `/dev/shm` has less than `need` bytes
+/// free, before iceoryx2 maps anything there; warns when it is low.
+fn check_shm(need: u64) -> Result<(), u8> {
+    let dir = std::path::Path::new(ipc::SHM_DIR);
+    match ipc::check_shm_room(dir, need) {
+        Ok(Some(space)) if space.free < ipc::SHM_LOW_FREE_BYTES.max(need) => {
+            tracing::warn!(
+                dir = ipc::SHM_DIR,
+                free_bytes = space.free,
+                size_bytes = space.size,
+                "shared memory is low: size /dev/shm up (a segment that cannot grow ends in SIGBUS)"
+            );
+            Ok(())
+        }
+        Ok(_) => Ok(()),
+        Err(e) => {
+            tracing::error!(error = %e, code = exit::SHM_FULL, "cannot join the mesh: shared memory full");
+            Err(exit::SHM_FULL)
+        }
+    }
+}
+
 /// How long a service may take to finish after shutdown was requested.
 const GRACE: Duration = Duration::from_secs(5);
 
@@ -150,9 +172,10 @@ where
                 format!("`{name}` must be 1-32 characters of [A-Za-z0-9_-]"),
             ));
         }
-        Ok((settings, domain, name))
+        let shm_min_free = ipc::shm_min_free_from_env()?;
+        Ok((settings, domain, name, shm_min_free))
     });
-    let (settings, domain, name) = match loaded {
+    let (settings, domain, name, shm_min_free) = match loaded {
         Ok(v) => v,
         Err(e) => {
             tracing::error!(error = %e, "bad configuration");
@@ -168,6 +191,10 @@ where
             domain.name
         );
         return ExitCode::from(exit::OK);
+    }
+
+    if let Err(code) = check_shm(shm_min_free) {
+        return ExitCode::from(code);
     }
 
     let rt = match tokio::runtime::Builder::new_multi_thread()
@@ -187,7 +214,8 @@ where
             Ok(b) => b,
             Err(e) => {
                 tracing::error!(error = %e, "cannot join the mesh");
-                return exit::FAILURE;
+                // Filled up meanwhile (e.g. by another service starting)?
+                return check_shm(shm_min_free).err().unwrap_or(exit::FAILURE);
             }
         };
         tracing::info!(service = %name, domain = %domain.name, ipc_config = %domain.origin, pid = std::process::id(), "starting");
@@ -240,9 +268,18 @@ where
                 tracing::info!(service = %name, "stopped");
                 exit::OK
             }
+            Err(e) if exit::is_addr_in_use(&e) => {
+                tracing::error!(
+                    service = %name,
+                    error = format!("{e:#}"),
+                    code = exit::ADDR_IN_USE,
+                    "failed: address already in use (another program holds it; restarted with backoff until it is free)"
+                );
+                exit::ADDR_IN_USE
+            }
             Err(e) => {
                 tracing::error!(service = %name, error = format!("{e:#}"), "failed");
-                exit::FAILURE
+                exit::code_for(&e)
             }
         }
     });

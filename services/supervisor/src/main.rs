@@ -200,10 +200,10 @@ fn up(args: UpArgs, log_format: &str, explicit_log_format: Option<String>) -> Ex
         let listener = tokio::net::TcpListener::bind(settings.metrics)
             .await
             .map_err(|e| {
-                anyhow::anyhow!(
-                    "cannot listen on {} for /metrics and /status: {e}",
+                anyhow::Error::new(e).context(format!(
+                    "cannot listen on {} for /metrics and /status",
                     settings.metrics
-                )
+                ))
             })?;
         let shutdown = CancellationToken::new();
         signals::spawn_shutdown_on_signal(shutdown.clone())?;
@@ -226,7 +226,7 @@ fn up(args: UpArgs, log_format: &str, explicit_log_format: Option<String>) -> Ex
         Err(e) => {
             tracing::error!(error = format!("{e:#}"), "supervisor failed");
             eprintln!("skymesh: {e:#}");
-            ExitCode::from(exit::FAILURE)
+            ExitCode::from(exit::code_for(&e))
         }
     }
 }

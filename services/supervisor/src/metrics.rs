@@ -10,7 +10,7 @@
 //! histograms ending in `_total` are dropped, so the output passes `promtool check metrics`.
 
 use std::collections::{BTreeMap, HashSet};
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use prometheus::core::{Collector, Desc};
@@ -18,12 +18,13 @@ use prometheus::proto::{self, LabelPair, Metric, MetricFamily, MetricType};
 use prometheus::{Encoder, Registry, TextEncoder};
 use skymesh_ipc_types::{StatEntry, StatKind};
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::ipc;
 
 use crate::procfs;
 use crate::state::{Mesh, Phase, ServiceEntry};
 
 /// Families the supervisor itself exports; a service may not report these names.
-const OWN: [(&str, MetricType, &str); 12] = [
+const OWN: [(&str, MetricType, &str); 14] = [
     ("skymesh_service_up", MetricType::GAUGE, "1 if the service is running (or degraded), else 0."),
     ("skymesh_service_state", MetricType::GAUGE, "1 for the service's current supervisor state, 0 for the others."),
     ("skymesh_service_restarts_total", MetricType::COUNTER, "Times the service was restarted (by the supervisor, or seen with a new pid in monitor-only mode)."),
@@ -36,6 +37,8 @@ const OWN: [(&str, MetricType, &str); 12] = [
     ("skymesh_supervisor_stale_nodes_cleaned_total", MetricType::COUNTER, "Dead iceoryx2 nodes whose stale resources the supervisor removed."),
     ("skymesh_supervisor_adopted_total", MetricType::COUNTER, "Running processes of the service this supervisor adopted (started by an earlier supervisor that died) instead of starting new ones."),
     ("skymesh_supervisor_invalid_stats_entries", MetricType::GAUGE, "Stats entries dropped at the last scrape because their name, labels or type were unusable."),
+    ("skymesh_shm_free_bytes", MetricType::GAUGE, "Bytes still free in /dev/shm, where every iceoryx2 segment lives (a full /dev/shm fails services or ends them with SIGBUS)."),
+    ("skymesh_shm_size_bytes", MetricType::GAUGE, "Size of the /dev/shm file system."),
 ];
 
 /// HELP text of the series the runtime reports for every service.
@@ -66,6 +69,8 @@ pub struct MeshCollector {
     mesh: Arc<Mesh>,
     /// `service/metric` pairs already warned about, so a bad entry is logged once.
     warned: Mutex<HashSet<String>>,
+    /// `/dev/shm` was below [`ipc::SHM_LOW_FREE_BYTES`] at the last scrape (warned once per dip).
+    shm_low: AtomicBool,
 }
 
 /// A [`Registry`] holding the mesh's collector.
@@ -199,6 +204,35 @@ impl MeshCollector {
         MeshCollector {
             mesh,
             warned: Mutex::new(HashSet::new()),
+            shm_low: AtomicBool::new(false),
+        }
+    }
+
+    /// `skymesh_shm_free_bytes` and `skymesh_shm_size_bytes` (one `statvfs`), and a
+    /// warning when the free room first drops below [`ipc::SHM_LOW_FREE_BYTES`].
+    fn shm_series(&self, fams: &mut Families) {
+        let Ok(space) = ipc::shm_space(std::path::Path::new(ipc::SHM_DIR)) else {
+            return;
+        };
+        fams.own(
+            "skymesh_shm_free_bytes",
+            gauge_metric(Vec::new(), space.free as f64),
+        );
+        fams.own(
+            "skymesh_shm_size_bytes",
+            gauge_metric(Vec::new(), space.size as f64),
+        );
+        let low = space.free < ipc::SHM_LOW_FREE_BYTES;
+        if low && !self.shm_low.swap(true, Ordering::Relaxed) {
+            tracing::warn!(
+                dir = ipc::SHM_DIR,
+                free_bytes = space.free,
+                size_bytes = space.size,
+                "shared memory is low: services refuse to start below {} bytes free and may die of SIGBUS when a segment cannot grow; size /dev/shm up",
+                ipc::SHM_MIN_FREE_BYTES
+            );
+        } else if !low {
+            self.shm_low.store(false, Ordering::Relaxed);
         }
     }
 
@@ -388,6 +422,7 @@ impl Collector for MeshCollector {
             "skymesh_supervisor_invalid_stats_entries",
             gauge_metric(Vec::new(), dropped.len() as f64),
         );
+        self.shm_series(&mut fams);
         if !dropped.is_empty() {
             let mut warned = self.warned.lock().unwrap_or_else(|p| p.into_inner());
             for (service, metric, why) in dropped {
@@ -615,5 +650,13 @@ mod tests {
             text.contains("skymesh_supervisor_stale_nodes_cleaned_total 0"),
             "{text}"
         );
+        let free = find_value(&text, "skymesh_shm_free_bytes").expect("shm free exported");
+        let size = find_value(&text, "skymesh_shm_size_bytes").expect("shm size exported");
+        assert!(size > 0.0 && free <= size, "{text}");
+    }
+
+    fn find_value(text: &str, series: &str) -> Option<f64> {
+        text.lines()
+            .find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.parse().ok())
     }
 }
