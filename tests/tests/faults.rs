@@ -405,10 +405,19 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
         // The commanding gateway stays dead longer than the freshness limit, so the
         // arbiter's brake is what stops the vehicle (a faster restart can resume the
         // stream within the limit, when no brake is due).
-        restart: vec![(
-            "imc-gateway".into(),
-            "{ initial_backoff_ms = 1000, jitter = 0.0 }".into(),
-        )],
+        // autopilot-link likewise, so the teleoperation the test sends while it is
+        // down (300 ms) certainly ends before a new process subscribes: what is
+        // checked is that nothing sent during the outage is executed afterwards.
+        restart: vec![
+            (
+                "imc-gateway".into(),
+                "{ initial_backoff_ms = 1000, jitter = 0.0 }".into(),
+            ),
+            (
+                "autopilot-link".into(),
+                "{ initial_backoff_ms = 1000, jitter = 0.0 }".into(),
+            ),
+        ],
         ..MeshOptions::default()
     })
     .unwrap();

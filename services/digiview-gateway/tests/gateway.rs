@@ -645,3 +645,40 @@ async fn a_flood_beyond_the_rate_limit_is_dropped_unanswered() {
     assert_eq!(dropped as usize + answered, 40);
     gw.stop().await;
 }
+
+#[tokio::test]
+async fn clients_beyond_max_clients_are_closed_and_the_others_served() {
+    let gw = Gateway::start_with(|s| s.max_clients = 2).await;
+    let mut a = gw.client().await;
+    let mut b = gw.client().await;
+    // Both are served before the third arrives (the slots are taken).
+    for c in [&mut a, &mut b] {
+        c.get(ParamType::SystemStatus, [0; DATA_LEN], 0, 1).await;
+        c.recv().await;
+    }
+    let mut third = gw.client().await;
+    assert!(third.closed().await, "a third client is closed at accept");
+    gw.wait_metric(
+        "skymesh_digiview_connections_total",
+        "result=refused_max_clients",
+        1.0,
+    )
+    .await;
+    a.get(ParamType::SystemStatus, [0; DATA_LEN], 0, 2).await;
+    a.recv().await;
+    // A slot freed by a leaving client is given to the next one.
+    drop(b);
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    loop {
+        let mut c = gw.client().await;
+        c.get(ParamType::SystemStatus, [0; DATA_LEN], 0, 3).await;
+        if c.recv_within(Duration::from_millis(500)).await.is_some() {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the freed slot was never given to a new client"
+        );
+    }
+    gw.stop().await;
+}
