@@ -803,6 +803,16 @@ grace_period_ms = 3000
         })
     }
 
+    /// Waits until every service in `names` runs; panics naming the first that does
+    /// not, with the mesh's output.
+    pub fn expect_running(&mut self, names: &[&str], timeout: Duration) {
+        for name in names {
+            if let Err(e) = self.wait_running(name, timeout) {
+                panic!("{name} did not start: {e:#}\n{}", self.output());
+            }
+        }
+    }
+
     /// SIGKILLs service `name` (the supervisor restarts it by its policy) and
     /// returns the killed pid.
     pub fn kill_service(&mut self, name: &str) -> Result<u32> {

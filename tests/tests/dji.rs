@@ -225,16 +225,15 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
         ..Default::default()
     })
     .unwrap();
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "mqtt-broker",
-        "dji-gateway",
-    ] {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "mqtt-broker",
+            "dji-gateway",
+        ],
+        STARTUP,
+    );
     let rt = runtime();
     rt.block_on(async {
         let bus = mesh.bus("e2e-dji").unwrap();

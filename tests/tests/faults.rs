@@ -421,11 +421,7 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
         ..MeshOptions::default()
     })
     .unwrap();
-    for name in ORDER {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(&ORDER, STARTUP);
     let supervisor = mesh.supervisor_pid().unwrap();
     let mut running = Times::default();
     let mut served = Times::default();

@@ -26,11 +26,7 @@ const SERVO_OUTPUT_RAW: u32 = 36;
 
 fn start(opts: MeshOptions, services: &[&str]) -> Mesh {
     let mut mesh = Mesh::start(opts).unwrap();
-    for name in services {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(services, STARTUP);
     mesh
 }
 

@@ -83,16 +83,15 @@ fn port_in_use_is_a_clear_error_retried_with_backoff() {
         ..Default::default()
     })
     .unwrap();
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "solo-gateway",
-        "shot-engine",
-    ] {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "solo-gateway",
+            "shot-engine",
+        ],
+        STARTUP,
+    );
     let addr = format!("127.0.0.1:{}", mesh.solo_port);
 
     // Kill the gateway and take its port before the supervisor restarts it (200 ms).

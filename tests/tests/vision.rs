@@ -404,17 +404,16 @@ fn vision_end_to_end() {
         ..Default::default()
     })
     .unwrap();
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "camera",
-        "vision-pipeline",
-        "digiview-gateway",
-    ] {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "camera",
+            "vision-pipeline",
+            "digiview-gateway",
+        ],
+        STARTUP,
+    );
     let bus: Bus = mesh.bus("vision-e2e").unwrap();
     let rt = runtime();
     let v = Vehicle::new(&bus);

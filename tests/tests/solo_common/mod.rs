@@ -39,16 +39,15 @@ pub fn start_mesh_with(shot_engine_extra: &str) -> Mesh {
         ..Default::default()
     })
     .unwrap();
-    for name in [
-        "vehicle-sim",
-        "autopilot-link",
-        "solo-gateway",
-        "shot-engine",
-    ] {
-        if let Err(e) = mesh.wait_running(name, STARTUP) {
-            panic!("{name} did not start: {e:#}\n{}", mesh.output());
-        }
-    }
+    mesh.expect_running(
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "solo-gateway",
+            "shot-engine",
+        ],
+        STARTUP,
+    );
     mesh
 }
 
