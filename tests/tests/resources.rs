@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use skymesh_e2e::{binary, repo_root, Mesh, MeshOptions};
+use skymesh_e2e::{binary, repo_root, MeshOptions};
 use skymesh_runtime::exit;
-use solo_common::{app, runtime, STARTUP};
+use solo_common::{app, runtime, start_solo_mesh};
 
 /// Seconds since midnight (UTC) of a log line's leading RFC 3339 timestamp.
 fn seconds_of_day(line: &str) -> Option<f64> {
@@ -71,9 +71,7 @@ fn assert_growing_backoff(spaced: &[(f64, u64)], initial_ms: u64, log: &str) {
 #[test]
 fn port_in_use_is_a_clear_error_retried_with_backoff() {
     const INITIAL_MS: u64 = 200;
-    let mut mesh = Mesh::start(MeshOptions {
-        solo: true,
-        attitude_hz: 25.0,
+    let mut mesh = start_solo_mesh(MeshOptions {
         restart: vec![(
             "solo-gateway".to_string(),
             format!(
@@ -81,17 +79,7 @@ fn port_in_use_is_a_clear_error_retried_with_backoff() {
             ),
         )],
         ..Default::default()
-    })
-    .unwrap();
-    mesh.expect_running(
-        &[
-            "vehicle-sim",
-            "autopilot-link",
-            "solo-gateway",
-            "shot-engine",
-        ],
-        STARTUP,
-    );
+    });
     let addr = format!("127.0.0.1:{}", mesh.solo_port);
 
     // Kill the gateway and take its port before the supervisor restarts it (200 ms).

@@ -32,11 +32,19 @@ pub fn start_mesh() -> Mesh {
 
 /// A mesh with `shot_engine_extra` appended to the shot engine's config.
 pub fn start_mesh_with(shot_engine_extra: &str) -> Mesh {
+    start_solo_mesh(MeshOptions {
+        shot_engine_extra: shot_engine_extra.to_string(),
+        ..Default::default()
+    })
+}
+
+/// The Solo mesh (vehicle-sim, autopilot-link, solo-gateway, shot-engine at 25 Hz
+/// attitude) with `opts` otherwise, once every service runs.
+pub fn start_solo_mesh(opts: MeshOptions) -> Mesh {
     let mut mesh = Mesh::start(MeshOptions {
         solo: true,
         attitude_hz: 25.0,
-        shot_engine_extra: shot_engine_extra.to_string(),
-        ..Default::default()
+        ..opts
     })
     .unwrap();
     mesh.expect_running(
