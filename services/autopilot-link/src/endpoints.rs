@@ -3,9 +3,14 @@
 //! between them and the autopilot link by the decisions of [`crate::router`]
 //! (the hub and the router metrics are in [`crate::hub`]).
 //!
-//! Each endpoint is one tokio task (TCP servers add one per client) with a bounded
-//! queue of frames to send. The hub only ever `try_send`s into those queues: a
-//! slow or dead endpoint loses frames (counted, `reason="queue_full"`) and never
+//! Each endpoint is one tokio task (TCP servers add one per client). A TCP
+//! endpoint has a bounded queue of frames to send, into which the hub only ever
+//! `try_send`s. A UDP endpoint has none: once its socket is open, its task hands
+//! the hub a [`UdpSink`] (a non-blocking copy of the socket, the destination or
+//! live peer list, the endpoint's signing) and the thread that routes a frame
+//! sends it there itself, so the autopilot's telemetry costs no tokio wake-up per
+//! frame; the task only wakes to receive. Either way a slow or dead endpoint loses
+//! frames (counted, `reason="queue_full"`: queue or socket buffer full) and never
 //! holds up the autopilot's reader thread or another endpoint. Frames towards the
 //! autopilot go into the link's own bounded forward queue the same way.
 //!
@@ -27,11 +32,12 @@
 
 use std::io;
 use std::net::SocketAddr;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use skymesh_runtime::Stats;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::unix::AsyncFd;
+use tokio::io::{AsyncReadExt, AsyncWriteExt, Interest};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::mpsc;
 use tokio::task::{JoinHandle, JoinSet};
@@ -46,7 +52,7 @@ use crate::signing::{EndpointSigning, Signing, SigningSettings};
 /// The signing of one endpoint, if it requires signing.
 type Sig = Option<Arc<EndpointSigning>>;
 
-/// Frames waiting for one endpoint (or one TCP client); beyond this they are dropped.
+/// Frames waiting for one TCP endpoint (or one TCP client); beyond this they are dropped.
 pub const ENDPOINT_QUEUE: usize = 256;
 /// A `udpin` peer silent this long is no longer sent to (ground stations send a
 /// HEARTBEAT every second).
@@ -152,7 +158,13 @@ pub fn start(
     let mut signers = Vec::new();
     let shared = signing.map(|s| Signing::new(s.key.clone()));
     for (i, (endpoint, socket)) in bound.endpoints.iter().enumerate() {
-        let (tx, rx) = mpsc::channel(ENDPOINT_QUEUE);
+        // UDP endpoints are sent to directly ([`UdpSink`]); TCP ones through a queue.
+        let (tx, rx) = if matches!(endpoint, Endpoint::TcpIn(_) | Endpoint::TcpOut { .. }) {
+            let (tx, rx) = mpsc::channel(ENDPOINT_QUEUE);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
         let label = label(i, &socket.shown(endpoint));
         let signs = signing.is_some_and(|s| s.endpoints.contains(&i));
         signers.push(match (&shared, signs) {
@@ -182,16 +194,16 @@ pub fn start(
             link_id = sig.as_ref().map(|s| s.link_id()),
             "MAVLink router endpoint"
         );
-        match (endpoint, socket) {
-            (_, Socket::UdpIn(s)) => tasks.spawn(udp_in(index, s, hub, rx, sig, stop)),
-            (_, Socket::TcpIn(l)) => tasks.spawn(tcp_in(index, l, hub, rx, sig, stop)),
-            (Endpoint::UdpOut { host, port }, Socket::Out) => {
-                tasks.spawn(udp_out(index, host, port, hub, rx, sig, stop))
+        match (endpoint, socket, rx) {
+            (_, Socket::UdpIn(s), _) => tasks.spawn(udp_in(index, s, hub, sig, stop)),
+            (_, Socket::TcpIn(l), Some(rx)) => tasks.spawn(tcp_in(index, l, hub, rx, sig, stop)),
+            (Endpoint::UdpOut { host, port }, Socket::Out, _) => {
+                tasks.spawn(udp_out(index, host, port, hub, sig, stop))
             }
-            (Endpoint::TcpOut { host, port }, Socket::Out) => {
+            (Endpoint::TcpOut { host, port }, Socket::Out, Some(rx)) => {
                 tasks.spawn(tcp_out(index, host, port, hub, rx, sig, stop))
             }
-            (other, Socket::Out) => {
+            (other, _, _) => {
                 // Config validation refuses these; nothing to run.
                 tracing::warn!(endpoint = %other, "unsupported router endpoint ignored");
                 continue;
@@ -276,64 +288,191 @@ impl Peers {
     }
 }
 
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Where a UDP endpoint's frames go.
+#[derive(Debug)]
+enum Destination {
+    /// `udpout`: the resolved address.
+    Fixed(SocketAddr),
+    /// `udpin`: every live peer (learnt by the endpoint's task as it receives).
+    Peers(Mutex<Peers>),
+}
+
+/// A UDP endpoint's sending side, shared by its task (which receives on another
+/// handle of the same socket) and the hub: whichever thread routes a frame to the
+/// endpoint sends it with [`UdpSink::send`], never waiting.
+#[derive(Debug)]
+pub struct UdpSink {
+    /// Non-blocking.
+    socket: std::net::UdpSocket,
+    to: Destination,
+    signing: Sig,
+}
+
+impl UdpSink {
+    /// Sends `frame` (signed if the endpoint signs) to the endpoint's destination
+    /// or to each of its live peers, counting each datagram sent or dropped on
+    /// `metrics`; a full socket buffer drops it (`queue_full`) rather than wait.
+    pub(crate) fn send(&self, frame: &RawFrame, metrics: &EndpointMetrics) {
+        match &self.to {
+            Destination::Fixed(to) => {
+                let frame = outgoing(*frame, self.signing.as_deref());
+                send_datagram(&self.socket, frame.as_bytes(), *to, metrics);
+            }
+            Destination::Peers(peers) => {
+                let mut peers = lock(peers);
+                if peers.expire(Instant::now()) > 0 {
+                    metrics.peers(peers.heard.len());
+                }
+                if peers.heard.is_empty() {
+                    return;
+                }
+                let frame = outgoing(*frame, self.signing.as_deref());
+                for (peer, _) in &peers.heard {
+                    send_datagram(&self.socket, frame.as_bytes(), *peer, metrics);
+                }
+            }
+        }
+    }
+}
+
+/// Sends one frame as a datagram without waiting, counting it sent or dropped.
+fn send_datagram(
+    socket: &std::net::UdpSocket,
+    bytes: &[u8],
+    to: SocketAddr,
+    metrics: &EndpointMetrics,
+) {
+    match socket.send_to(bytes, to) {
+        Ok(_) => metrics.frame_out(),
+        Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+            metrics.dropped(DropReason::QueueFull, 1);
+        }
+        Err(e) => {
+            metrics.dropped(DropReason::SendError, 1);
+            tracing::debug!(%to, error = %e, "udp send failed");
+        }
+    }
+}
+
+/// The receiving half of a UDP endpoint's socket, registered with tokio for reads
+/// only: sends on the [`UdpSink`]'s handle of the same socket then never wake the
+/// runtime (with write interest, as `tokio::net::UdpSocket` registers, every
+/// datagram leaving the send buffer signals writability and wakes the reactor).
+#[derive(Debug)]
+struct UdpReceiver(AsyncFd<std::net::UdpSocket>);
+
+impl UdpReceiver {
+    /// `socket` (non-blocking) registered for reads.
+    fn new(socket: std::net::UdpSocket) -> io::Result<UdpReceiver> {
+        // Deprecated in tokio 1.54 because an `AsRawFd` type that does not own its
+        // descriptor could close it while registered; `std::net::UdpSocket` owns it
+        // and the `AsyncFd` owns the socket, so the descriptor stays valid until
+        // it is deregistered. Its replacement is `unsafe` for that reason only.
+        #[allow(deprecated)]
+        let fd = AsyncFd::with_interest(socket, Interest::READABLE)?;
+        Ok(UdpReceiver(fd))
+    }
+
+    async fn recv_from(&self, buf: &mut [u8]) -> io::Result<(usize, SocketAddr)> {
+        loop {
+            let mut ready = self.0.readable().await?;
+            if let Ok(r) = ready.try_io(|s| s.get_ref().recv_from(buf)) {
+                return r;
+            }
+        }
+    }
+}
+
+/// Splits an open UDP socket into the task's receiving half and the hub's sink
+/// (sending to `to`, signing with `signing`).
+fn split_udp(
+    socket: std::net::UdpSocket,
+    to: Destination,
+    signing: Sig,
+) -> io::Result<(UdpReceiver, Arc<UdpSink>)> {
+    socket.set_nonblocking(true)?;
+    let sink = UdpSink {
+        socket: socket.try_clone()?,
+        to,
+        signing,
+    };
+    let receiver = UdpReceiver::new(socket)?;
+    Ok((receiver, Arc::new(sink)))
+}
+
+/// Removes a UDP endpoint's sink from the hub when its task ends (so the socket
+/// closes with the task, however it ends).
+struct SinkInstalled<'a> {
+    hub: &'a Hub,
+    index: u8,
+}
+
+impl<'a> SinkInstalled<'a> {
+    fn new(hub: &'a Hub, index: u8, sink: Arc<UdpSink>) -> Self {
+        hub.set_udp_sink(index, Some(sink));
+        SinkInstalled { hub, index }
+    }
+}
+
+impl Drop for SinkInstalled<'_> {
+    fn drop(&mut self) {
+        self.hub.set_udp_sink(self.index, None);
+    }
+}
+
 async fn udp_in(
     index: u8,
     socket: UdpSocket,
     hub: Arc<Hub>,
-    mut rx: mpsc::Receiver<RawFrame>,
     signing: Sig,
     shutdown: CancellationToken,
 ) {
-    let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
-    let mut peers = Peers::default();
+    let opened = socket.into_std().and_then(|s| {
+        split_udp(
+            s,
+            Destination::Peers(Mutex::new(Peers::default())),
+            signing.clone(),
+        )
+    });
+    let (socket, sink) = match opened {
+        Ok(v) => v,
+        Err(e) => {
+            // Only fails if the OS refuses a file descriptor or epoll registration.
+            tracing::error!(endpoint = metrics.label(), error = %e, "cannot set up udp endpoint; it is disabled");
+            return;
+        }
+    };
+    let Destination::Peers(peers) = &sink.to else {
+        return;
+    };
+    let _installed = SinkInstalled::new(&hub, index, sink.clone());
+    let signing = signing.as_deref();
     let mut parser = FrameParser::new();
     let mut buf = vec![0u8; 65536];
     metrics.peers(0);
     loop {
         tokio::select! {
             _ = shutdown.cancelled() => return,
-            frame = rx.recv() => {
-                let Some(frame) = frame else { return };
-                if peers.expire(Instant::now()) > 0 {
-                    metrics.peers(peers.heard.len());
-                }
-                if peers.heard.is_empty() {
-                    continue;
-                }
-                let frame = outgoing(frame, signing);
-                for (peer, _) in &peers.heard {
-                    send_datagram(&socket, frame.as_bytes(), *peer, metrics).await;
-                }
-            }
             r = socket.recv_from(&mut buf) => match r {
                 Ok((n, from)) => {
                     let delivered = deliver(&hub, index, &mut parser, &buf[..n], true, signing);
                     // On a signing endpoint only an authenticated sender is a peer.
-                    if (signing.is_none() || delivered > 0) && peers.heard(from, Instant::now()) {
-                        tracing::info!(endpoint = metrics.label(), peer = %from, "udp peer joined");
-                        metrics.peers(peers.heard.len());
+                    if signing.is_none() || delivered > 0 {
+                        let mut peers = lock(peers);
+                        if peers.heard(from, Instant::now()) {
+                            tracing::info!(endpoint = metrics.label(), peer = %from, "udp peer joined");
+                            metrics.peers(peers.heard.len());
+                        }
                     }
                 }
                 // E.g. ICMP port unreachable from a vanished peer: not fatal.
                 Err(e) => tracing::debug!(endpoint = metrics.label(), error = %e, "udp receive failed"),
             },
-        }
-    }
-}
-
-/// Sends one frame as a datagram, counting it sent or dropped.
-async fn send_datagram(
-    socket: &UdpSocket,
-    bytes: &[u8],
-    to: SocketAddr,
-    metrics: &EndpointMetrics,
-) {
-    match socket.send_to(bytes, to).await {
-        Ok(_) => metrics.frame_out(),
-        Err(e) => {
-            metrics.dropped(DropReason::SendError, 1);
-            tracing::debug!(%to, error = %e, "udp send failed");
         }
     }
 }
@@ -362,19 +501,25 @@ async fn idle(
     }
 }
 
+/// Waits `delay`; false on shutdown.
+async fn pause(delay: Duration, shutdown: &CancellationToken) -> bool {
+    tokio::select! {
+        _ = shutdown.cancelled() => false,
+        _ = tokio::time::sleep(delay) => true,
+    }
+}
+
 async fn udp_out(
     index: u8,
     host: String,
     port: u16,
     hub: Arc<Hub>,
-    mut rx: mpsc::Receiver<RawFrame>,
     signing: Sig,
     shutdown: CancellationToken,
 ) {
-    let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
     let mut delay = RECONNECT_MIN;
-    let (socket, to) = loop {
+    let (socket, sink) = loop {
         let opened = async {
             let to = resolve(&host, port).await?;
             let any: SocketAddr = if to.is_ipv4() {
@@ -382,30 +527,35 @@ async fn udp_out(
             } else {
                 (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
             };
-            Ok::<_, io::Error>((UdpSocket::bind(any).await?, to))
+            split_udp(
+                std::net::UdpSocket::bind(any)?,
+                Destination::Fixed(to),
+                signing.clone(),
+            )
         };
-        match opened.await {
+        let opened = tokio::select! {
+            _ = shutdown.cancelled() => return,
+            o = opened => o,
+        };
+        match opened {
             Ok(v) => break v,
             Err(e) => {
                 tracing::warn!(endpoint = metrics.label(), error = %e, retry_in_s = delay.as_secs_f32(), "cannot open udp endpoint; retrying");
-                if !idle(delay, &mut rx, &shutdown).await {
+                if !pause(delay, &shutdown).await {
                     return;
                 }
                 delay = (delay * 2).min(RECONNECT_MAX);
             }
         }
     };
+    let _installed = SinkInstalled::new(&hub, index, sink);
+    let signing = signing.as_deref();
     metrics.peers(1);
     let mut parser = FrameParser::new();
     let mut buf = vec![0u8; 65536];
     loop {
         tokio::select! {
             _ = shutdown.cancelled() => return,
-            frame = rx.recv() => {
-                let Some(frame) = frame else { return };
-                let frame = outgoing(frame, signing);
-                send_datagram(&socket, frame.as_bytes(), to, metrics).await;
-            }
             r = socket.recv_from(&mut buf) => match r {
                 Ok((n, _)) => {
                     deliver(&hub, index, &mut parser, &buf[..n], true, signing);
@@ -599,6 +749,154 @@ async fn serve_stream(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::signing::{signature_is_valid, signed_parts, SigningKey};
+    use mavlink::dialects::ardupilotmega::{MavMessage, ATTITUDE_DATA};
+    use mavlink::MavHeader;
+
+    const PATIENCE: Duration = Duration::from_secs(10);
+
+    /// An ATTITUDE from the autopilot (system 1) or, with `from`, someone else.
+    fn attitude(i: u32) -> RawFrame {
+        attitude_from((1, 1), i)
+    }
+
+    fn attitude_from(from: (u8, u8), i: u32) -> RawFrame {
+        let header = MavHeader {
+            system_id: u32::from(from.0),
+            component_id: from.1,
+            sequence: i as u8,
+        };
+        let msg = MavMessage::ATTITUDE(ATTITUDE_DATA {
+            time_boot_ms: i,
+            ..ATTITUDE_DATA::DEFAULT
+        });
+        RawFrame::encode(header, &msg)
+    }
+
+    fn ground_station() -> std::net::UdpSocket {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        s.set_read_timeout(Some(PATIENCE)).unwrap();
+        s
+    }
+
+    /// The next datagram on `socket` (within [`PATIENCE`]) as a frame.
+    fn next_frame(socket: &std::net::UdpSocket, who: &str) -> RawFrame {
+        let mut buf = [0u8; 512];
+        let n = socket
+            .recv(&mut buf)
+            .unwrap_or_else(|e| panic!("{who}: no frame within {PATIENCE:?}: {e}"));
+        let mut parser = FrameParser::new();
+        parser.push(&buf[..n]);
+        parser
+            .next_frame()
+            .unwrap_or_else(|| panic!("{who}: not a frame: {:?}", &buf[..n]))
+    }
+
+    /// Frames for `udpout` and `udpin` endpoints are sent by the thread that routes
+    /// them: they arrive (signed on a signing endpoint) while the endpoints' only
+    /// runtime thread is blocked, so no tokio wake-up is needed per frame.
+    #[test]
+    fn udp_endpoints_are_sent_to_by_the_routing_thread() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let (plain, signed) = (ground_station(), ground_station());
+        let out = |s: &std::net::UdpSocket| Endpoint::UdpOut {
+            host: "127.0.0.1".into(),
+            port: s.local_addr().unwrap().port(),
+        };
+        let endpoints = vec![
+            out(&plain),
+            out(&signed),
+            Endpoint::UdpIn("127.0.0.1:0".parse().unwrap()),
+        ];
+        let key = SigningKey::new([7; 32]);
+        let signing = SigningSettings {
+            key: key.clone(),
+            endpoints: vec![1],
+        };
+        let stats = Stats::new();
+        let shutdown = CancellationToken::new();
+        let peer = ground_station();
+        let (hub, task) = rt.block_on(async {
+            let bound = Bound::bind(&endpoints).await.unwrap();
+            let udpin = bound.local_addrs()[2].unwrap();
+            let (hub, task) = start(bound, (1, 191), Some(&signing), &stats, shutdown.clone());
+            // The udpin endpoint learns its peer from what it sends; the udpout
+            // ones open their sockets: wait (driving the runtime) until all three
+            // receive what the hub routes.
+            let mut ready = [false; 3];
+            let deadline = Instant::now() + PATIENCE;
+            while ready.contains(&false) {
+                assert!(Instant::now() < deadline, "endpoints not up: {ready:?}");
+                peer.send_to(attitude_from((255, 190), 0).as_bytes(), udpin)
+                    .unwrap();
+                hub.from_autopilot(&attitude(0));
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                for (i, s) in [&plain, &signed, &peer].into_iter().enumerate() {
+                    s.set_nonblocking(true).unwrap();
+                    while s.recv(&mut [0u8; 512]).is_ok() {
+                        ready[i] = true;
+                    }
+                    s.set_nonblocking(false).unwrap();
+                }
+            }
+            (hub, task)
+        });
+
+        // The runtime is not running now: nothing but the routing thread can send.
+        let n = 20u32;
+        let router = {
+            let hub = hub.clone();
+            std::thread::spawn(move || {
+                for i in 1..=n {
+                    hub.from_autopilot(&attitude(i));
+                }
+            })
+        };
+        for i in 1..=n {
+            let sent = attitude(i);
+            let got = next_frame(&plain, "udpout");
+            assert_eq!(got.as_bytes(), sent.as_bytes(), "udpout frame {i}");
+            let got = next_frame(&peer, "udpin peer");
+            assert_eq!(got.as_bytes(), sent.as_bytes(), "udpin frame {i}");
+            let got = next_frame(&signed, "signing udpout");
+            assert!(
+                got.is_signed(),
+                "frame {i} to the signing endpoint is unsigned"
+            );
+            assert!(
+                signature_is_valid(&key, got.as_bytes()),
+                "frame {i}: bad signature"
+            );
+            assert_eq!(signed_parts(got.as_bytes()).unwrap().link_id, 1);
+            // Header (but the incompatibility flags) and payload unchanged.
+            let payload_end = 10 + usize::from(sent.as_bytes()[1]);
+            let (g, w) = (got.as_bytes(), sent.as_bytes());
+            assert_eq!(g[..2], w[..2], "frame {i}");
+            assert_eq!(g[3..payload_end], w[3..payload_end], "frame {i}");
+        }
+        router.join().unwrap();
+
+        let mut snapshot = Box::<skymesh_ipc_types::ServiceStats>::default();
+        stats.snapshot_into(&mut snapshot);
+        let sent_to = |label: String| {
+            snapshot
+                .entries()
+                .iter()
+                .find(|e| {
+                    e.name.as_str() == "skymesh_router_frames_total"
+                        && e.labels.as_str() == format!("endpoint={label},direction=out")
+                })
+                .map_or(0.0, |e| e.value)
+        };
+        assert!(sent_to(endpoints[0].to_string()) >= f64::from(n + 1));
+        assert!(sent_to(endpoints[1].to_string()) >= f64::from(n + 1));
+
+        shutdown.cancel();
+        rt.block_on(task).unwrap();
+    }
 
     #[test]
     fn udp_peers_are_remembered_bounded_and_expire() {

@@ -1,6 +1,11 @@
 //! The router hub: moves frames between the autopilot link and the endpoints by
-//! the decisions of [`crate::router`], without ever waiting (bounded queues, drop
-//! and count), and the router's metrics.
+//! the decisions of [`crate::router`], without ever waiting (bounded queues or
+//! non-blocking UDP sends, drop and count), and the router's metrics.
+//!
+//! Frames for a UDP endpoint are sent by the thread that routes them (the link's
+//! reader thread for the autopilot's telemetry) with a non-blocking `send_to` on
+//! the endpoint's socket ([`UdpSink`]): no queue and no tokio wake-up per frame.
+//! TCP endpoints keep a bounded queue drained by their task.
 //!
 //! | metric | labels |
 //! |---|---|
@@ -20,6 +25,7 @@ use skymesh_runtime::{Counter, Gauge, Stats};
 use tokio::sync::mpsc;
 
 use crate::config::Endpoint;
+use crate::endpoints::UdpSink;
 use crate::frame::RawFrame;
 use crate::link::{Outbox, WriteError};
 use crate::router::{Learned, Link, Router};
@@ -35,7 +41,8 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 /// Why a frame was not delivered (label `reason`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DropReason {
-    /// The destination's queue was full (it is slower than the traffic).
+    /// The destination's queue (or UDP socket send buffer) was full: it is slower
+    /// than the traffic.
     QueueFull,
     /// Input that was not a MAVLink frame (junk, bad checksum): counted per resync.
     Malformed,
@@ -161,7 +168,12 @@ pub fn label(index: usize, endpoint: &Endpoint) -> String {
 
 #[derive(Debug)]
 struct Port {
-    tx: mpsc::Sender<RawFrame>,
+    /// A TCP endpoint's queue (drained by its task); `None` for a UDP endpoint.
+    queue: Option<mpsc::Sender<RawFrame>>,
+    /// A UDP endpoint's socket while it is open (set and cleared by its task);
+    /// frames routed to the endpoint while there is none are dropped uncounted,
+    /// as there is nobody to send them to.
+    udp: Mutex<Option<Arc<UdpSink>>>,
     metrics: EndpointMetrics,
 }
 
@@ -187,15 +199,20 @@ pub struct Hub {
 const LOCAL_BROADCAST_IDS: [u32; 2] = [282, 287];
 
 impl Hub {
-    /// `ports`: each endpoint's queue (drained by its task) and series.
+    /// `ports`: each endpoint's queue (drained by its task; `None` for a UDP
+    /// endpoint, which sends directly once it calls [`Hub::set_udp_sink`]) and series.
     pub(crate) fn new(
         local: (u8, u8),
-        ports: Vec<(mpsc::Sender<RawFrame>, EndpointMetrics)>,
+        ports: Vec<(Option<mpsc::Sender<RawFrame>>, EndpointMetrics)>,
         stats: &Stats,
     ) -> Hub {
         let ports: Vec<Port> = ports
             .into_iter()
-            .map(|(tx, metrics)| Port { tx, metrics })
+            .map(|(queue, metrics)| Port {
+                queue,
+                udp: Mutex::new(None),
+                metrics,
+            })
             .collect();
         Hub {
             router: Mutex::new(Router::new(ports.len(), local)),
@@ -313,8 +330,26 @@ impl Hub {
         let Some(port) = self.ports.get(usize::from(index)) else {
             return;
         };
-        if let Err(mpsc::error::TrySendError::Full(_)) = port.tx.try_send(*frame) {
-            port.metrics.dropped(DropReason::QueueFull, 1);
+        match &port.queue {
+            Some(tx) => {
+                if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(*frame) {
+                    port.metrics.dropped(DropReason::QueueFull, 1);
+                }
+            }
+            None => {
+                let sink = lock(&port.udp).clone();
+                if let Some(sink) = sink {
+                    sink.send(frame, &port.metrics);
+                }
+            }
+        }
+    }
+
+    /// UDP endpoint `index` opened its socket (`Some`: frames routed to it are sent
+    /// on `sink` from now on) or closed it (`None`).
+    pub(crate) fn set_udp_sink(&self, index: u8, sink: Option<Arc<UdpSink>>) {
+        if let Some(port) = self.ports.get(usize::from(index)) {
+            *lock(&port.udp) = sink;
         }
     }
 

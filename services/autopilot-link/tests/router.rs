@@ -776,3 +776,109 @@ async fn bench_forwarding_latency_and_throughput() {
     );
     mesh.stop().await;
 }
+
+/// Context switches of every thread of this process (`/proc/self/task/*/status`),
+/// by thread id: (name, voluntary + involuntary).
+fn context_switches() -> std::collections::BTreeMap<u32, (String, u64)> {
+    let mut out = std::collections::BTreeMap::new();
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return out;
+    };
+    for task in tasks.flatten() {
+        let Ok(tid) = task.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(status) = std::fs::read_to_string(task.path().join("status")) else {
+            continue;
+        };
+        let mut name = String::new();
+        let mut switches = 0;
+        for line in status.lines() {
+            if let Some(n) = line.strip_prefix("Name:") {
+                name = n.trim().to_string();
+            } else if let Some(v) = line
+                .strip_prefix("voluntary_ctxt_switches:")
+                .or_else(|| line.strip_prefix("nonvoluntary_ctxt_switches:"))
+            {
+                switches += v.trim().parse::<u64>().unwrap_or(0);
+            }
+        }
+        out.insert(tid, (name, switches));
+    }
+    out
+}
+
+/// Not a test: the context switches of autopilot-link (and this test's helper
+/// threads) while a fake autopilot sends ~85 frames/s and the one `udpout`
+/// endpoint's ground station does not listen (the default deployment, idle).
+/// `cargo test -p skymesh-autopilot-link --test router -- --ignored --nocapture idle_wakeups`
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore]
+async fn bench_idle_wakeups_with_a_udpout_endpoint() {
+    let fake = FakeAutopilot::start(AckStyle::Targeted);
+    // A port nobody listens on (as a ground station that is not running).
+    let gcs_port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoints = vec![Endpoint::UdpOut {
+        host: "127.0.0.1".into(),
+        port: gcs_port,
+    }];
+    let bound = Bound::bind(&endpoints).await.expect("bind endpoints");
+    let mut mesh = Mesh::start_routed(settings(fake.port, endpoints), Some(bound)).await;
+    mesh.wait_link_up().await;
+    // The fake sends HEARTBEAT + ATTITUDE at 5 Hz; 75 more frames/s make ~85.
+    let stop = Arc::new(AtomicBool::new(false));
+    let pacer = {
+        let (raw, stop) = (fake.raw.clone(), stop.clone());
+        let frame = encode((VEHICLE, 1), &MavMessage::ATTITUDE(ATTITUDE_DATA::DEFAULT));
+        std::thread::spawn(move || {
+            let start = Instant::now();
+            let mut i = 0u32;
+            while !stop.load(Ordering::Relaxed) {
+                i += 1;
+                let due = start + Duration::from_secs(1) * i / 75;
+                std::thread::sleep(due.saturating_duration_since(Instant::now()));
+                if raw.send(frame.clone()).is_err() {
+                    return;
+                }
+            }
+        })
+    };
+    let out = || {
+        mesh.metric(
+            "skymesh_router_frames_total",
+            &format!("endpoint=udpout:127.0.0.1:{gcs_port},direction=out"),
+        )
+    };
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let window = Duration::from_secs(10);
+    let (before, sent_before) = (context_switches(), out());
+    // Not on a runtime worker: the test itself must not add wake-ups.
+    tokio::task::block_in_place(|| std::thread::sleep(window));
+    let (after, sent_after) = (context_switches(), out());
+    stop.store(true, Ordering::Relaxed);
+    pacer.join().unwrap();
+    let secs = window.as_secs_f64();
+    let mut total = 0;
+    let mut rows = Vec::new();
+    for (tid, (name, n)) in &after {
+        let d = n - before.get(tid).map_or(0, |b| b.1);
+        total += d;
+        if d > 0 {
+            rows.push((d, *tid, name.clone()));
+        }
+    }
+    rows.sort_unstable_by(|a, b| b.cmp(a));
+    println!(
+        "{:.0} frames/s sent to the udpout endpoint; whole test process: {:.0} context switches/s",
+        (sent_after - sent_before) / secs,
+        total as f64 / secs
+    );
+    for (d, tid, name) in rows {
+        println!("  {tid:>7} {name:<24} {:>6.1}/s", d as f64 / secs);
+    }
+    mesh.stop().await;
+}
