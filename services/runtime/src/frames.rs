@@ -19,9 +19,11 @@ use iceoryx2::prelude::*;
 use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 use tokio::io::unix::AsyncFd;
 
+use crate::anticipate::{Anticipation, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::ipc::{
-    ipc_err, wait_listener, with_retry, BlockingWait, Bus, IpcError, ListenerFd, Svc, WaitSource,
+    ipc_err, recv_anticipating, wait_listener, with_retry, BlockingWait, Bus, IpcError, ListenerFd,
+    Svc, WaitSource,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -142,6 +144,7 @@ impl Bus {
             ),
             last_seq: Mutex::new(HashMap::new()),
             warn: Mutex::new(WarnLimiter::default()),
+            anticipation: None,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -254,6 +257,8 @@ pub struct FrameSubscriber {
     age: Histogram,
     last_seq: Mutex<HashMap<(u16, u16), u64>>,
     warn: Mutex<WarnLimiter<&'static str>>,
+    /// Set by [`FrameSubscriber::set_anticipate`].
+    anticipation: Option<Mutex<Anticipation>>,
     topic: String,
     _bus: Bus,
 }
@@ -367,6 +372,23 @@ impl FrameSubscriber {
         }
     }
 
+    /// Low-latency receive of a camera stream with
+    /// [`FrameSubscriber::recv_blocking_with`]: wakes on a timer shortly before the
+    /// next frame is due (learnt from the frames' send stamps) and polls shared
+    /// memory until it comes, at most `max_spin` per frame, so the frame is in hand
+    /// within microseconds of its publication instead of one process wake-up later.
+    /// See [`crate::ipc::Subscriber::set_anticipate`]; zero turns it off.
+    pub fn set_anticipate(&mut self, max_spin: Duration) {
+        self.anticipation = (!max_spin.is_zero()).then(|| Mutex::new(Anticipation::new(max_spin)));
+    }
+
+    /// What [`FrameSubscriber::set_anticipate`] has done; `None` when it is off.
+    pub fn anticipation(&self) -> Option<AnticipationStats> {
+        self.anticipation
+            .as_ref()
+            .map(|a| a.lock().unwrap_or_else(|p| p.into_inner()).stats())
+    }
+
     /// Waits on the calling thread, without an async runtime, for the next frame and
     /// hands it to `read` in place (see [`FrameSubscriber::try_recv_with`]): blocks in
     /// the kernel on the stream's event, as a blocking socket read does. `None` after
@@ -377,6 +399,16 @@ impl FrameSubscriber {
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
+        if let Some(a) = &self.anticipation {
+            return recv_anticipating(
+                &self.blocking,
+                &self.listener,
+                a,
+                deadline,
+                &self.topic,
+                || self.try_recv_with(&mut read),
+            );
+        }
         loop {
             if let Some(r) = self.try_recv_with(&mut read)? {
                 return Ok(Some(r));
@@ -411,6 +443,11 @@ impl FrameSubscriber {
     fn account(&self, h: &FrameHeader) {
         let h = &h.header;
         self.received.inc();
+        if let Some(a) = &self.anticipation {
+            a.lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .observe(h.stamp_ns);
+        }
         self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
         let prev = self
             .last_seq

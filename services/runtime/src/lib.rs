@@ -16,6 +16,7 @@
 #![deny(unsafe_code)]
 
 pub mod addresses;
+mod anticipate;
 pub mod clock;
 pub mod config;
 pub mod exit;
@@ -30,6 +31,7 @@ pub mod stats;
 pub mod systemd;
 pub mod warn_limit;
 
+pub use anticipate::AnticipationStats;
 pub use config::{ConfigError, ServiceConfig};
 pub use frames::{FrameError, FramePublisher, FrameSubscriber};
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};

@@ -269,3 +269,62 @@ fn overwritten_samples_count_as_lost_unless_the_subscriber_wants_only_the_newest
         }
     }
 }
+
+/// `set_anticipate`: a periodic stream is received whole and in order, some samples
+/// are taken by polling in the window around their expected time (no wake-up), the
+/// period is learnt from the send stamps, a receive still times out when the stream
+/// stops, and a sample taken while polling leaves no stale notification behind.
+#[test]
+fn anticipating_receive_takes_a_periodic_stream_in_order_and_times_out() {
+    let d = domain("ant");
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::vehicle_state(4);
+    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+    sub.set_anticipate(Duration::from_millis(2));
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+    const N: u32 = 150;
+    const PERIOD: Duration = Duration::from_millis(5);
+
+    std::thread::scope(|s| {
+        let publisher = s.spawn(move || {
+            let t0 = std::time::Instant::now();
+            for i in 1..=N {
+                // Absolute pacing, as a camera or a fixed-rate telemetry loop does.
+                let due = t0 + PERIOD * i;
+                std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+                publ.publish(VehicleState {
+                    lat_deg: f64::from(i),
+                    ..Default::default()
+                })
+                .unwrap();
+            }
+            publ
+        });
+        for i in 1..=N {
+            let v = sub
+                .recv_blocking(Some(Duration::from_secs(5)))
+                .unwrap()
+                .expect("every sample arrives");
+            assert_eq!(v.lat_deg, f64::from(i));
+        }
+        let _publ = publisher.join().unwrap();
+        let t0 = std::time::Instant::now();
+        assert!(sub
+            .recv_blocking(Some(Duration::from_millis(30)))
+            .unwrap()
+            .is_none());
+        assert!(t0.elapsed() >= Duration::from_millis(30));
+    });
+    let stats = sub.anticipation().expect("on");
+    let period = stats.period.expect("period learnt");
+    assert!(
+        period > Duration::from_millis(3) && period < Duration::from_millis(8),
+        "{stats:?}"
+    );
+    assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
+    assert!(stats.hits <= stats.windows, "{stats:?}");
+
+    sub.set_anticipate(Duration::ZERO);
+    assert!(sub.anticipation().is_none());
+}

@@ -6,7 +6,7 @@
 //! cargo run --release -p skymesh-e2e --bin frames-bench [-- FRAMES_PER_PHASE]
 //! ```
 //!
-//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, four phases per size in this
+//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, six phases per size in this
 //! order (fresh child process each), FRAMES_PER_PHASE frames each (default 200), the
 //! first [`WARMUP`] not counted (page faults of fresh mappings, first wake-ups):
 //!
@@ -25,11 +25,19 @@
 //!   before one `write_all`; receipt after `read_exact` of the whole frame (a socket
 //!   has to move every byte: that is its transfer).
 //!
+//! - `ant`: `xfer` with the iceoryx2 receiver anticipating the next frame
+//!   (`FrameSubscriber::set_anticipate`, [`ANT_MAX_SPIN`]); compared with a fresh
+//!   socket `xfer` phase. The receiver prints its learnt period, windows and hits.
+//!
+//! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_TRACE=1` makes the `ant`
+//! receiver print every frame's latency and anticipation state (stderr).
+//!
 //! Both sides use `CLOCK_MONOTONIC`, shared by the processes of one machine. CPU per
 //! frame is `CLOCK_PROCESS_CPUTIME_ID` over the counted frames on each side. In the
 //! iceoryx2 `xfer` phase the sender also measures the loan itself (the call to
 //! `publish_with` until its closure runs: `loan_slice`, which zero-fills the slice)
-//! and the pixel write, per frame.
+//! and the pixel write, per frame, and (also in `ant`) the rest of `publish_with`:
+//! header check, stamp, `send`, notify.
 
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -59,13 +67,28 @@ enum Mode {
     Full,
     /// Transfer only.
     Xfer,
+    /// Transfer only, the iceoryx2 receiver anticipating the next frame
+    /// (`FrameSubscriber::set_anticipate`); its socket phase is `xfer`'s.
+    Ant,
 }
+
+/// The anticipating receiver's longest poll per frame.
+const ANT_MAX_SPIN: Duration = Duration::from_millis(2);
 
 impl Mode {
     fn arg(self) -> &'static str {
         match self {
             Mode::Full => "full",
             Mode::Xfer => "xfer",
+            Mode::Ant => "ant",
+        }
+    }
+
+    /// The socket phase compared with this one.
+    fn socket(self) -> Mode {
+        match self {
+            Mode::Ant => Mode::Xfer,
+            m => m,
         }
     }
 
@@ -73,6 +96,7 @@ impl Mode {
         match s {
             "full" => Ok(Mode::Full),
             "xfer" => Ok(Mode::Xfer),
+            "ant" => Ok(Mode::Ant),
             _ => anyhow::bail!("unknown mode `{s}`"),
         }
     }
@@ -135,6 +159,9 @@ struct Phase {
     /// iceoryx2 `xfer` only: per counted frame, the loan (ns) and the pixel write (ns).
     loan: Vec<u64>,
     write: Vec<u64>,
+    /// From the end of the pixel write to `publish_with`'s return: header check,
+    /// stamp, `send`, notify (ns).
+    send: Vec<u64>,
 }
 
 impl Phase {
@@ -157,11 +184,18 @@ fn driver(frames: usize) -> Result<()> {
     );
     let mut iox_p = Vec::new();
     let mut loans = Vec::new();
+    // FRAMES_BENCH_ONLY=1920 runs one size (for profiling).
+    let only: Option<u32> = std::env::var("FRAMES_BENCH_ONLY")
+        .ok()
+        .and_then(|v| v.parse().ok());
     for (w, h) in SIZES {
+        if only.is_some_and(|o| o != w) {
+            continue;
+        }
         let len = (w * h * 3) as usize;
-        for mode in [Mode::Full, Mode::Xfer] {
+        for mode in [Mode::Full, Mode::Xfer, Mode::Ant] {
             let iox = iox_run(w, h, frames, mode)?;
-            let uds = uds_run(len, frames, mode)?;
+            let uds = uds_run(len, frames, mode.socket())?;
             let (pi, pu) = (iox.p(), uds.p());
             for (via, ph, p) in [("iox", &iox, pi), ("uds", &uds, pu)] {
                 println!(
@@ -191,30 +225,52 @@ fn driver(frames: usize) -> Result<()> {
                 uds.tx_cpu / iox.tx_cpu,
                 uds.rx.cpu_per_msg() / iox.rx.cpu_per_msg(),
             );
-            if mode == Mode::Xfer {
-                loans.push((w, h, percentiles(&iox.loan), percentiles(&iox.write)));
+            if mode != Mode::Full {
+                loans.push((
+                    w,
+                    h,
+                    mode,
+                    percentiles(&iox.loan),
+                    percentiles(&iox.write),
+                    percentiles(&iox.send),
+                ));
             }
             iox_p.push((w, mode, pi));
         }
     }
-    println!("iceoryx2 publisher, per frame (xfer phases): µs");
+    println!("iceoryx2 publisher, per frame (xfer and ant phases): µs");
     println!(
-        "{:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
-        "size", "loan p50", "loan p99", "loan p999", "write p50", "write p99", "write p999"
+        "{:>9} {:>4} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
+        "size",
+        "mode",
+        "loan p50",
+        "loan p99",
+        "loan p999",
+        "write p50",
+        "write p99",
+        "write p999",
+        "send p50",
+        "send p99",
+        "send p999"
     );
-    for (w, h, l, wr) in loans {
+    // `send` = header check + stamp + send + notify.
+    for (w, h, mode, l, wr, se) in loans {
         println!(
-            "{:>9} | {:>9.1} {:>9.1} {:>9.1} | {:>9.1} {:>9.1} {:>9.1}",
+            "{:>9} {:>4} | {:>9.1} {:>9.1} {:>9.1} | {:>9.1} {:>9.1} {:>9.1} | {:>9.1} {:>9.1} {:>9.1}",
             format!("{w}x{h}"),
+            mode.arg(),
             l[0] / 1e3,
             l[1] / 1e3,
             l[2] / 1e3,
             wr[0] / 1e3,
             wr[1] / 1e3,
             wr[2] / 1e3,
+            se[0] / 1e3,
+            se[1] / 1e3,
+            se[2] / 1e3,
         );
     }
-    for mode in [Mode::Full, Mode::Xfer] {
+    for mode in [Mode::Full, Mode::Xfer, Mode::Ant] {
         let find = |w: u32| iox_p.iter().find(|e| e.0 == w && e.1 == mode).map(|e| e.2);
         if let (Some(small), Some(big)) = (find(640), find(1920)) {
             println!(
@@ -254,6 +310,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     let mut cpu = SendCpu::new(WARMUP);
     let mut loan = Vec::with_capacity(frames);
     let mut write = Vec::with_capacity(frames);
+    let mut send = Vec::with_capacity(frames);
     for k in 0..frames {
         pace.wait();
         cpu.at(k);
@@ -268,31 +325,37 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
             pixels.fill(fill_value(k));
             t_written = monotonic_ns();
         })?;
+        let t_sent = monotonic_ns();
         if k >= WARMUP {
             loan.push(t_loaned.saturating_sub(t0));
             write.push(t_written.saturating_sub(t_loaned));
+            send.push(t_sent.saturating_sub(t_written));
         }
     }
     let tx_cpu = cpu.per_msg();
     let rx = finish_child(child, out)?;
     drop(publ);
     drop(bus);
-    let (loan, write) = match mode {
-        Mode::Xfer => (loan, write),
-        Mode::Full => (Vec::new(), Vec::new()),
+    let (loan, write, send) = match mode {
+        Mode::Xfer | Mode::Ant => (loan, write, send),
+        Mode::Full => (Vec::new(), Vec::new(), Vec::new()),
     };
     Ok(Phase {
         rx,
         tx_cpu,
         loan,
         write,
+        send,
     })
 }
 
 fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<()> {
     let domain = Domain::load(domain, None)?;
     let bus = Bus::open(&domain, "bench-reader", ServiceId::Tool, 0, Stats::new())?;
-    let sub = bus.frame_subscriber(&topics::camera_frames("bench"))?;
+    let mut sub = bus.frame_subscriber(&topics::camera_frames("bench"))?;
+    if mode == Mode::Ant {
+        sub.set_anticipate(ANT_MAX_SPIN);
+    }
     let mut tally = Tally::new(frames, WARMUP);
     println!("ready");
     // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
@@ -305,7 +368,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
                 let t1 = monotonic_ns();
                 (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
             }
-            Mode::Xfer => {
+            Mode::Xfer | Mode::Ant => {
                 let t1 = monotonic_ns();
                 let ends = (
                     pixels.first().copied().unwrap_or(0),
@@ -319,12 +382,25 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
         ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
         match mode {
             Mode::Full => check_sum(k, n, sum)?,
-            Mode::Xfer => check_ends(k, ends)?,
+            Mode::Xfer | Mode::Ant => check_ends(k, ends)?,
         }
         tally.add(k, t0, t1);
+        if std::env::var_os("FRAMES_BENCH_TRACE").is_some() {
+            if let Some(a) = sub.anticipation() {
+                eprintln!("k {k} stamp {t0} lat {} {a:?}", t1 - t0);
+            }
+        }
         if k + 1 >= frames {
             break;
         }
+    }
+    if let Some(a) = sub.anticipation() {
+        eprintln!(
+            "    (ant receiver: period {:.3} ms, {} windows, {} frames taken while polling)",
+            a.period.map_or(f64::NAN, |p| p.as_secs_f64() * 1e3),
+            a.windows,
+            a.hits
+        );
     }
     tally.report()
 }
@@ -357,7 +433,7 @@ fn uds_run(len: usize, frames: usize, mode: Mode) -> Result<Phase> {
                 buf[HEAD..].fill(fill_value(k));
                 t0
             }
-            Mode::Xfer => {
+            Mode::Xfer | Mode::Ant => {
                 buf[HEAD..].fill(fill_value(k));
                 monotonic_ns()
             }
@@ -375,6 +451,7 @@ fn uds_run(len: usize, frames: usize, mode: Mode) -> Result<Phase> {
         tx_cpu,
         loan: Vec::new(),
         write: Vec::new(),
+        send: Vec::new(),
     })
 }
 
@@ -402,7 +479,7 @@ fn uds_receiver(path: &str, len: usize, frames: usize, mode: Mode) -> Result<()>
                 check_sum(k, n, sum)?;
                 tally.add(k, t0, t1);
             }
-            Mode::Xfer => {
+            Mode::Xfer | Mode::Ant => {
                 let t1 = monotonic_ns();
                 check_ends(k, (buf[0], buf[len - 1]))?;
                 tally.add(k, t0, t1);

@@ -8,13 +8,17 @@
 //! ```
 //!
 //! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
-//! `SCALE` multiplying the counts, four receivers per rate, in this order:
+//! `SCALE` multiplying the counts, five receivers per rate, in this order:
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
-//! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime.
+//! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime;
+//! - `iox ant`: `recv_blocking` with `Subscriber::set_anticipate` ([`ANT_MAX_SPIN`]):
+//!   wakes on a timer just before the next sample is due and polls for it (compared
+//!   with `udp blk`; `SAMPLES_BENCH_TRACE=1` prints every sample's latency and the
+//!   anticipation's windows and hits).
 //!
 //! Latency = the receiver's `CLOCK_MONOTONIC` when it holds the sample − the send
 //! stamp carried in it (the bus stamps `header.stamp_ns` just before sending; the
@@ -61,14 +65,20 @@ enum Via {
     UdpBlocking,
     IoxTokio,
     UdpTokio,
+    /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
+    IoxAnticipating,
 }
 
+/// The anticipating receiver's longest poll per sample.
+const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
+
 impl Via {
-    const ALL: [Via; 4] = [
+    const ALL: [Via; 5] = [
         Via::IoxBlocking,
         Via::UdpBlocking,
         Via::IoxTokio,
         Via::UdpTokio,
+        Via::IoxAnticipating,
     ];
 
     fn arg(self) -> &'static str {
@@ -77,6 +87,7 @@ impl Via {
             Via::UdpBlocking => "udp-blk",
             Via::IoxTokio => "iox-tok",
             Via::UdpTokio => "udp-tok",
+            Via::IoxAnticipating => "iox-ant",
         }
     }
 
@@ -88,7 +99,10 @@ impl Via {
     }
 
     fn is_iox(self) -> bool {
-        matches!(self, Via::IoxBlocking | Via::IoxTokio)
+        matches!(
+            self,
+            Via::IoxBlocking | Via::IoxTokio | Via::IoxAnticipating
+        )
     }
 }
 
@@ -225,6 +239,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
         for (label, udp, iox) in [
             ("blk", Via::UdpBlocking, Via::IoxBlocking),
             ("tok", Via::UdpTokio, Via::IoxTokio),
+            ("ant", Via::UdpBlocking, Via::IoxAnticipating),
         ] {
             let find = |v: Via| phases.iter().find(|(w, _, _)| *w == v);
             let (Some((_, pu, u)), Some((_, pi, i))) = (find(udp), find(iox)) else {
@@ -421,16 +436,37 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             .build()
     };
     match via {
-        Via::IoxBlocking | Via::IoxTokio => {
+        Via::IoxBlocking | Via::IoxTokio | Via::IoxAnticipating => {
             let domain = Domain::load(domain, None)?;
             let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
             let mut sub = bus.subscriber::<VehicleState>(&bench_topic("one_way", n))?;
+            if via == Via::IoxAnticipating {
+                sub.set_anticipate(ANT_MAX_SPIN);
+            }
             println!("ready");
-            if via == Via::IoxBlocking {
+            if via != Via::IoxTokio {
+                let trace = std::env::var_os("SAMPLES_BENCH_TRACE").is_some();
                 while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+                    if trace {
+                        if let Some(a) = sub.anticipation() {
+                            let lat = monotonic_ns().saturating_sub(s.header.stamp_ns);
+                            eprintln!(
+                                "seq {} lat {} windows {} hits {}",
+                                s.header.seq, lat, a.windows, a.hits
+                            );
+                        }
+                    }
                     if iox_sample(&mut tally, s)? {
                         break;
                     }
+                }
+                if let Some(a) = sub.anticipation() {
+                    eprintln!(
+                        "    (iox-ant receiver: period {:.3} ms, {} windows, {} samples taken while polling)",
+                        a.period.map_or(f64::NAN, |p| p.as_secs_f64() * 1e3),
+                        a.windows,
+                        a.hits
+                    );
                 }
             } else {
                 rt()?.block_on(async {
