@@ -105,6 +105,22 @@ fn bad_configuration_exits_64_with_a_clear_message() {
             Some(64),
             "{bin} with a bad SKYMESH_DOMAIN"
         );
+        // So is a worker count out of range; an explicit good one checks.
+        for (workers, code) in [("0", 64), ("17", 64), ("two", 64), ("2", 0)] {
+            let out = Command::new(binary(bin))
+                .arg("--check-config")
+                .env("SKYMESH_DOMAIN", format!("cli{}", std::process::id()))
+                .env_remove("SKYMESH_CONFIG")
+                .env("SKYMESH_TOKIO_WORKERS", workers)
+                .output()
+                .unwrap();
+            assert_eq!(
+                out.status.code(),
+                Some(code),
+                "{bin} with SKYMESH_TOKIO_WORKERS={workers}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
     }
 }
 

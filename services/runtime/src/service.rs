@@ -16,6 +16,31 @@ use crate::ipc::{self, Bus, Domain};
 use crate::stats::Stats;
 use crate::{signals, systemd};
 
+/// Overrides the number of tokio worker threads of a service (1..=16).
+pub const WORKERS_ENV: &str = "SKYMESH_TOKIO_WORKERS";
+/// One worker by default. Every service's async work is light (the heavy parts —
+/// camera rendering, vision analysis, the autopilot link's reads and writes — run
+/// in `block_in_place` or on their own threads), and a second worker mostly added
+/// wake-ups: a sample or frame handed to the runtime from outside woke one worker
+/// and that one often woke the other to look for work. Measured on the control
+/// mesh (docs/benchmarks.md): autopilot-link 219 → 146 wake-ups/s.
+pub const DEFAULT_WORKERS: usize = 1;
+
+fn workers_from_env() -> Result<usize, ConfigError> {
+    match std::env::var(WORKERS_ENV) {
+        Ok(v) if !v.trim().is_empty() => v
+            .trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|n| (1..=16).contains(n))
+            .ok_or_else(|| ConfigError::Env {
+                name: WORKERS_ENV,
+                message: format!("`{v}` is not a worker count in 1..=16"),
+            }),
+        _ => Ok(DEFAULT_WORKERS),
+    }
+}
+
 /// What a service tells the runtime about itself.
 #[derive(Debug, Clone, Copy)]
 pub struct ServiceSpec {
@@ -173,9 +198,10 @@ where
             ));
         }
         let shm_min_free = ipc::shm_min_free_from_env()?;
-        Ok((settings, domain, name, shm_min_free))
+        let workers = workers_from_env()?;
+        Ok((settings, domain, name, shm_min_free, workers))
     });
-    let (settings, domain, name, shm_min_free) = match loaded {
+    let (settings, domain, name, shm_min_free, workers) = match loaded {
         Ok(v) => v,
         Err(e) => {
             tracing::error!(error = %e, "bad configuration");
@@ -198,7 +224,7 @@ where
     }
 
     let rt = match tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
+        .worker_threads(workers)
         .enable_all()
         .build()
     {
