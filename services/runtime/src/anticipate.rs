@@ -29,6 +29,7 @@
 //! publisher) are ignored; after four such stamps or gaps in a row the estimate
 //! starts over from the newest interval, so a rate change is followed.
 
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 /// Weight of a new observation in the running averages.
@@ -90,6 +91,41 @@ pub struct AnticipationStats {
     pub margin: Duration,
     /// How late the timer wake-ups have come (the window opens that much earlier).
     pub lateness: Duration,
+}
+
+/// A subscriber's anticipation: off until [`Anticipating::set`]. Shared by
+/// `Subscriber` and `FrameSubscriber`; behind a mutex because their receives take
+/// `&self` (never contended: one receiving thread).
+#[derive(Debug, Default)]
+pub(crate) struct Anticipating(Option<Mutex<Anticipation>>);
+
+impl Anticipating {
+    /// On with `max_spin`; zero turns it off.
+    pub(crate) fn set(&mut self, max_spin: Duration) {
+        self.0 = (!max_spin.is_zero()).then(|| Mutex::new(Anticipation::new(max_spin)));
+    }
+
+    /// The state, if on.
+    pub(crate) fn get(&self) -> Option<&Mutex<Anticipation>> {
+        self.0.as_ref()
+    }
+
+    /// Feeds a received sample's send stamp, if on.
+    pub(crate) fn observe(&self, stamp_ns: u64) {
+        if let Some(a) = &self.0 {
+            lock(a).observe(stamp_ns);
+        }
+    }
+
+    /// What it has done, if on.
+    pub(crate) fn stats(&self) -> Option<AnticipationStats> {
+        self.0.as_ref().map(|a| lock(a).stats())
+    }
+}
+
+/// The anticipation state, also after a panic elsewhere (it holds only estimates).
+pub(crate) fn lock(a: &Mutex<Anticipation>) -> MutexGuard<'_, Anticipation> {
+    a.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 impl Anticipation {

@@ -19,11 +19,11 @@ use iceoryx2::prelude::*;
 use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 use tokio::io::unix::AsyncFd;
 
-use crate::anticipate::{Anticipation, AnticipationStats};
+use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::ipc::{
-    ipc_err, recv_anticipating, wait_listener, with_retry, BlockingWait, Bus, IpcError, ListenerFd,
-    Svc, WaitSource,
+    ipc_err, recv_anticipating, time_left, wait_listener, with_retry, BlockingWait, Bus, IpcError,
+    ListenerFd, Svc, WaitSource,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -144,7 +144,7 @@ impl Bus {
             ),
             last_seq: Mutex::new(HashMap::new()),
             warn: Mutex::new(WarnLimiter::default()),
-            anticipation: None,
+            anticipation: Anticipating::default(),
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -258,7 +258,7 @@ pub struct FrameSubscriber {
     last_seq: Mutex<HashMap<(u16, u16), u64>>,
     warn: Mutex<WarnLimiter<&'static str>>,
     /// Set by [`FrameSubscriber::set_anticipate`].
-    anticipation: Option<Mutex<Anticipation>>,
+    anticipation: Anticipating,
     topic: String,
     _bus: Bus,
 }
@@ -379,14 +379,12 @@ impl FrameSubscriber {
     /// within microseconds of its publication instead of one process wake-up later.
     /// See [`crate::ipc::Subscriber::set_anticipate`]; zero turns it off.
     pub fn set_anticipate(&mut self, max_spin: Duration) {
-        self.anticipation = (!max_spin.is_zero()).then(|| Mutex::new(Anticipation::new(max_spin)));
+        self.anticipation.set(max_spin);
     }
 
     /// What [`FrameSubscriber::set_anticipate`] has done; `None` when it is off.
     pub fn anticipation(&self) -> Option<AnticipationStats> {
-        self.anticipation
-            .as_ref()
-            .map(|a| a.lock().unwrap_or_else(|p| p.into_inner()).stats())
+        self.anticipation.stats()
     }
 
     /// Waits on the calling thread, without an async runtime, for the next frame and
@@ -399,7 +397,7 @@ impl FrameSubscriber {
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
-        if let Some(a) = &self.anticipation {
+        if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
                 &self.blocking,
                 &self.listener,
@@ -413,12 +411,8 @@ impl FrameSubscriber {
             if let Some(r) = self.try_recv_with(&mut read)? {
                 return Ok(Some(r));
             }
-            let left = match deadline {
-                None => None,
-                Some(d) => match d.saturating_duration_since(Instant::now()) {
-                    left if left.is_zero() => return Ok(None),
-                    left => Some(left),
-                },
+            let Some(left) = time_left(deadline) else {
+                return Ok(None);
             };
             self.blocking.wait(&self.listener, left, &self.topic)?;
         }
@@ -443,11 +437,7 @@ impl FrameSubscriber {
     fn account(&self, h: &FrameHeader) {
         let h = &h.header;
         self.received.inc();
-        if let Some(a) = &self.anticipation {
-            a.lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .observe(h.stamp_ns);
-        }
+        self.anticipation.observe(h.stamp_ns);
         self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
         let prev = self
             .last_seq

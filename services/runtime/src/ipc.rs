@@ -24,7 +24,7 @@ use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
-use crate::anticipate::{Anticipation, AnticipationStats, Plan};
+use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
@@ -533,7 +533,7 @@ impl Bus {
             last_seq: Mutex::new(Vec::new()),
             spin: Duration::ZERO,
             newest_only: false,
-            anticipation: None,
+            anticipation: Anticipating::default(),
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -722,6 +722,18 @@ fn epoll_timeout(timeout: Option<Duration>) -> EpollTimeout {
     }
 }
 
+/// What is left until `deadline` for a blocking wait: `Some(None)` without a
+/// deadline (wait indefinitely), `None` once it has passed.
+pub(crate) fn time_left(deadline: Option<Instant>) -> Option<Option<Duration>> {
+    match deadline {
+        None => Some(None),
+        Some(d) => match d.saturating_duration_since(Instant::now()) {
+            left if left.is_zero() => None,
+            left => Some(Some(left)),
+        },
+    }
+}
+
 /// Runs one blocking receive of a subscriber with [`Anticipation`] on: `take` tries to
 /// take a sample (and, through the subscriber's accounting, feeds its stamp to
 /// `anticipation`); between tries the thread sleeps, spins or blocks as the
@@ -734,7 +746,7 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
     topic: &str,
     mut take: impl FnMut() -> Result<Option<R>, E>,
 ) -> Result<Option<R>, E> {
-    let lock = || anticipation.lock().unwrap_or_else(|p| p.into_inner());
+    let lock = || anticipate::lock(anticipation);
     let drain = || {
         listener
             .try_wait(|_| {})
@@ -750,12 +762,8 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
         if let Some(r) = take()? {
             return Ok(Some(r));
         }
-        let left = match deadline {
-            None => None,
-            Some(d) => match d.saturating_duration_since(Instant::now()) {
-                left if left.is_zero() => return Ok(None),
-                left => Some(left),
-            },
+        let Some(left) = time_left(deadline) else {
+            return Ok(None);
         };
         let plan = if spun {
             Plan::Block
@@ -910,7 +918,7 @@ pub struct Subscriber<T: Sample> {
     /// Overwritten samples are expected, not lost (see `set_newest_only`).
     newest_only: bool,
     /// Set by [`Subscriber::set_anticipate`].
-    anticipation: Option<Mutex<Anticipation>>,
+    anticipation: Anticipating,
     topic: String,
     _bus: Bus,
 }
@@ -956,11 +964,7 @@ impl<T: Sample> Subscriber<T> {
     fn account(&self, value: &T) {
         let h = value.header();
         self.received.inc();
-        if let Some(a) = &self.anticipation {
-            a.lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .observe(h.stamp_ns);
-        }
+        self.anticipation.observe(h.stamp_ns);
         self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
         let key = (h.service, h.instance);
         let prev = {
@@ -1009,14 +1013,12 @@ impl<T: Sample> Subscriber<T> {
     /// periodic publisher per topic; costs about the window's width of CPU per
     /// sample (measured in `samples-bench`). Zero turns it off. Async receives ignore it.
     pub fn set_anticipate(&mut self, max_spin: Duration) {
-        self.anticipation = (!max_spin.is_zero()).then(|| Mutex::new(Anticipation::new(max_spin)));
+        self.anticipation.set(max_spin);
     }
 
     /// What [`Subscriber::set_anticipate`] has done; `None` when it is off.
     pub fn anticipation(&self) -> Option<AnticipationStats> {
-        self.anticipation
-            .as_ref()
-            .map(|a| a.lock().unwrap_or_else(|p| p.into_inner()).stats())
+        self.anticipation.stats()
     }
 
     /// Polls for up to the configured spin time; `Some` if a sample came.
@@ -1042,7 +1044,7 @@ impl<T: Sample> Subscriber<T> {
     /// `timeout` without a sample; `timeout = None` waits indefinitely.
     pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
         let deadline = timeout.map(|t| Instant::now() + t);
-        if let Some(a) = &self.anticipation {
+        if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
                 &self.blocking,
                 &self.listener,
@@ -1069,15 +1071,8 @@ impl<T: Sample> Subscriber<T> {
                 self.listener.try_wait(|_| {}).map_err(wait)?;
                 continue;
             }
-            let left = match deadline {
-                None => None,
-                Some(d) => {
-                    let left = d.saturating_duration_since(Instant::now());
-                    if left.is_zero() {
-                        return Ok(None);
-                    }
-                    Some(left)
-                }
+            let Some(left) = time_left(deadline) else {
+                return Ok(None);
             };
             self.blocking.wait(&self.listener, left, &self.topic)?;
         }
