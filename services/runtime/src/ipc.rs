@@ -603,25 +603,8 @@ impl BlockingWait {
         timeout: Option<Duration>,
         topic: &str,
     ) -> Result<(), IpcError> {
-        let err = |e: nix::errno::Errno| IpcError::Wait {
-            topic: topic.to_string(),
-            source: e.into(),
-        };
-        let epoll = self.epoll(listener).map_err(err)?;
-        let mut events = [EpollEvent::empty(); 2];
-        let n = match epoll.wait(&mut events, epoll_timeout(timeout)) {
-            Ok(n) => n,
-            Err(nix::errno::Errno::EINTR) => 0,
-            Err(e) => return Err(err(e)),
-        };
-        // A timer left armed by an anticipating wait that an event ended: consume it.
-        if events[..n].iter().any(|e| e.data() == EPOLL_TIMER) {
-            self.consume_timer();
-        }
-        listener
-            .try_wait(|_| {})
-            .map_err(|e| ipc_err("listener wait", topic, e))?;
-        Ok(())
+        let epoll = self.epoll(listener).map_err(wait_err(topic))?;
+        self.wait_events(epoll, listener, timeout, topic).map(drop)
     }
 
     /// Like [`BlockingWait::wait`], but also returns at `wake_at_ns`
@@ -635,10 +618,7 @@ impl BlockingWait {
         timeout: Option<Duration>,
         topic: &str,
     ) -> Result<bool, IpcError> {
-        let err = |e: nix::errno::Errno| IpcError::Wait {
-            topic: topic.to_string(),
-            source: e.into(),
-        };
+        let err = wait_err(topic);
         let epoll = self.epoll(listener).map_err(err)?;
         let timer = match self.timer.get() {
             Some(timer) => timer,
@@ -664,21 +644,33 @@ impl BlockingWait {
                 TimerSetTimeFlags::TFD_TIMER_ABSTIME,
             )
             .map_err(err)?;
+        self.wait_events(epoll, listener, timeout, topic)
+    }
+
+    /// One `epoll_wait`; consumes the listener's notifications if it woke, and the
+    /// timer's expiry (also one left armed by an anticipating wait that an event
+    /// ended). True if the timer fired.
+    fn wait_events(
+        &self,
+        epoll: &Epoll,
+        listener: &Listener<Svc>,
+        timeout: Option<Duration>,
+        topic: &str,
+    ) -> Result<bool, IpcError> {
         let mut events = [EpollEvent::empty(); 2];
         let n = match epoll.wait(&mut events, epoll_timeout(timeout)) {
             Ok(n) => n,
             Err(nix::errno::Errno::EINTR) => 0,
-            Err(e) => return Err(err(e)),
+            Err(e) => return Err(wait_err(topic)(e)),
         };
         let mut timer_fired = false;
         for e in &events[..n] {
-            match e.data() {
-                EPOLL_TIMER => timer_fired = true,
-                _ => {
-                    listener
-                        .try_wait(|_| {})
-                        .map_err(|e| ipc_err("listener wait", topic, e))?;
-                }
+            if e.data() == EPOLL_TIMER {
+                timer_fired = true;
+            } else {
+                listener
+                    .try_wait(|_| {})
+                    .map_err(|e| ipc_err("listener wait", topic, e))?;
             }
         }
         if timer_fired {
@@ -708,6 +700,14 @@ impl BlockingWait {
             // Non-blocking: EAGAIN when another read (or a re-arm) got there first.
             let _ = timer.wait();
         }
+    }
+}
+
+/// A failed wait on `topic`'s event.
+fn wait_err(topic: &str) -> impl Fn(nix::errno::Errno) -> IpcError + Copy + '_ {
+    move |e| IpcError::Wait {
+        topic: topic.to_string(),
+        source: e.into(),
     }
 }
 
