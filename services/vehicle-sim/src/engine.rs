@@ -15,7 +15,7 @@ use std::time::Duration;
 use mavlink::dialects::ardupilotmega::{MavMessage, HOME_POSITION_DATA};
 use mavlink::{MavHeader, MessageData};
 use tokio::sync::mpsc::{self, error::TrySendError};
-use tokio::time::{Instant, MissedTickBehavior};
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use tracing::{debug, info};
 
@@ -48,6 +48,10 @@ pub(crate) const LINK_QUEUE_FRAMES: usize = 512;
 /// After a stall, at most this many physics steps are run at once; the rest of
 /// the lost time is skipped rather than simulated in a burst.
 const MAX_CATCH_UP_STEPS: u64 = 20;
+
+/// While every vehicle is disarmed the engine runs at least this often (physics
+/// steps), even with no telemetry due: 100 ms.
+const IDLE_STEPS: u64 = PHYSICS_HZ as u64 / 10;
 
 /// What the I/O tasks tell the engine.
 #[derive(Debug)]
@@ -150,27 +154,23 @@ impl Engine {
         shutdown: CancellationToken,
     ) {
         let dt = dt();
-        let mut ticker = tokio::time::interval(dt);
-        ticker.set_missed_tick_behavior(MissedTickBehavior::Skip);
         let start = Instant::now();
-        // Wall-clock ticks accounted for (simulated or skipped).
+        // Wall-clock steps accounted for (simulated or skipped).
         let mut wall_steps: u64 = 0;
         loop {
+            let wake = start
+                + Duration::from_micros(self.next_wake_step(wall_steps).saturating_mul(DT_US));
             tokio::select! {
                 biased;
                 () = shutdown.cancelled() => break,
-                _ = ticker.tick() => {
-                    let due = (start.elapsed().as_micros() / dt.as_micros()) as u64;
-                    let n = due.saturating_sub(wall_steps);
-                    if n > MAX_CATCH_UP_STEPS {
-                        debug!(skipped = n - MAX_CATCH_UP_STEPS, "simulation fell behind; skipping time");
-                        stats::add(&self.stats.steps_skipped, n - MAX_CATCH_UP_STEPS);
-                    }
-                    wall_steps = due;
-                    self.tick(n.min(MAX_CATCH_UP_STEPS));
-                }
+                () = tokio::time::sleep_until(wake) => self.catch_up(start, &mut wall_steps),
                 ev = events.recv() => match ev {
-                    Some(ev) => self.on_event(ev),
+                    Some(ev) => {
+                        // The frame acts on the vehicle as it is now, not as it
+                        // was at the last wake.
+                        self.catch_up(start, &mut wall_steps);
+                        self.on_event(ev);
+                    }
                     None => break,
                 },
             }
@@ -181,6 +181,53 @@ impl Engine {
             links = self.vehicles.iter().map(|v| v.links.len()).sum::<usize>(),
             "simulation stopped"
         );
+    }
+
+    /// Step the physics to the wall clock (whole steps), then send what fell due.
+    fn catch_up(&mut self, start: Instant, wall_steps: &mut u64) {
+        let due = (start.elapsed().as_micros() / u128::from(DT_US)) as u64;
+        let n = due.saturating_sub(*wall_steps);
+        if n == 0 {
+            return;
+        }
+        if n > MAX_CATCH_UP_STEPS {
+            debug!(
+                skipped = n - MAX_CATCH_UP_STEPS,
+                "simulation fell behind; skipping time"
+            );
+            stats::add(&self.stats.steps_skipped, n - MAX_CATCH_UP_STEPS);
+        }
+        *wall_steps = due;
+        self.tick(n.min(MAX_CATCH_UP_STEPS));
+    }
+
+    /// The wall-clock step at which the engine must next run on its own (frames
+    /// from links wake it besides). An armed vehicle is stepped every
+    /// [`PHYSICS_HZ`] tick, as before. While every vehicle is disarmed nothing
+    /// needs the steps one by one — the model integrates the same whether its
+    /// steps are taken together or apart — so the engine sleeps until the next
+    /// telemetry falls due on any link, at most [`IDLE_STEPS`] (events the model
+    /// raises, e.g. a status text, go out then). An idle simulator wakes at its
+    /// telemetry rate (50 a second with autopilot-link's defaults), not at 100 Hz.
+    fn next_wake_step(&self, wall_steps: u64) -> u64 {
+        let next = wall_steps + 1;
+        if self.vehicles.iter().any(|v| v.vehicle.armed()) {
+            return next;
+        }
+        let telemetry = self
+            .vehicles
+            .iter()
+            .flat_map(|v| v.links.values())
+            .filter_map(|l| l.streams.next_due())
+            .min()
+            .map(|due| {
+                // Sim time runs behind wall steps by the steps skipped after stalls.
+                let ahead = due.saturating_sub(self.sim_now()).as_micros();
+                wall_steps + u64::try_from(ahead.div_ceil(u128::from(DT_US))).unwrap_or(u64::MAX)
+            });
+        telemetry
+            .unwrap_or(u64::MAX)
+            .clamp(next, wall_steps + IDLE_STEPS)
     }
 
     fn sim_now(&self) -> Duration {
@@ -382,6 +429,48 @@ mod tests {
         }
         assert_ne!(link_id(0, 1), link_id(1, 1));
         assert_eq!(link_id(0, 5), 5, "a single vehicle's ids are unchanged");
+    }
+
+    #[test]
+    #[allow(deprecated)] // MAV_DATA_STREAM_ALL: see streams.rs
+    fn a_disarmed_engine_wakes_for_telemetry_an_armed_one_every_step() {
+        let settings = crate::RawConfig::from_toml("")
+            .and_then(crate::RawConfig::validate)
+            .expect("valid");
+        let mut engine = Engine::new(&settings, Arc::new(SimStats::default()));
+        // No link: nothing due, so the idle bound.
+        assert_eq!(engine.next_wake_step(0), IDLE_STEPS);
+        let (tx, mut rx) = mpsc::channel(LINK_QUEUE_FRAMES);
+        engine.on_event(LinkEvent::Opened {
+            id: link_id(0, 1),
+            peer: "test".into(),
+            tx,
+        });
+        let link = engine.vehicles[0].links.get_mut(&link_id(0, 1)).unwrap();
+        link.streams.request_data_stream(
+            mavlink::dialects::ardupilotmega::MavDataStream::MAV_DATA_STREAM_ALL,
+            0,
+            false,
+            Duration::ZERO,
+        );
+        link.streams.set_interval(
+            mavlink::dialects::ardupilotmega::ATTITUDE_DATA::ID,
+            crate::streams::IntervalRequest::Every(Duration::from_millis(40)),
+            Duration::ZERO,
+        );
+        // Everything is due at once on a new link, then ATTITUDE every 4 steps
+        // (GoPro heartbeat 1 Hz, HEARTBEAT 1 Hz).
+        assert_eq!(engine.next_wake_step(0), 1);
+        engine.tick(1);
+        while rx.try_recv().is_ok() {}
+        assert_eq!(engine.next_wake_step(1), 4, "ATTITUDE at 40 ms");
+        engine.tick(3);
+        assert!(rx.try_recv().is_ok(), "ATTITUDE sent at step 4");
+        assert_eq!(engine.next_wake_step(4), 8);
+        // Sim time behind the wall clock after a stall: still the sim time's due step.
+        assert_eq!(engine.next_wake_step(10), 14);
+        engine.vehicles[0].vehicle.arm(true).expect("force arm");
+        assert_eq!(engine.next_wake_step(4), 5, "armed: every physics step");
     }
 
     #[test]

@@ -141,13 +141,17 @@ impl StreamScheduler {
             IntervalRequest::Default => self.defaults.get(&id).copied().flatten(),
             IntervalRequest::Every(d) => Some(d.max(MIN_INTERVAL)),
         };
-        self.streams.insert(
-            id,
-            Stream {
-                interval,
-                next_due: now,
-            },
-        );
+        // The new rate starts on its grid (see [`next_on_grid`]), so streams of
+        // commensurate rates fall due on the same ticks however their requests
+        // were spread.
+        let next_due = interval.map_or(now, |i| {
+            if on_grid(now, i) {
+                now
+            } else {
+                next_on_grid(now, i)
+            }
+        });
+        self.streams.insert(id, Stream { interval, next_due });
     }
 
     /// Apply a REQUEST_DATA_STREAM (rate 0 or `start == false` stops the group).
@@ -173,6 +177,15 @@ impl StreamScheduler {
         self.streams.get(&id).and_then(|s| s.interval)
     }
 
+    /// When the next message falls due (`None`: nothing is streamed).
+    pub fn next_due(&self) -> Option<Duration> {
+        self.streams
+            .values()
+            .filter(|s| s.interval.is_some())
+            .map(|s| s.next_due)
+            .min()
+    }
+
     /// Message ids due at `now`, in id order (HEARTBEAT first).
     pub fn due(&mut self, now: Duration) -> Vec<u32> {
         let mut out = Vec::new();
@@ -187,15 +200,27 @@ impl StreamScheduler {
             let Some(interval) = s.interval else { continue };
             if now >= s.next_due {
                 out.push(*id);
-                // Keep the long-run rate exact despite tick jitter, but never
-                // burst to catch up after a stall.
-                s.next_due += interval;
-                if s.next_due <= now {
-                    s.next_due = now + interval;
-                }
+                // The next multiple of the interval in sim time: the long-run rate
+                // stays exact, a stall never bursts, and every stream whose
+                // interval divides another's is due on the same ticks as it —
+                // one batch of frames per tick instead of one per stream's phase
+                // (the link's reader wakes once: 50 a second for the usual
+                // 50/10/5/2 Hz set, not ~90).
+                s.next_due = next_on_grid(now, interval);
             }
         }
     }
+}
+
+/// The first multiple of `interval` (counted from sim time zero) after `now`.
+fn next_on_grid(now: Duration, interval: Duration) -> Duration {
+    let i = interval.as_nanos().max(1);
+    let next = (now.as_nanos() / i + 1) * i;
+    Duration::from_nanos(u64::try_from(next).unwrap_or(u64::MAX))
+}
+
+fn on_grid(now: Duration, interval: Duration) -> bool {
+    now.as_nanos().is_multiple_of(interval.as_nanos().max(1))
 }
 
 #[cfg(test)]
@@ -364,6 +389,47 @@ mod tests {
         };
         let mut s = StreamScheduler::new(&off, Duration::ZERO);
         assert_eq!(count(&mut s, id, Duration::ZERO, 5), 0);
+    }
+
+    #[test]
+    fn commensurate_streams_fall_due_on_the_same_ticks_whenever_requested() {
+        let mut s = StreamScheduler::new(&defaults(), Duration::ZERO);
+        s.request_data_stream(MavDataStream::MAV_DATA_STREAM_ALL, 0, false, Duration::ZERO);
+        // Requested on three different ticks, as a link's requests arrive.
+        let ms = Duration::from_millis;
+        s.set_interval(ATTITUDE_DATA::ID, IntervalRequest::Every(ms(20)), ms(30));
+        s.set_interval(
+            GLOBAL_POSITION_INT_DATA::ID,
+            IntervalRequest::Every(ms(100)),
+            ms(40),
+        );
+        s.set_interval(SYS_STATUS_DATA::ID, IntervalRequest::Every(ms(500)), ms(70));
+        let mut ticks_with_frames = 0;
+        let (mut attitude, mut position, mut status) = (0, 0, 0);
+        for tick in 8..108 {
+            let now = ms(10 * tick);
+            let due: Vec<u32> = s
+                .due(now)
+                .into_iter()
+                .filter(|id| *id != HEARTBEAT_DATA::ID)
+                .collect();
+            if due.is_empty() {
+                continue;
+            }
+            ticks_with_frames += 1;
+            assert!(
+                due.contains(&ATTITUDE_DATA::ID),
+                "at {now:?} {due:?} fell due off the 20 ms grid"
+            );
+            attitude += 1;
+            position += usize::from(due.contains(&GLOBAL_POSITION_INT_DATA::ID));
+            status += usize::from(due.contains(&SYS_STATUS_DATA::ID));
+        }
+        // One second (80..1080 ms): 50, 10 and 2 of them, on 50 ticks.
+        assert_eq!(
+            (ticks_with_frames, attitude, position, status),
+            (50, 50, 10, 2)
+        );
     }
 
     #[test]

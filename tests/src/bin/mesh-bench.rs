@@ -199,10 +199,12 @@ mod default_mesh {
         let window = Duration::from_secs(arg("--window-secs", 20));
         let kills = arg("--kills", 10) as usize;
         let restart = list_arg("--restart", "solo-gateway,mqtt-broker,camera");
-        println!(
-            "# whole default mesh (deploy/skymesh.toml), settle {settle:?}, window {window:?}"
-        );
-        {
+        // `--control-only`: skip the whole mesh (A/B runs of the idle cost).
+        let control_only = std::env::args().any(|a| a == "--control-only");
+        if !control_only {
+            println!(
+                "# whole default mesh (deploy/skymesh.toml), settle {settle:?}, window {window:?}"
+            );
             let mut mesh = DefaultMesh::start(&[], kills)?;
             mesh.wait_all_running(Duration::from_secs(90))?;
             std::thread::sleep(settle);
