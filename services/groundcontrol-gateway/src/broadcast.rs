@@ -130,8 +130,13 @@ impl Broadcast {
                 _ = tick.tick() => {}
             }
             let now = Instant::now();
-            if let Some(s) = state.latest()? {
-                *latest = s;
+            // Drained in place (the sample is ~20 KiB; `latest()` would copy it
+            // out of shared memory and again into `latest`).
+            let mut fresh = false;
+            while state.try_recv_with(|s| *latest = *s)?.is_some() {
+                fresh = true;
+            }
+            if fresh {
                 received_at = Some(now);
             }
             let skip = match received_at {
@@ -152,16 +157,15 @@ impl Broadcast {
                 // Nothing to send until the queue publishes again: wait for its next
                 // sample instead of waking every period to find none.
                 let paused = Instant::now();
-                let sample = tokio::select! {
+                tokio::select! {
                     _ = stop.cancelled() => return Ok(()),
-                    r = state.recv() => r?,
+                    r = state.recv_with(|s| *latest = *s) => r?,
                 };
                 // Keep the skip counter what a tick per period would have made it.
                 let missed = paused.elapsed().as_nanos() / self.period.as_nanos().max(1);
                 for _ in 0..missed {
                     metrics.broadcast_skipped(reason);
                 }
-                *latest = sample;
                 received_at = Some(Instant::now());
                 tick.reset_immediately();
                 continue;

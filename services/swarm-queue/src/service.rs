@@ -15,7 +15,6 @@
 //! topic's buffer of 1024) wait for the next tick, so bursts of answers never
 //! overrun the gateway's subscriber buffer.
 
-use skymesh_ipc_types::SwarmState;
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{CancellationToken, IpcError};
 use tokio::time::MissedTickBehavior;
@@ -38,7 +37,6 @@ pub(crate) async fn run_loop(
     let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
     let mut last_tick: Option<u64> = None;
     let mut budget = budget_per_tick;
-    let mut state = Box::new(SwarmState::default());
     loop {
         let step = tokio::select! {
             biased;
@@ -58,7 +56,7 @@ pub(crate) async fn run_loop(
                 }
                 last_tick = Some(now);
                 budget = budget_per_tick;
-                let r = tick(&mut swarm, &mut ports, &mut budget, &mut state, now);
+                let r = tick(&mut swarm, &mut ports, &mut budget, now);
                 let took = monotonic_ns().saturating_sub(now);
                 metrics.tick_seconds.observe(took as f64 / 1e9);
                 if took > period_ns {
@@ -78,7 +76,6 @@ fn tick(
     swarm: &mut Swarm,
     ports: &mut Ports,
     budget: &mut usize,
-    state: &mut SwarmState,
     now: u64,
 ) -> Result<(), IpcError> {
     for (idx, d) in ports.drones.iter().enumerate() {
@@ -94,8 +91,8 @@ fn tick(
     }
     swarm.tick(now);
     publish(swarm, ports, budget)?;
-    swarm.fill_state(now, state);
-    ports.state.publish(*state)?;
+    // Written in place in shared memory: the sample is ~20 KiB.
+    ports.state.publish_with(|out| swarm.fill_state(now, out))?;
     Ok(())
 }
 
