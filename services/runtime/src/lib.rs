@@ -29,6 +29,7 @@ mod service;
 pub mod signals;
 pub mod stats;
 pub mod systemd;
+pub mod timer;
 pub mod warn_limit;
 
 pub use anticipate::AnticipationStats;

@@ -14,10 +14,11 @@ use std::time::Duration;
 
 use mavlink::dialects::ardupilotmega::{MavMessage, HOME_POSITION_DATA};
 use mavlink::{MavHeader, MessageData};
+use skymesh_runtime::timer::Timer;
 use tokio::sync::mpsc::{self, error::TrySendError};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
-use tracing::{debug, info};
+use tracing::{debug, error, info};
 
 use crate::codec::{self, Inbound};
 use crate::config::{Settings, StreamDefaults, PHYSICS_HZ};
@@ -151,6 +152,7 @@ impl Engine {
     pub(crate) async fn run(
         mut self,
         mut events: mpsc::Receiver<LinkEvent>,
+        mut timer: Timer,
         shutdown: CancellationToken,
     ) {
         let dt = dt();
@@ -163,7 +165,14 @@ impl Engine {
             tokio::select! {
                 biased;
                 () = shutdown.cancelled() => break,
-                () = tokio::time::sleep_until(wake) => self.catch_up(start, &mut wall_steps),
+                // A timerfd, not tokio's wheel: see skymesh_runtime::timer.
+                r = timer.sleep_until(wake) => match r {
+                    Ok(()) => self.catch_up(start, &mut wall_steps),
+                    Err(e) => {
+                        error!(error = %e, "simulation timer failed; stopping");
+                        break;
+                    }
+                },
                 ev = events.recv() => match ev {
                     Some(ev) => {
                         // The frame acts on the vehicle as it is now, not as it

@@ -106,8 +106,12 @@ pub async fn run_all(
     let stop = shutdown.child_token();
     let (events_tx, events_rx) = mpsc::channel(EVENT_QUEUE);
     let tracker = TaskTracker::new();
-    let mut engine =
-        tokio::spawn(engine::Engine::new(&settings, stats.clone()).run(events_rx, stop.clone()));
+    let timer = skymesh_runtime::timer::Timer::new().context("creating the simulation timer")?;
+    let mut engine = tokio::spawn(engine::Engine::new(&settings, stats.clone()).run(
+        events_rx,
+        timer,
+        stop.clone(),
+    ));
     let mut io = JoinSet::new();
     for (spec, listener) in specs.iter().zip(listeners) {
         io.spawn(server::serve(
