@@ -135,12 +135,12 @@ pub(crate) async fn run(
     let intrinsics = settings.intrinsics.to_wire();
     let mut raw = vec![0u8; header.frame_len()];
     let mut tracker = PoseTracker::new(settings.mount);
-    let mut ticker = Ticker::new(settings.fps);
+    let mut ticker = Ticker::new(settings.fps)?;
     let mut warn = WarnLimiter::default();
     let mut finished = false;
     let mut frame_seq = 0u64;
     ctx.ready();
-    while ticker.tick(&ctx, &metrics).await.is_some() {
+    while ticker.tick(&ctx, &metrics).await?.is_some() {
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {
             tracker.update_vehicle(&v);

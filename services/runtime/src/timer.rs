@@ -152,6 +152,11 @@ impl Ticker {
         Ok(due)
     }
 
+    /// The next tick comes a period from now (then every period from it).
+    pub fn reset(&mut self) {
+        self.next = Instant::now() + self.period;
+    }
+
     /// The next tick comes at once (then every period from it).
     pub fn reset_immediately(&mut self) {
         self.next = Instant::now();
@@ -234,5 +239,12 @@ mod tests {
             "{gap:?}"
         );
         assert!(Ticker::new(Duration::ZERO).is_err());
+        let before = Instant::now();
+        ticker.reset();
+        let after_reset = ticker.tick().await.unwrap();
+        assert!(after_reset >= before + period && Instant::now() >= after_reset);
+        ticker.reset_immediately();
+        let at_once = Instant::now();
+        assert!(ticker.tick().await.unwrap() <= at_once);
     }
 }
