@@ -63,8 +63,13 @@ pub async fn run_heartbeat(
         out.name = stats_name;
         bus.stats().snapshot_into(out);
     };
-    let mut tick = tokio::time::interval(period);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // A timerfd: on tokio's wheel every tick longer than 64 ms costs a second
+    // wake-up at the wheel's block boundary before its own (see crate::timer).
+    let timer_err = |source: std::io::Error| IpcError::Wait {
+        topic: "the heartbeat timer".to_string(),
+        source,
+    };
+    let mut tick = crate::timer::Ticker::new(period).map_err(timer_err)?;
     let mut last_stats = Instant::now() - STATS_PERIOD;
     let health = |state: ServiceState| ServiceHealth {
         name: FixedStr::new(&name),
@@ -76,7 +81,7 @@ pub async fn run_heartbeat(
     };
     loop {
         tokio::select! {
-            _ = tick.tick() => {}
+            t = tick.tick() => { t.map_err(timer_err)?; }
             _ = stop.cancelled() => break,
         }
         health_pub.publish(health(state.get()))?;
