@@ -5,6 +5,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{topics, FixedStr, ServiceHealth, ServiceState, ServiceStats};
+use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 
 use crate::ipc::{Bus, IpcError};
@@ -15,22 +16,33 @@ pub const DEFAULT_HEARTBEAT: Duration = Duration::from_millis(500);
 /// How often the stats sample is published.
 pub const STATS_PERIOD: Duration = Duration::from_secs(1);
 
-/// The state a service reports in its heartbeat; set by the service, read by the heartbeat task.
+/// The state a service reports in its heartbeat; set by the service, read by the
+/// heartbeat task, which publishes a heartbeat at once when the state changes (so
+/// the supervisor sees `Running` when the service is ready, not a period later).
 #[derive(Debug, Clone)]
-pub struct HealthState(Arc<AtomicU8>);
+pub struct HealthState {
+    state: Arc<AtomicU8>,
+    changed: Arc<Notify>,
+}
 
 impl Default for HealthState {
     fn default() -> Self {
-        HealthState(Arc::new(AtomicU8::new(ServiceState::Starting.to_wire())))
+        HealthState {
+            state: Arc::new(AtomicU8::new(ServiceState::Starting.to_wire())),
+            changed: Arc::new(Notify::new()),
+        }
     }
 }
 
 impl HealthState {
     pub fn set(&self, state: ServiceState) {
-        self.0.store(state.to_wire(), Ordering::Relaxed);
+        if self.state.swap(state.to_wire(), Ordering::Relaxed) != state.to_wire() {
+            // A stored permit if the heartbeat task is not waiting right now.
+            self.changed.notify_one();
+        }
     }
     pub fn get(&self) -> ServiceState {
-        ServiceState::try_from(self.0.load(Ordering::Relaxed)).unwrap_or(ServiceState::Running)
+        ServiceState::try_from(self.state.load(Ordering::Relaxed)).unwrap_or(ServiceState::Running)
     }
 }
 
@@ -82,6 +94,7 @@ pub async fn run_heartbeat(
     loop {
         tokio::select! {
             t = tick.tick() => { t.map_err(timer_err)?; }
+            () = state.changed.notified() => {}
             _ = stop.cancelled() => break,
         }
         health_pub.publish(health(state.get()))?;

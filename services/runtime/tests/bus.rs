@@ -328,3 +328,52 @@ fn anticipating_receive_takes_a_periodic_stream_in_order_and_times_out() {
     sub.set_anticipate(Duration::ZERO);
     assert!(sub.anticipation().is_none());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_state_change_is_heartbeated_at_once_not_a_period_later() {
+    use skymesh_ipc_types::{ServiceHealth, ServiceState};
+    use skymesh_runtime::health::{run_heartbeat, HealthState};
+    use tokio_util::sync::CancellationToken;
+
+    let d = domain("h");
+    let service = Bus::open(&d, "hb-svc", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let watcher = Bus::open(&d, "hb-watch", ServiceId::Tool, 1, Stats::new()).unwrap();
+    let mut health = watcher
+        .subscriber::<ServiceHealth>(&topics::service_health(service.name()))
+        .unwrap();
+    let state = HealthState::default();
+    let stop = CancellationToken::new();
+    // A period far longer than the test may take.
+    let task = tokio::spawn(run_heartbeat(
+        service.clone(),
+        state.clone(),
+        Duration::from_secs(60),
+        stop.clone(),
+    ));
+    let first = tokio::time::timeout(Duration::from_secs(5), health.recv())
+        .await
+        .expect("first heartbeat at once")
+        .unwrap();
+    assert_eq!(
+        ServiceState::try_from(first.state),
+        Ok(ServiceState::Starting)
+    );
+    state.set(ServiceState::Running);
+    let next = tokio::time::timeout(Duration::from_secs(5), health.recv())
+        .await
+        .expect("the change is published without waiting for the 60 s tick")
+        .unwrap();
+    assert_eq!(
+        ServiceState::try_from(next.state),
+        Ok(ServiceState::Running)
+    );
+    // Setting the same state again publishes nothing extra.
+    state.set(ServiceState::Running);
+    assert!(health
+        .recv_timeout(Duration::from_millis(200))
+        .await
+        .unwrap()
+        .is_none());
+    stop.cancel();
+    task.await.unwrap().unwrap();
+}
