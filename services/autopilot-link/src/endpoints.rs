@@ -11,7 +11,7 @@
 //! sends it there itself, so the autopilot's telemetry costs no tokio wake-up per
 //! frame; the task only wakes to receive. Either way a slow or dead endpoint loses
 //! frames (counted, `reason="queue_full"`: queue or socket buffer full) and never
-//! holds up the autopilot's reader thread or another endpoint. Frames towards the
+//! holds up the autopilot's reader or another endpoint. Frames towards the
 //! autopilot go into the link's own bounded forward queue the same way.
 //!
 //! | scheme | socket | peers |

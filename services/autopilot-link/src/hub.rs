@@ -2,9 +2,9 @@
 //! the decisions of [`crate::router`], without ever waiting (bounded queues or
 //! non-blocking UDP sends, drop and count), and the router's metrics.
 //!
-//! Frames for a UDP endpoint are sent by the thread that routes them (the link's
-//! reader thread for the autopilot's telemetry) with a non-blocking `send_to` on
-//! the endpoint's socket ([`UdpSink`]): no queue and no tokio wake-up per frame.
+//! Frames for a UDP endpoint are sent by whoever routes them (the link's reader
+//! for the autopilot's telemetry) with a non-blocking `send_to` on the endpoint's
+//! socket ([`UdpSink`]): no queue and no tokio wake-up per frame.
 //! TCP endpoints keep a bounded queue drained by their task.
 //!
 //! | metric | labels |

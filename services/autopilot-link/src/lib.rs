@@ -213,7 +213,7 @@ pub async fn run_with_endpoints(
     let mut svc = service::Service::new(settings, lifecycle, metrics, audit, ports, vision_parts);
     let result = svc.run(&mut events, &shutdown).await;
     link_stop.cancel();
-    // The reader thread may be waiting for room in the event channel: close it.
+    // A serial reader thread may be waiting for room in the event channel: close it.
     drop(events);
     if let Err(e) = link_task.await {
         tracing::warn!(error = %e, "link task failed");

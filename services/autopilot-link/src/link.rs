@@ -1,16 +1,18 @@
 //! The MAVLink connection: open, read, write, reconnect.
 //!
-//! Each open connection gets two blocking threads (tokio's blocking pool) over the
-//! raw byte transport of `transport`: a reader that splits the bytes into
-//! frames ([`crate::frame`]), hands every frame to the router [`Hub`] (byte for
-//! byte, to the endpoints) and decodes the ones the dialect knows into the
-//! service's [`LinkEvent`] channel; and a writer that drains the [`Outbox`]:
-//! our own messages (queued through [`LinkWriter`], serialised with our header and
-//! sequence) before frames the router forwards from endpoints, each kind bounded
-//! on its own so ground-station traffic can never crowd out our commands. The
-//! reader polls a stop flag at least every [`POLL`], so a shutdown or a reconnect
-//! never waits on a blocked read; the writer sleeps until there is something to
-//! write or the outbox is closed (which every stop does).
+//! Each open connection, over the raw byte transport of `transport`, gets a reader
+//! that splits the bytes into frames ([`crate::frame`]), hands every frame to the
+//! router [`Hub`] (byte for byte, to the endpoints) and decodes the ones the
+//! dialect knows into the service's [`LinkEvent`] channel; and a writer thread
+//! (tokio's blocking pool) that drains the [`Outbox`]: our own messages (queued
+//! through [`LinkWriter`], serialised with our header and sequence) before frames
+//! the router forwards from endpoints, each kind bounded on its own so
+//! ground-station traffic can never crowd out our commands. A TCP or UDP socket
+//! is read on the runtime (tokio's reactor says when it is readable: one wake-up
+//! per telemetry batch, on the thread that also runs the service); a serial port
+//! by a blocking thread that polls a stop flag at least every [`POLL`], so a
+//! shutdown or a reconnect never waits on a blocked read. The writer sleeps until
+//! there is something to write or the outbox is closed (which every stop does).
 //!
 //! COMMAND_ACKs that answer an endpoint's command (decided by the
 //! [`AckLedger`], fed by the writer) are forwarded but not given to the service.
@@ -22,14 +24,18 @@
 //! reconnects; only this module knows about connections.
 
 use std::collections::VecDeque;
+use std::future::Future;
 use std::io;
 use std::net::TcpListener;
+use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::{MavHeader, Message};
+use tokio::io::unix::AsyncFd;
+use tokio::io::Interest;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
@@ -327,30 +333,50 @@ async fn serve(
     };
     let me = (config.system_id, config.component_id);
     let ledger = Arc::new(Mutex::new(AckLedger::new(me)));
-    let mut reader = {
-        let (events, metrics, hub, ledger, stop) = (
-            events.clone(),
-            metrics.clone(),
-            hub.clone(),
-            ledger.clone(),
-            stop.clone(),
-        );
-        let silence = config
-            .silence_reconnect
-            .filter(|_| config.endpoint.is_stream());
-        let mut reader_half = reader;
-        tokio::task::spawn_blocking(move || {
-            read_loop(
-                &mut reader_half,
-                silence,
-                &events,
-                &metrics,
-                &hub,
-                &ledger,
-                &stop,
-            )
-        })
-    };
+    let silence = config
+        .silence_reconnect
+        .filter(|_| config.endpoint.is_stream());
+    // A socket is read here, on the runtime; a serial port by a blocking thread.
+    let (mut reader, reader_thread): (Pin<Box<dyn Future<Output = String> + Send + '_>>, bool) =
+        match reader.into_socket() {
+            Ok(socket) => {
+                let ledger = ledger.clone();
+                (
+                    Box::pin(async move {
+                        read_socket(socket, silence, events, metrics, hub, &ledger).await
+                    }),
+                    false,
+                )
+            }
+            Err(mut serial) => {
+                let (events, metrics, hub, ledger, stop) = (
+                    events.clone(),
+                    metrics.clone(),
+                    hub.clone(),
+                    ledger.clone(),
+                    stop.clone(),
+                );
+                let thread = tokio::task::spawn_blocking(move || {
+                    read_loop(
+                        &mut serial,
+                        silence,
+                        &events,
+                        &metrics,
+                        &hub,
+                        &ledger,
+                        &stop,
+                    )
+                });
+                (
+                    Box::pin(async move {
+                        thread
+                            .await
+                            .unwrap_or_else(|e| format!("link thread failed: {e}"))
+                    }),
+                    true,
+                )
+            }
+        };
     let mut writer = {
         let (metrics, hub, stop, outbox) =
             (metrics.clone(), hub.clone(), stop.clone(), outbox.clone());
@@ -377,14 +403,15 @@ async fn serve(
         r.unwrap_or_else(|e| format!("link thread failed: {e}"))
     };
     let (reason, reader_done, writer_done) = tokio::select! {
-        r = &mut reader => (joined(r), true, false),
+        r = &mut reader => (r, true, false),
         r = &mut writer => (joined(r), false, true),
         _ = shutdown.cancelled() => ("shutdown".to_string(), false, false),
     };
     drop(guard);
-    // The reader sees the flag within POLL, the writer at once (closed outbox). The reader may be waiting for room in
-    // the event channel; the service keeps draining it until it drops the receiver.
-    if !reader_done {
+    // A reader thread sees the flag within POLL, the writer at once (closed outbox).
+    // The reader thread may be waiting for room in the event channel; the service
+    // keeps draining it until it drops the receiver. A socket reader just stops here.
+    if !reader_done && reader_thread {
         let _ = reader.await;
     }
     if !writer_done {
@@ -412,7 +439,61 @@ fn lock_ledger(ledger: &Mutex<AckLedger>) -> MutexGuard<'_, AckLedger> {
     ledger.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// Reads until the transport fails, the stop flag is set or the service is gone.
+/// What the reader does with the bytes it read, however it waited for them: split
+/// them into frames, route every frame to the endpoints, and decode the ones for
+/// the service.
+struct Intake<'a> {
+    parser: FrameParser,
+    last_message: Instant,
+    metrics: &'a Metrics,
+    hub: &'a Hub,
+    ledger: &'a Mutex<AckLedger>,
+    /// Decoded messages of the last read, handed to the service in one go after
+    /// every frame of the read was routed (so a batch of telemetry wakes the
+    /// service once, not once per message with routing in between).
+    out: Vec<(MavHeader, MavMessage)>,
+}
+
+impl<'a> Intake<'a> {
+    fn new(metrics: &'a Metrics, hub: &'a Hub, ledger: &'a Mutex<AckLedger>) -> Self {
+        Intake {
+            parser: FrameParser::new(),
+            last_message: Instant::now(),
+            metrics,
+            hub,
+            ledger,
+            out: Vec::new(),
+        }
+    }
+
+    /// Takes one read; the messages for the service are then in `self.out`.
+    fn take(&mut self, bytes: &[u8], datagram: bool) {
+        self.parser.push(bytes);
+        while let Some(frame) = self.parser.next_frame() {
+            self.last_message = Instant::now();
+            self.hub.from_autopilot(&frame);
+            if let Some(msg) = decode_for_service(&frame, self.metrics, self.ledger) {
+                self.out.push((frame.header(), msg));
+            }
+        }
+        if datagram {
+            self.parser.end_datagram();
+        }
+        let bad = self.parser.take_malformed();
+        if bad > 0 {
+            self.hub.autopilot_malformed(bad);
+        }
+    }
+
+    fn silent_for(&self, silence: Option<Duration>) -> Option<String> {
+        let silence = silence?;
+        (self.last_message.elapsed() >= silence)
+            .then(|| format!("no MAVLink received for {silence:?}"))
+    }
+}
+
+/// Reads a serial port until it fails, the stop flag is set or the service is gone
+/// (a blocking thread; sockets are read by [`read_socket`]).
 fn read_loop(
     reader: &mut transport::Reader,
     silence: Option<Duration>,
@@ -423,60 +504,107 @@ fn read_loop(
     stop: &AtomicBool,
 ) -> String {
     let mut buf = vec![0u8; READ_BUFFER];
-    let mut parser = FrameParser::new();
-    let mut last_message = Instant::now();
+    let mut intake = Intake::new(metrics, hub, ledger);
     while !stop.load(Ordering::Relaxed) {
-        let (n, datagram) = match reader.read(&mut buf) {
-            Ok(Received::Stream(n)) => (n, false),
-            Ok(Received::Datagram(n)) => (n, true),
+        match reader.read(&mut buf) {
+            Ok(Received::Stream(n)) => intake.take(&buf[..n], false),
+            Ok(Received::Datagram(n)) => intake.take(&buf[..n], true),
             Ok(Received::Idle) => {
-                if let Some(silence) = silence {
-                    if last_message.elapsed() >= silence {
-                        return format!("no MAVLink received for {silence:?}");
-                    }
+                if let Some(reason) = intake.silent_for(silence) {
+                    return reason;
                 }
                 continue;
             }
             Ok(Received::Closed) => return "closed by the other end".to_string(),
             Err(e) => return format!("read failed: {e}"),
-        };
-        parser.push(&buf[..n]);
-        while let Some(frame) = parser.next_frame() {
-            last_message = Instant::now();
-            hub.from_autopilot(&frame);
-            if !deliver(&frame, events, metrics, ledger) {
+        }
+        for (header, msg) in intake.out.drain(..) {
+            if events
+                .blocking_send(LinkEvent::Message(header, msg))
+                .is_err()
+            {
                 return "service stopped".to_string();
             }
-        }
-        if datagram {
-            parser.end_datagram();
-        }
-        let bad = parser.take_malformed();
-        if bad > 0 {
-            hub.autopilot_malformed(bad);
         }
     }
     "stopped".to_string()
 }
 
-/// Decodes a frame from the autopilot for the service. False once the service is gone.
-fn deliver(
-    frame: &RawFrame,
+/// Reads a TCP or UDP socket from tokio's reactor until it fails or the service is
+/// gone (ends early when dropped). Compared with a reader thread, a datagram costs
+/// one wake-up of the runtime's thread, which then also runs the service, instead
+/// of the reader thread's wake-up plus the one it hands the messages to.
+async fn read_socket(
+    socket: transport::SocketReader,
+    silence: Option<Duration>,
     events: &mpsc::Sender<LinkEvent>,
     metrics: &Metrics,
+    hub: &Hub,
     ledger: &Mutex<AckLedger>,
-) -> bool {
-    let id = frame.message_id();
-    if message_info(id).is_none() {
-        // Not in our dialect: forwarded to the endpoints, nothing for us.
-        return true;
+) -> String {
+    // `AsyncFd::new` is deprecated because it cannot prove the descriptor stays open
+    // while registered; here the `AsyncFd` owns the socket, so it does.
+    #[allow(deprecated)]
+    let mut fd = match AsyncFd::with_interest(socket, Interest::READABLE) {
+        Ok(fd) => fd,
+        Err(e) => return format!("cannot wait on the socket: {e}"),
+    };
+    let mut buf = vec![0u8; READ_BUFFER];
+    let mut intake = Intake::new(metrics, hub, ledger);
+    // Looked at once per `silence` (not re-armed per message).
+    let far = Duration::from_secs(86_400 * 365);
+    let check = tokio::time::sleep(silence.unwrap_or(far));
+    tokio::pin!(check);
+    loop {
+        let mut ready = tokio::select! {
+            r = fd.readable_mut() => match r {
+                Ok(guard) => guard,
+                Err(e) => return format!("waiting on the socket failed: {e}"),
+            },
+            () = &mut check => {
+                if let Some(reason) = intake.silent_for(silence) {
+                    return reason;
+                }
+                let next = intake.last_message + silence.unwrap_or(far);
+                check.as_mut().reset(next.into());
+                continue;
+            }
+        };
+        match ready.get_inner_mut().read_now(&mut buf) {
+            Ok(Received::Stream(n)) => intake.take(&buf[..n], false),
+            Ok(Received::Datagram(n)) => intake.take(&buf[..n], true),
+            Ok(Received::Idle) => {
+                ready.clear_ready();
+                continue;
+            }
+            Ok(Received::Closed) => return "closed by the other end".to_string(),
+            Err(e) => return format!("read failed: {e}"),
+        }
+        drop(ready);
+        for (header, msg) in intake.out.drain(..) {
+            if events.send(LinkEvent::Message(header, msg)).await.is_err() {
+                return "service stopped".to_string();
+            }
+        }
     }
+}
+
+/// Decodes a frame from the autopilot for the service: `None` for frames that are
+/// not for it (not in our dialect, unparsable, an endpoint's COMMAND_ACK).
+fn decode_for_service(
+    frame: &RawFrame,
+    metrics: &Metrics,
+    ledger: &Mutex<AckLedger>,
+) -> Option<MavMessage> {
+    let id = frame.message_id();
+    // Not in our dialect: forwarded to the endpoints, nothing for us.
+    message_info(id)?;
     let msg = match frame.decode() {
         Ok(msg) => msg,
         Err(e) => {
             metrics.parse_errors.inc();
             tracing::debug!(error = %e, message_id = id, "unparsable MAVLink frame");
-            return true;
+            return None;
         }
     };
     metrics.received(msg.message_name());
@@ -491,12 +619,10 @@ fn deliver(
                 ?target,
                 "COMMAND_ACK for a router endpoint; not ours"
             );
-            return true;
+            return None;
         }
     }
-    events
-        .blocking_send(LinkEvent::Message(frame.header(), msg))
-        .is_ok()
+    Some(msg)
 }
 
 /// What the writer thread needs besides the transport.
@@ -721,6 +847,117 @@ mod tests {
                 next(&mut rx).await,
                 LinkEvent::Disconnected { .. }
             ));
+        }
+        shutdown.cancel();
+        tokio::time::timeout(Duration::from_secs(5), task)
+            .await
+            .unwrap()
+            .unwrap();
+    }
+
+    fn frame_from_autopilot(sequence: u8) -> RawFrame {
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence,
+        };
+        RawFrame::encode(header, &heartbeat())
+    }
+
+    /// A TCP autopilot that stops talking but keeps the socket open is dropped after
+    /// `silence_reconnect`, and not while it talks (the check is re-armed by every
+    /// message, not once from the connect).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_silent_tcp_autopilot_is_dropped_after_the_silence_and_not_before() {
+        use std::io::Write;
+        let server = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = server.local_addr().unwrap().port();
+        let shutdown = CancellationToken::new();
+        let mut cfg = config(Endpoint::TcpOut {
+            host: "127.0.0.1".into(),
+            port,
+        });
+        let silence = Duration::from_millis(800);
+        cfg.silence_reconnect = Some(silence);
+        let (mut rx, task) = spawn(cfg, Metrics::new(&Stats::new()), hub(), shutdown.clone());
+        let talking = 20u8; // × 100 ms: well past the silence
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        let peer = std::thread::spawn(move || {
+            let (mut stream, _) = server.accept().unwrap();
+            for seq in 0..talking {
+                stream
+                    .write_all(frame_from_autopilot(seq).as_bytes())
+                    .unwrap();
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            // Silent from here, with the socket open until the test is done.
+            let _ = done_rx.recv_timeout(Duration::from_secs(30));
+            drop(stream);
+        });
+        assert!(matches!(next(&mut rx).await, LinkEvent::Connected(_)));
+        for seq in 0..talking {
+            match next(&mut rx).await {
+                LinkEvent::Message(h, _) => assert_eq!(h.sequence, seq),
+                other => panic!("message {seq} expected while the peer talks, got {other:?}"),
+            }
+        }
+        let quiet_since = Instant::now();
+        let LinkEvent::Disconnected { reason } = next(&mut rx).await else {
+            panic!("expected Disconnected")
+        };
+        assert!(reason.contains("no MAVLink received"), "{reason}");
+        // From the last message (sent ~100 ms before we noted the time).
+        assert!(quiet_since.elapsed() + Duration::from_millis(150) >= silence);
+        done_tx.send(()).unwrap();
+        peer.join().unwrap();
+        shutdown.cancel();
+        tokio::time::timeout(Duration::from_secs(5), task)
+            .await
+            .unwrap()
+            .unwrap();
+    }
+
+    /// `udpin`: we bind, the autopilot speaks first, and what we send goes to the
+    /// last address the autopilot spoke from.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn udpin_replies_go_to_the_last_sender() {
+        let addr = {
+            let probe = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+            probe.local_addr().unwrap()
+        };
+        let shutdown = CancellationToken::new();
+        let (mut rx, task) = spawn(
+            config(Endpoint::UdpIn(addr)),
+            Metrics::new(&Stats::new()),
+            hub(),
+            shutdown.clone(),
+        );
+        let LinkEvent::Connected(writer) = next(&mut rx).await else {
+            panic!("expected Connected")
+        };
+        for (round, seq) in [(0, 7u8), (1, 9u8)] {
+            let autopilot = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+            autopilot
+                .set_read_timeout(Some(Duration::from_secs(10)))
+                .unwrap();
+            autopilot
+                .send_to(frame_from_autopilot(seq).as_bytes(), addr)
+                .unwrap();
+            let LinkEvent::Message(h, m) = next(&mut rx).await else {
+                panic!("expected a message in round {round}")
+            };
+            assert_eq!((h.system_id, h.sequence), (1, seq));
+            assert_eq!(m, heartbeat());
+            writer.send(heartbeat()).unwrap();
+            let mut buf = [0u8; 512];
+            let n = autopilot.recv(&mut buf).expect("our reply at the sender");
+            let mut parser = FrameParser::new();
+            parser.push(&buf[..n]);
+            let frame = parser.next_frame().expect("a whole frame");
+            assert_eq!(
+                (frame.header().system_id, frame.header().component_id),
+                (1, 191)
+            );
         }
         shutdown.cancel();
         tokio::time::timeout(Duration::from_secs(5), task)

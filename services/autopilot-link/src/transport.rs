@@ -1,13 +1,17 @@
-//! The autopilot's byte transports (blocking): TCP, UDP and serial, each split into
-//! a reading and a writing half for the link's reader and writer threads.
+//! The autopilot's byte transports: TCP, UDP and serial, each split into a reading
+//! and a writing half. The writing half is used by the link's writer thread
+//! (blocking); a socket's reading half is waited on in tokio's reactor
+//! ([`SocketReader`]: one wake-up per arriving datagram, on the thread that then
+//! handles it), a serial port's by the link's reader thread (blocking).
 //!
 //! Raw bytes rather than the `mavlink` crate's connections, because the router
 //! forwards frames byte for byte, including message ids the crate's dialect does
 //! not know (its reader drops those). Every read returns within [`POLL`] so the
 //! threads see their stop flag.
 
-use std::io::{self, Read, Write};
+use std::io::{self, IoSliceMut, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs, UdpSocket};
+use std::os::fd::{AsRawFd, RawFd};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -92,6 +96,88 @@ impl Reader {
     fn is_udp(&self) -> bool {
         matches!(self, Reader::Udp { .. })
     }
+
+    /// The socket transports, to be read from tokio's reactor; a serial port (read
+    /// by a blocking thread) is handed back.
+    pub fn into_socket(self) -> Result<SocketReader, Reader> {
+        match self {
+            Reader::Tcp(s) => Ok(SocketReader::Tcp(s)),
+            Reader::Udp { socket, reply_to } => Ok(SocketReader::Udp { socket, reply_to }),
+            serial @ Reader::Serial(_) => Err(serial),
+        }
+    }
+}
+
+/// A socket's reading half, read without blocking (`MSG_DONTWAIT`) when tokio's
+/// reactor says it is readable. The socket itself stays in blocking mode: the
+/// file description is shared with the writer thread's half, whose blocking
+/// writes (with their timeout) must not start failing with `WouldBlock`.
+#[derive(Debug)]
+pub enum SocketReader {
+    Tcp(TcpStream),
+    Udp {
+        socket: UdpSocket,
+        /// `udpin`: remember who spoke last, replies go there.
+        reply_to: Option<Destination>,
+    },
+}
+
+impl AsRawFd for SocketReader {
+    fn as_raw_fd(&self) -> RawFd {
+        match self {
+            SocketReader::Tcp(s) => s.as_raw_fd(),
+            SocketReader::Udp { socket, .. } => socket.as_raw_fd(),
+        }
+    }
+}
+
+impl SocketReader {
+    /// Reads what has arrived without waiting: one datagram, or what the stream
+    /// holds up to `buf`'s size; [`Received::Idle`] when nothing has.
+    pub fn read_now(&mut self, buf: &mut [u8]) -> io::Result<Received> {
+        use nix::errno::Errno;
+        use nix::sys::socket::{self, MsgFlags, SockaddrStorage};
+        let fd = self.as_raw_fd();
+        loop {
+            let r = match self {
+                SocketReader::Tcp(_) => socket::recv(fd, buf, MsgFlags::MSG_DONTWAIT).map(|n| {
+                    if n == 0 {
+                        Received::Closed
+                    } else {
+                        Received::Stream(n)
+                    }
+                }),
+                SocketReader::Udp { reply_to, .. } => {
+                    let mut iov = [IoSliceMut::new(buf)];
+                    socket::recvmsg::<SockaddrStorage>(fd, &mut iov, None, MsgFlags::MSG_DONTWAIT)
+                        .map(|m| {
+                            if let (Some(dest), Some(from)) =
+                                (reply_to, m.address.as_ref().and_then(std_addr))
+                            {
+                                *lock(dest) = Some(from);
+                            }
+                            Received::Datagram(m.bytes)
+                        })
+                }
+            };
+            return match r {
+                Ok(received) => Ok(received),
+                Err(Errno::EAGAIN) => Ok(Received::Idle),
+                Err(Errno::EINTR) => continue,
+                // ICMP port unreachable from a peer that is not listening (yet): not
+                // fatal, and a datagram may be queued behind it.
+                Err(Errno::ECONNREFUSED) if matches!(self, SocketReader::Udp { .. }) => continue,
+                Err(e) => Err(io::Error::from(e)),
+            };
+        }
+    }
+}
+
+fn std_addr(a: &nix::sys::socket::SockaddrStorage) -> Option<SocketAddr> {
+    if let Some(v4) = a.as_sockaddr_in() {
+        return Some(SocketAddr::V4((*v4).into()));
+    }
+    a.as_sockaddr_in6().map(|v6| SocketAddr::V6((*v6).into()))
 }
 
 /// The writing half.
