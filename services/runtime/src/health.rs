@@ -59,6 +59,11 @@ pub fn heartbeat_period_from_env() -> Duration {
 /// Publishes `ServiceHealth` every `period` and `ServiceStats` every second until
 /// `stop` is cancelled, then one last heartbeat saying `Stopping`. Pings the systemd
 /// watchdog with each heartbeat, so a hung runtime stops both.
+///
+/// Only a heartbeat that says something new (the first, a changed state,
+/// `Stopping`) wakes the subscribers; the periodic ones and the stats are published
+/// quietly, for the supervisor to drain on its own clock (a wake-up per heartbeat
+/// of every service cost it 30 a second).
 pub async fn run_heartbeat(
     bus: Bus,
     state: HealthState,
@@ -91,22 +96,28 @@ pub async fn run_heartbeat(
         period_ms: period.as_millis() as u32,
         ..Default::default()
     };
+    let mut told: Option<ServiceState> = None;
     loop {
         tokio::select! {
             t = tick.tick() => { t.map_err(timer_err)?; }
             () = state.changed.notified() => {}
             _ = stop.cancelled() => break,
         }
-        health_pub.publish(health(state.get()))?;
+        let now = state.get();
+        if told.replace(now) == Some(now) {
+            health_pub.publish_quiet(health(now))?;
+        } else {
+            health_pub.publish(health(now))?;
+        }
         if watchdog.is_some() {
             systemd::notify_watchdog();
         }
         if last_stats.elapsed() >= STATS_PERIOD {
             last_stats = Instant::now();
-            stats_pub.publish_with(snapshot)?;
+            stats_pub.publish_with_quiet(snapshot)?;
         }
     }
-    let _ = stats_pub.publish_with(snapshot);
+    let _ = stats_pub.publish_with_quiet(snapshot);
     let _ = health_pub.publish(health(ServiceState::Stopping));
     Ok(())
 }

@@ -849,7 +849,19 @@ impl<T: Sample> core::fmt::Debug for Publisher<T> {
 impl<T: Sample> Publisher<T> {
     /// Stamps the header (sequence, monotonic time, publisher id), sends, and wakes
     /// the subscribers. Returns the sequence number used.
-    pub fn publish(&mut self, mut sample: T) -> Result<u64, IpcError> {
+    pub fn publish(&mut self, sample: T) -> Result<u64, IpcError> {
+        self.send(sample, true)
+    }
+
+    /// Like [`Publisher::publish`] but without waking anyone: for samples the
+    /// subscribers look at on their own schedule (a periodic heartbeat the
+    /// supervisor drains once a second), which would otherwise cost each of them a
+    /// wake-up per sample.
+    pub fn publish_quiet(&mut self, sample: T) -> Result<u64, IpcError> {
+        self.send(sample, false)
+    }
+
+    fn send(&mut self, mut sample: T, wake: bool) -> Result<u64, IpcError> {
         self.seq += 1;
         let h = sample.header_mut();
         h.seq = self.seq;
@@ -859,9 +871,15 @@ impl<T: Sample> Publisher<T> {
         self.port
             .send_copy(sample)
             .map_err(|e| ipc_err("send", &self.topic, e))?;
-        self.notifier
-            .notify()
-            .map_err(|e| ipc_err("notify", &self.topic, e))?;
+        self.sent(wake)
+    }
+
+    fn sent(&mut self, wake: bool) -> Result<u64, IpcError> {
+        if wake {
+            self.notifier
+                .notify()
+                .map_err(|e| ipc_err("notify", &self.topic, e))?;
+        }
         self.published.inc();
         Ok(self.seq)
     }
@@ -870,6 +888,16 @@ impl<T: Sample> Publisher<T> {
     /// memory (starting from `T::default()`): for large samples (the stats sample is
     /// ~130 KiB) that must not be copied through the stack.
     pub fn publish_with(&mut self, fill: impl FnOnce(&mut T)) -> Result<u64, IpcError> {
+        self.send_with(fill, true)
+    }
+
+    /// [`Publisher::publish_with`] without waking anyone (see
+    /// [`Publisher::publish_quiet`]).
+    pub fn publish_with_quiet(&mut self, fill: impl FnOnce(&mut T)) -> Result<u64, IpcError> {
+        self.send_with(fill, false)
+    }
+
+    fn send_with(&mut self, fill: impl FnOnce(&mut T), wake: bool) -> Result<u64, IpcError> {
         let mut sample = self
             .port
             .loan()
@@ -883,11 +911,7 @@ impl<T: Sample> Publisher<T> {
         h.service = self.service;
         h.instance = self.instance;
         sample.send().map_err(|e| ipc_err("send", &self.topic, e))?;
-        self.notifier
-            .notify()
-            .map_err(|e| ipc_err("notify", &self.topic, e))?;
-        self.published.inc();
-        Ok(self.seq)
+        self.sent(wake)
     }
 
     pub fn topic(&self) -> &str {

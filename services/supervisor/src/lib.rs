@@ -214,7 +214,12 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         .context("joining the mesh's iceoryx2 domain")?;
     let watch_stop = CancellationToken::new();
     let watchers = TaskTracker::new();
-    monitor::spawn_watchers(&bus, &mesh, &watch_stop, &watchers)
+    let rule = LivenessRule {
+        period: settings.heartbeat,
+        missed: settings.missed_heartbeats,
+        startup_timeout: settings.startup_timeout,
+    };
+    monitor::spawn_watchers(&bus, &mesh, rule, &watch_stop, &watchers)
         .context("subscribing to service heartbeats")?;
 
     let http_stop = CancellationToken::new();
@@ -233,11 +238,6 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
             .with_context(|| format!("writing status file {}", f.display()))?;
     }
 
-    let rule = LivenessRule {
-        period: settings.heartbeat,
-        missed: settings.missed_heartbeats,
-        startup_timeout: settings.startup_timeout,
-    };
     let mut supervisors = Vec::new();
     if monitor_only {
         watchers.spawn(observe(

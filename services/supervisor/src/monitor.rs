@@ -1,14 +1,21 @@
 //! Heartbeats and stats from the bus, and what they say about a service's liveness.
 //!
-//! One task per service waits on its `ServiceHealth` and `ServiceStats` topics (event
-//! driven, no polling) and writes what arrives into the shared [`Mesh`]. The rules that
-//! turn "last heartbeat at t" into hung / alive / stale are pure functions below.
+//! One task per service writes what arrives on its `ServiceHealth` and `ServiceStats`
+//! topics into the shared [`Mesh`]: at once for a heartbeat that says something new
+//! (the first, a changed state, `Stopping`: those wake the subscriber), and on the
+//! drain clock for the periodic heartbeats and the stats, which services publish
+//! quietly — a wake-up per heartbeat of every service would cost the supervisor 30
+//! a second. The clock runs often enough that a healthy service never looks hung
+//! ([`drain_period`]). The rules that turn "last heartbeat at t" into hung / alive /
+//! stale are pure functions below.
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use skymesh_ipc_types::{topics, ServiceHealth, ServiceState, ServiceStats};
+use skymesh_runtime::timer::Timer;
 use skymesh_runtime::{Bus, IpcError, Subscriber};
+use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
@@ -173,35 +180,102 @@ pub fn on_stats(mesh: &Mesh, idx: usize, s: &ServiceStats) {
     });
 }
 
-/// Subscribes to every service's health and stats topics and spawns one task per
-/// service on `tracker` that records samples until `stop` is cancelled.
+/// How often the watchers drain the quietly published heartbeats and stats: half
+/// the slack between a service's heartbeat period and the silence allowed after it
+/// (`(missed − 1) × period / 2`, for the shortest period any service reports), at
+/// most a second. A healthy service's newest heartbeat is then at most one drain
+/// period plus one heartbeat period old when it is looked at — within the
+/// allowance by half the slack, so draining late never makes a live service look
+/// hung.
+pub fn drain_period(rule: &LivenessRule, mesh: &Mesh) -> Duration {
+    let shortest = mesh.with_all(|es| {
+        es.iter()
+            .filter_map(|e| e.heartbeat.filter(|h| h.period_ms > 0))
+            .map(|h| Duration::from_millis(u64::from(h.period_ms)))
+            .fold(rule.period, Duration::min)
+    });
+    (shortest * rule.missed.saturating_sub(1) / 2)
+        .clamp(Duration::from_millis(10), Duration::from_secs(1))
+}
+
+/// Subscribes to every service's health and stats topics and spawns on `tracker`
+/// one task per service that records samples, and the drain clock, until `stop` is
+/// cancelled.
 pub fn spawn_watchers(
     bus: &Bus,
     mesh: &Arc<Mesh>,
+    rule: LivenessRule,
     stop: &CancellationToken,
     tracker: &TaskTracker,
 ) -> Result<(), IpcError> {
     let names: Vec<String> = mesh.with_all(|es| es.iter().map(|e| e.name.clone()).collect());
+    let (clock, ticks) = watch::channel(());
     for (idx, name) in names.iter().enumerate() {
-        let health = bus.subscriber::<ServiceHealth>(&topics::service_health(name))?;
-        let stats = bus.subscriber::<ServiceStats>(&topics::service_stats(name))?;
-        tracker.spawn(watch(health, stats, mesh.clone(), idx, stop.clone()));
+        let mut health = bus.subscriber::<ServiceHealth>(&topics::service_health(name))?;
+        let mut stats = bus.subscriber::<ServiceStats>(&topics::service_stats(name))?;
+        // Drained on the clock: samples overwritten in between are by design.
+        health.set_newest_only();
+        stats.set_newest_only();
+        let ticks = ticks.clone();
+        tracker.spawn(watch(health, stats, mesh.clone(), idx, ticks, stop.clone()));
     }
+    tracker.spawn(drain_clock(clock, rule, mesh.clone(), stop.clone()));
     Ok(())
+}
+
+/// Ticks the watchers' drain every [`drain_period`] (one wake-up for all of them).
+async fn drain_clock(
+    clock: watch::Sender<()>,
+    rule: LivenessRule,
+    mesh: Arc<Mesh>,
+    stop: CancellationToken,
+) {
+    // A timerfd, not tokio's wheel (a tick longer than 64 ms costs it a second
+    // wake-up): see skymesh_runtime::timer. Without one, tokio's sleep.
+    let mut timer = Timer::new()
+        .inspect_err(|e| tracing::warn!(error = %e, "no timerfd for the heartbeat drain; using tokio's timer"))
+        .ok();
+    loop {
+        let at = tokio::time::Instant::now() + drain_period(&rule, &mesh);
+        let slept = async {
+            match &mut timer {
+                Some(t) => t.sleep_until(at).await,
+                None => {
+                    tokio::time::sleep_until(at).await;
+                    Ok(())
+                }
+            }
+        };
+        tokio::select! {
+            _ = stop.cancelled() => return,
+            r = slept => {
+                if let Err(e) = r {
+                    tracing::warn!(error = %e, "the heartbeat drain timer failed; using tokio's timer");
+                    timer = None;
+                }
+            }
+        }
+        clock.send_replace(());
+    }
 }
 
 async fn watch(
     mut health: Subscriber<ServiceHealth>,
-    mut stats: Subscriber<ServiceStats>,
+    stats: Subscriber<ServiceStats>,
     mesh: Arc<Mesh>,
     idx: usize,
+    mut ticks: watch::Receiver<()>,
     stop: CancellationToken,
 ) {
     loop {
         let failed = tokio::select! {
             _ = stop.cancelled() => return,
+            // Woken only by a heartbeat that says something new (see the module).
             r = health.recv() => r.map(|h| on_health(&mesh, idx, &h)).err(),
-            r = stats.recv_with(|s| on_stats(&mesh, idx, s)) => r.err(),
+            r = ticks.changed() => match r {
+                Ok(()) => drain(&health, &stats, &mesh, idx).err(),
+                Err(_) => return, // the clock stopped: so are we
+            },
         };
         if let Some(e) = failed {
             tracing::warn!(service = %mesh.with(idx, |e| e.name.clone()), error = %e, "reading heartbeats failed; retrying");
@@ -211,6 +285,20 @@ async fn watch(
             }
         }
     }
+}
+
+/// Records every heartbeat and stats sample published since the last look.
+fn drain(
+    health: &Subscriber<ServiceHealth>,
+    stats: &Subscriber<ServiceStats>,
+    mesh: &Mesh,
+    idx: usize,
+) -> Result<(), IpcError> {
+    while let Some(h) = health.try_recv()? {
+        on_health(mesh, idx, &h);
+    }
+    while stats.try_recv_with(|s| on_stats(mesh, idx, s))?.is_some() {}
+    Ok(())
 }
 
 #[cfg(test)]

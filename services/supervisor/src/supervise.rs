@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::timer::Timer;
 use skymesh_runtime::Domain;
 use tokio_util::sync::CancellationToken;
 
@@ -95,6 +96,11 @@ async fn hang_watch(sh: &Shared, rule: &LivenessRule, idx: usize, heartbeat: boo
     // Until the first heartbeat: a short tick (it may arrive any time and bring the
     // deadline forward from the startup timeout to its own silence allowance).
     let tick = (rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(250));
+    // A timerfd for the deadlines (seconds away: on tokio's wheel each would cost a
+    // second wake-up at a 64 ms block boundary, see skymesh_runtime::timer).
+    let mut timer = Timer::new()
+        .inspect_err(|e| tracing::debug!(error = %e, "no timerfd; hang checks on tokio's timer"))
+        .ok();
     loop {
         let (spawned_ns, hb) = sh.mesh.with(idx, |e| (e.spawned_ns, e.heartbeat));
         let now_ns = monotonic_ns();
@@ -109,7 +115,14 @@ async fn hang_watch(sh: &Shared, rule: &LivenessRule, idx: usize, heartbeat: boo
                 .map_or(tick, |at| Duration::from_nanos(at.saturating_sub(now_ns))),
             verdict => return verdict,
         };
-        tokio::time::sleep(wait).await;
+        let at = tokio::time::Instant::now() + wait;
+        if let Some(t) = &mut timer {
+            if t.sleep_until(at).await.is_ok() {
+                continue;
+            }
+            timer = None;
+        }
+        tokio::time::sleep_until(at).await;
     }
 }
 

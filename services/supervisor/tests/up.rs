@@ -326,6 +326,64 @@ async fn heartbeats_make_a_service_running_and_their_loss_gets_it_killed() {
     );
 }
 
+/// Services publish their periodic heartbeats without waking the supervisor (only
+/// a new state does): it drains them on its own clock, often enough that a service
+/// beating quietly for many times its allowed silence (4 × 100 ms here) is never
+/// taken for hung, and sees a new state at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn quiet_heartbeats_are_drained_in_time_and_a_new_state_is_seen_at_once() {
+    let toml = mesh_toml(&[("quiet", "exec sleep 60", "critical = true")]);
+    let mut h = Harness::start(&toml).await;
+    let s = h
+        .wait_for("quiet", "spawned", Duration::from_secs(10), |s| {
+            s.pid.is_some()
+        })
+        .await;
+    let pid = s.pid.unwrap();
+    let (bus, mut publisher) = heartbeat_publisher(&h.domain, "quiet");
+    publisher
+        .publish(health("quiet", pid, ServiceState::Running))
+        .unwrap();
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(2500) {
+        publisher
+            .publish_quiet(health("quiet", pid, ServiceState::Running))
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let s = h.service("quiet").await;
+    assert_eq!(
+        (s.state.as_str(), s.pid, s.restarts),
+        ("running", Some(pid), 0),
+        "{s:?}"
+    );
+    assert!(s.heartbeat_age_s.unwrap() < 0.4, "{s:?}");
+    // A state change wakes the supervisor: seen well before the next drain could
+    // matter (the wait is short, the quiet beats go on).
+    publisher
+        .publish(health("quiet", pid, ServiceState::Degraded))
+        .unwrap();
+    let seen = Instant::now();
+    h.wait_for("quiet", "degraded", Duration::from_secs(5), |s| {
+        s.state == "degraded"
+    })
+    .await;
+    assert!(seen.elapsed() < Duration::from_secs(5));
+    // Quiet beats stop: killed after the allowed silence like any hung service.
+    let s = h
+        .wait_for(
+            "quiet",
+            "killed and restarted",
+            Duration::from_secs(10),
+            |s| s.restarts >= 1,
+        )
+        .await;
+    assert_eq!(s.last_exit_code, Some(137), "{s:?}");
+    drop(publisher);
+    drop(bus);
+    h.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn monitor_only_watches_heartbeats_without_spawning() {
     let toml = mesh_toml(&[("watched", "exit 99", "")]);
