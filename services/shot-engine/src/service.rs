@@ -29,7 +29,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::timer::Ticker;
+use skymesh_runtime::timer::{Ticker, Timer};
 use skymesh_runtime::{Counter, IpcError};
 use tokio_util::sync::CancellationToken;
 
@@ -71,6 +71,8 @@ pub(crate) async fn run_loop(
     // A timerfd, not tokio's wheel (which would add ~16 wake-ups a second to the
     // 25 Hz tick): see skymesh_runtime::timer.
     let mut interval = Ticker::new(period).context("creating the tick timer")?;
+    // The idle deadlines too (the 5 Hz status: 200 ms, two wake-ups each on the wheel).
+    let mut idle_timer = Timer::new().context("creating the idle timer")?;
     let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
     let mut last_tick: Option<u64> = None;
     let mut was_idle = false;
@@ -104,10 +106,14 @@ pub(crate) async fn run_loop(
             },
             Some(until_ns) => {
                 let wait = Duration::from_nanos(until_ns.saturating_sub(monotonic_ns()));
+                let at = tokio::time::Instant::now() + wait;
                 tokio::select! {
                     biased;
                     _ = shutdown.cancelled() => break Ok(()),
-                    _ = tokio::time::sleep(wait) => Wake::Tick,
+                    t = idle_timer.sleep_until(at) => match t {
+                        Ok(()) => Wake::Tick,
+                        Err(e) => break Err(anyhow::Error::new(e).context("the idle timer failed")),
+                    },
                     m = ports.from_app.recv() => Wake::App(m),
                     g = ports.app_geofence.recv() => Wake::Fence(g.map(Box::new)),
                     s = ports.app_session.recv() => Wake::Session(s),

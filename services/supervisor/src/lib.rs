@@ -98,14 +98,15 @@ async fn observe(
     cleanup_interval: Duration,
     stop: CancellationToken,
 ) {
-    let tick = (rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(500));
-    let mut interval = tokio::time::interval(tick);
-    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // On the drain clock's grid, half a drain period after each drain.
+    let mut timer = monitor::timerfd();
     let mut last_clean: Option<Instant> = None;
     loop {
+        let grid = monitor::drain_period(&rule, &mesh);
+        let at = monitor::on_grid(monotonic_ns() + 1, grid, grid / 2);
         tokio::select! {
             _ = stop.cancelled() => return,
-            _ = interval.tick() => {}
+            () = monitor::sleep_until(&mut timer, monitor::instant_at(at)) => {}
         }
         let now = monotonic_ns();
         for idx in 0..mesh.len() {
@@ -293,8 +294,12 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     let period = watchdog.map_or(Duration::from_secs(1), |w| {
         (w / 2).min(Duration::from_secs(1))
     });
-    let mut interval = tokio::time::interval(period.max(Duration::from_millis(10)));
-    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let period = period.max(Duration::from_millis(10));
+    // On a timerfd, on the drain clock's grid (the same instants with the default
+    // 1 s): the housekeeping shares the drain's wake-up.
+    let mut timer = monitor::timerfd();
+    let next_tick =
+        || monitor::instant_at(monitor::on_grid(monotonic_ns() + 1, period, Duration::ZERO));
     let logs = match (&output, &supervisor_log) {
         (Output::Files(dir), Some(own)) => Some(format!(
             "{}/<service>.log, supervisor: {}",
@@ -320,7 +325,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     loop {
         tokio::select! {
             _ = shutdown.cancelled() => break,
-            _ = interval.tick() => house.tick(true),
+            () = monitor::sleep_until(&mut timer, next_tick()) => house.tick(true),
             // Readiness as soon as it happens, not up to a second later.
             r = changes.changed(), if !house.ready_sent => if r.is_ok() && mesh.ready() { house.tick(true) },
         }
@@ -340,7 +345,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     loop {
         tokio::select! {
             _ = &mut stopping => break,
-            _ = interval.tick() => house.tick(false),
+            () = monitor::sleep_until(&mut timer, next_tick()) => house.tick(false),
         }
     }
     house.draw();

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use skymesh_ipc_types::{topics, ServiceHealth, ServiceState, ServiceStats};
+use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::timer::Timer;
 use skymesh_runtime::{Bus, IpcError, Subscriber};
 use tokio::sync::watch;
@@ -198,6 +199,46 @@ pub fn drain_period(rule: &LivenessRule, mesh: &Mesh) -> Duration {
         .clamp(Duration::from_millis(10), Duration::from_secs(1))
 }
 
+/// The first instant at or after `from_ns` on the grid `k × period + offset` of
+/// `CLOCK_MONOTONIC`: the drain clock ticks on the grid, and the hang checks half a
+/// period after it (when that tick's drain has run), so one wake-up serves them all
+/// instead of one per service at its own deadline.
+pub fn on_grid(from_ns: u64, period: Duration, offset: Duration) -> u64 {
+    let p = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX).max(1);
+    let o = u64::try_from(offset.as_nanos()).unwrap_or(0) % p;
+    let k = from_ns.saturating_sub(o).div_ceil(p);
+    k.saturating_mul(p).saturating_add(o)
+}
+
+/// A tokio instant for a `CLOCK_MONOTONIC` time in ns.
+pub fn instant_at(at_ns: u64) -> tokio::time::Instant {
+    tokio::time::Instant::now() + Duration::from_nanos(at_ns.saturating_sub(monotonic_ns()))
+}
+
+/// A timerfd for the supervisor's deadlines, which are seconds away: on tokio's
+/// wheel each would cost a second wake-up at a 64 ms block boundary (see
+/// skymesh_runtime::timer). `None` (tokio's timer) if the kernel refuses one.
+pub fn timerfd() -> Option<Timer> {
+    Timer::new()
+        .inspect_err(|e| tracing::warn!(error = %e, "no timerfd; using tokio's timer"))
+        .ok()
+}
+
+/// Sleeps until `at` on `timer`, or on tokio's timer without one (also from the
+/// first time the timerfd fails).
+pub async fn sleep_until(timer: &mut Option<Timer>, at: tokio::time::Instant) {
+    if let Some(t) = timer {
+        match t.sleep_until(at).await {
+            Ok(()) => return,
+            Err(e) => {
+                tracing::warn!(error = %e, "timerfd failed; using tokio's timer");
+                *timer = None;
+            }
+        }
+    }
+    tokio::time::sleep_until(at).await;
+}
+
 /// Subscribes to every service's health and stats topics and spawns on `tracker`
 /// one task per service that records samples, and the drain clock, until `stop` is
 /// cancelled.
@@ -230,30 +271,16 @@ async fn drain_clock(
     mesh: Arc<Mesh>,
     stop: CancellationToken,
 ) {
-    // A timerfd, not tokio's wheel (a tick longer than 64 ms costs it a second
-    // wake-up): see skymesh_runtime::timer. Without one, tokio's sleep.
-    let mut timer = Timer::new()
-        .inspect_err(|e| tracing::warn!(error = %e, "no timerfd for the heartbeat drain; using tokio's timer"))
-        .ok();
+    let mut timer = timerfd();
     loop {
-        let at = tokio::time::Instant::now() + drain_period(&rule, &mesh);
-        let slept = async {
-            match &mut timer {
-                Some(t) => t.sleep_until(at).await,
-                None => {
-                    tokio::time::sleep_until(at).await;
-                    Ok(())
-                }
-            }
-        };
+        let at = instant_at(on_grid(
+            monotonic_ns() + 1,
+            drain_period(&rule, &mesh),
+            Duration::ZERO,
+        ));
         tokio::select! {
             _ = stop.cancelled() => return,
-            r = slept => {
-                if let Err(e) = r {
-                    tracing::warn!(error = %e, "the heartbeat drain timer failed; using tokio's timer");
-                    timer = None;
-                }
-            }
+            () = sleep_until(&mut timer, at) => {}
         }
         clock.send_replace(());
     }
@@ -325,6 +352,22 @@ mod tests {
             period_ms,
             uptime_ms: 1000,
         }
+    }
+
+    #[test]
+    fn on_grid_is_the_first_grid_instant_not_before() {
+        let p = Duration::from_millis(1000);
+        let half = Duration::from_millis(500);
+        assert_eq!(on_grid(0, p, Duration::ZERO), 0);
+        assert_eq!(on_grid(1, p, Duration::ZERO), S);
+        assert_eq!(on_grid(S, p, Duration::ZERO), S);
+        assert_eq!(on_grid(S + 1, p, Duration::ZERO), 2 * S);
+        assert_eq!(on_grid(0, p, half), 500 * MS);
+        assert_eq!(on_grid(500 * MS, p, half), 500 * MS);
+        assert_eq!(on_grid(500 * MS + 1, p, half), 1500 * MS);
+        assert_eq!(on_grid(7 * S + 200 * MS, p, half), 7 * S + 500 * MS);
+        // An offset of a whole period or more wraps.
+        assert_eq!(on_grid(S + 1, p, p + half), S + 500 * MS);
     }
 
     #[test]

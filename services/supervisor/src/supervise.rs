@@ -12,14 +12,13 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::timer::Timer;
 use skymesh_runtime::Domain;
 use tokio_util::sync::CancellationToken;
 
 use crate::adopt::Adopted;
 use crate::child::{self, Environment, Running};
 use crate::config::ServiceSpec;
-use crate::monitor::{Liveness, LivenessRule};
+use crate::monitor::{self, Liveness, LivenessRule};
 use crate::policy::{Decision, Ending, RestartTracker};
 use crate::state::{Mesh, Phase};
 
@@ -96,33 +95,27 @@ async fn hang_watch(sh: &Shared, rule: &LivenessRule, idx: usize, heartbeat: boo
     // Until the first heartbeat: a short tick (it may arrive any time and bring the
     // deadline forward from the startup timeout to its own silence allowance).
     let tick = (rule.period / 2).clamp(Duration::from_millis(10), Duration::from_millis(250));
-    // A timerfd for the deadlines (seconds away: on tokio's wheel each would cost a
-    // second wake-up at a 64 ms block boundary, see skymesh_runtime::timer).
-    let mut timer = Timer::new()
-        .inspect_err(|e| tracing::debug!(error = %e, "no timerfd; hang checks on tokio's timer"))
-        .ok();
+    let mut timer = monitor::timerfd();
     loop {
         let (spawned_ns, hb) = sh.mesh.with(idx, |e| (e.spawned_ns, e.heartbeat));
         let now_ns = monotonic_ns();
         let wait = match rule.evaluate(spawned_ns, hb.as_ref(), now_ns) {
             Liveness::AwaitingFirst => tick,
             // Then no periodic polling: the verdict can only change once the newest
-            // heartbeat is older than its allowance, so sleep until exactly then and
-            // look again (heartbeats that came meanwhile push the deadline on; a
-            // process keeps the period it reports for its whole life).
-            Liveness::Alive => rule
-                .hung_at(hb.as_ref())
-                .map_or(tick, |at| Duration::from_nanos(at.saturating_sub(now_ns))),
+            // heartbeat is older than its allowance, so sleep until then and look
+            // again (heartbeats drained meanwhile push the deadline on; a process
+            // keeps the period it reports for its whole life). "Then" is rounded up
+            // to the drain clock's grid, half a drain period after a drain, so every
+            // service's check shares one wake-up: a hang is seen at most one drain
+            // period (1 s by default) after its deadline.
+            Liveness::Alive => rule.hung_at(hb.as_ref()).map_or(tick, |at| {
+                let grid = monitor::drain_period(rule, &sh.mesh);
+                let at = monitor::on_grid(at, grid, grid / 2);
+                Duration::from_nanos(at.saturating_sub(now_ns))
+            }),
             verdict => return verdict,
         };
-        let at = tokio::time::Instant::now() + wait;
-        if let Some(t) = &mut timer {
-            if t.sleep_until(at).await.is_ok() {
-                continue;
-            }
-            timer = None;
-        }
-        tokio::time::sleep_until(at).await;
+        monitor::sleep_until(&mut timer, tokio::time::Instant::now() + wait).await;
     }
 }
 
