@@ -56,18 +56,27 @@ pub fn heartbeat_period_from_env() -> Duration {
         .unwrap_or(DEFAULT_HEARTBEAT)
 }
 
+/// Whether the watcher drains periodic heartbeats on its own clock
+/// (`SKYMESH_HEARTBEAT_QUIET=1`, set by a supervisor that does, and by the systemd
+/// units): only then may they be published without waking it. Unset (an older
+/// supervisor, which only looks when woken), every heartbeat wakes the watcher.
+pub fn heartbeat_quiet_from_env() -> bool {
+    std::env::var("SKYMESH_HEARTBEAT_QUIET").is_ok_and(|v| v == "1")
+}
+
 /// Publishes `ServiceHealth` every `period` and `ServiceStats` every second until
 /// `stop` is cancelled, then one last heartbeat saying `Stopping`. Pings the systemd
 /// watchdog with each heartbeat, so a hung runtime stops both.
 ///
-/// Only a heartbeat that says something new (the first, a changed state,
-/// `Stopping`) wakes the subscribers; the periodic ones and the stats are published
-/// quietly, for the supervisor to drain on its own clock (a wake-up per heartbeat
-/// of every service cost it 30 a second).
+/// `quiet` (see [`heartbeat_quiet_from_env`]): only a heartbeat that says something
+/// new (the first, a changed state, `Stopping`) wakes the subscribers; the periodic
+/// ones and the stats are published without notifying, for the supervisor to drain
+/// on its own clock (a wake-up per heartbeat of every service cost it 30 a second).
 pub async fn run_heartbeat(
     bus: Bus,
     state: HealthState,
     period: Duration,
+    quiet: bool,
     stop: CancellationToken,
 ) -> Result<(), IpcError> {
     let name = bus.name().to_string();
@@ -104,7 +113,7 @@ pub async fn run_heartbeat(
             _ = stop.cancelled() => break,
         }
         let now = state.get();
-        if told.replace(now) == Some(now) {
+        if quiet && told.replace(now) == Some(now) {
             health_pub.publish_quiet(health(now))?;
         } else {
             health_pub.publish(health(now))?;
@@ -114,10 +123,14 @@ pub async fn run_heartbeat(
         }
         if last_stats.elapsed() >= STATS_PERIOD {
             last_stats = Instant::now();
-            stats_pub.publish_with_quiet(snapshot)?;
+            if quiet {
+                stats_pub.publish_with_quiet(snapshot)?;
+            } else {
+                stats_pub.publish_with(snapshot)?;
+            }
         }
     }
-    let _ = stats_pub.publish_with_quiet(snapshot);
+    let _ = stats_pub.publish_with(snapshot);
     let _ = health_pub.publish(health(ServiceState::Stopping));
     Ok(())
 }

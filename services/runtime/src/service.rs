@@ -256,6 +256,7 @@ where
             bus.clone(),
             health.clone(),
             health::heartbeat_period_from_env(),
+            health::heartbeat_quiet_from_env(),
             hb_stop.clone(),
         ));
         let ctx = Context { bus, shutdown: shutdown.clone(), stats, name: name.clone(), health: health.clone() };

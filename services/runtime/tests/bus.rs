@@ -348,6 +348,7 @@ async fn a_state_change_is_heartbeated_at_once_not_a_period_later() {
         service.clone(),
         state.clone(),
         Duration::from_secs(60),
+        true,
         stop.clone(),
     ));
     let first = tokio::time::timeout(Duration::from_secs(5), health.recv())

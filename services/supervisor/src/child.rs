@@ -77,6 +77,9 @@ pub fn command(spec: &ServiceSpec, env: &Environment) -> std::io::Result<Command
             "SKYMESH_HEARTBEAT_MS",
             env.heartbeat.as_millis().to_string(),
         )
+        // We drain periodic heartbeats on our clock (crate::monitor): they need not
+        // wake us.
+        .env("SKYMESH_HEARTBEAT_QUIET", "1")
         .env_remove("NOTIFY_SOCKET")
         .env_remove("WATCHDOG_USEC")
         .env_remove("WATCHDOG_PID")
@@ -209,7 +212,7 @@ mod tests {
     #[tokio::test]
     async fn child_gets_the_mesh_environment_its_own_group_and_a_log_file() {
         let dir = tempfile::tempdir().unwrap();
-        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR; \
+        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $SKYMESH_HEARTBEAT_QUIET $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR; \
                       [ \"$(cut -d' ' -f5 /proc/$$/stat)\" = \"$$\" ] && echo own-group; exit 3";
         let mut run = spawn(
             &sh("a", script),
@@ -220,7 +223,7 @@ mod tests {
         assert_eq!(ending(&status), Ending::Code(3));
         let log = std::fs::read_to_string(dir.path().join("a.log")).unwrap();
         assert!(
-            log.contains("a childtest /x/iceoryx2.toml 250 1 none 1"),
+            log.contains("a childtest /x/iceoryx2.toml 250 1 1 none 1"),
             "{log}"
         );
         assert!(log.contains("own-group"), "{log}");

@@ -24,11 +24,12 @@ pub const DEFAULT_METRICS: &str = "127.0.0.1:9464";
 pub const SEARCH_PATHS: [&str; 2] = ["deploy/skymesh.toml", "/etc/skymesh/skymesh.toml"];
 
 /// Environment variables the supervisor sets for every child; a service's `env` may not override them.
-pub const RESERVED_ENV: [&str; 7] = [
+pub const RESERVED_ENV: [&str; 8] = [
     "SKYMESH_SERVICE_NAME",
     "SKYMESH_DOMAIN",
     "SKYMESH_IPC_CONFIG",
     "SKYMESH_HEARTBEAT_MS",
+    "SKYMESH_HEARTBEAT_QUIET",
     "NOTIFY_SOCKET",
     "WATCHDOG_USEC",
     "WATCHDOG_PID",
