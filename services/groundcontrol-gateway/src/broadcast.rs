@@ -125,10 +125,7 @@ impl Broadcast {
         let mut buf = Vec::with_capacity(MAX_DATAGRAM);
         // A timerfd, not tokio's wheel (which would add ~16 wake-ups a second to a
         // 30 Hz tick): see skymesh_runtime::timer.
-        let timer_err = |source| IpcError::Wait {
-            topic: "the pose broadcast timer".to_string(),
-            source,
-        };
+        let timer_err = IpcError::timer("the pose broadcast timer");
         let mut tick = Ticker::new(self.period).map_err(timer_err)?;
         loop {
             tokio::select! {

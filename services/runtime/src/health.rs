@@ -91,10 +91,7 @@ pub async fn run_heartbeat(
     };
     // A timerfd: on tokio's wheel every tick longer than 64 ms costs a second
     // wake-up at the wheel's block boundary before its own (see crate::timer).
-    let timer_err = |source: std::io::Error| IpcError::Wait {
-        topic: "the heartbeat timer".to_string(),
-        source,
-    };
+    let timer_err = IpcError::timer("the heartbeat timer");
     let mut tick = crate::timer::Ticker::new(period).map_err(timer_err)?;
     let mut last_stats = Instant::now() - STATS_PERIOD;
     let health = |state: ServiceState| ServiceHealth {

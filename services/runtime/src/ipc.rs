@@ -57,6 +57,17 @@ pub enum IpcError {
     },
 }
 
+impl IpcError {
+    /// For `map_err` on a [`crate::timer`] call that paces a bus loop: the timer
+    /// `what` (e.g. "the heartbeat timer") failed.
+    pub fn timer(what: &'static str) -> impl Fn(std::io::Error) -> IpcError + Copy {
+        move |source| IpcError::Wait {
+            topic: what.to_string(),
+            source,
+        }
+    }
+}
+
 pub(crate) fn ipc_err(op: &'static str, what: &str, e: impl core::fmt::Debug) -> IpcError {
     IpcError::Iceoryx {
         op,

@@ -85,6 +85,9 @@ impl Timer {
             // Reads the expiry count; WouldBlock when the readiness was stale (an
             // expiry of an earlier arming that the re-arm above discarded).
             if let Ok(read) = ready.try_io(|fd| fd.get_ref().0.wait().map_err(io::Error::from)) {
+                // The one-shot is spent until re-armed: clearing the readiness now
+                // saves the next wait a read that would only find it stale.
+                ready.clear_ready();
                 return read;
             }
         }
