@@ -67,11 +67,19 @@ fn mesh_comes_up_and_vehicle_state_flows() {
             "{series} in\n{metrics}"
         );
     }
-    let published = skymesh_e2e::find_metric(
-        &metrics,
-        "skymesh_topic_samples_published_total{service=\"autopilot-link\",topic=\"skymesh/vehicle/1/state\"}",
-    );
-    assert!(published.unwrap_or(0.0) > 0.0, "{metrics}");
+    // A service's own counters reach /metrics with its next stats sample (every
+    // second), which the supervisor drains on its clock (every second): poll.
+    let series = "skymesh_topic_samples_published_total{service=\"autopilot-link\",topic=\"skymesh/vehicle/1/state\"}";
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let mut metrics = metrics;
+    while skymesh_e2e::find_metric(&metrics, series).unwrap_or(0.0) <= 0.0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{series} not above 0 within 10 s:\n{metrics}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+        metrics = mesh.http_get("/metrics").unwrap();
+    }
 }
 
 #[test]
