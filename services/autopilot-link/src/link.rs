@@ -551,9 +551,8 @@ async fn read_socket(
     };
     let mut buf = vec![0u8; READ_BUFFER];
     let mut intake = Intake::new(metrics, hub, ledger);
-    // Looked at once per `silence` (not re-armed per message).
-    let far = Duration::from_secs(86_400 * 365);
-    let check = tokio::time::sleep(silence.unwrap_or(far));
+    // Looked at once per `silence` (not re-armed per message); no timer without one.
+    let check = tokio::time::sleep(silence.unwrap_or_default());
     tokio::pin!(check);
     loop {
         let mut ready = tokio::select! {
@@ -561,11 +560,11 @@ async fn read_socket(
                 Ok(guard) => guard,
                 Err(e) => return format!("waiting on the socket failed: {e}"),
             },
-            () = &mut check => {
+            () = &mut check, if silence.is_some() => {
                 if let Some(reason) = intake.silent_for(silence) {
                     return reason;
                 }
-                let next = intake.last_message + silence.unwrap_or(far);
+                let next = intake.last_message + silence.unwrap_or_default();
                 check.as_mut().reset(next.into());
                 continue;
             }
