@@ -570,7 +570,15 @@ async fn read_socket(
             }
         };
         match ready.get_inner_mut().read_now(&mut buf) {
-            Ok(Received::Stream(n)) => intake.take(&buf[..n], false),
+            Ok(Received::Stream(n)) => {
+                // A short read emptied the stream's receive queue: what arrives
+                // later raises a new edge, so the `recv` that would only return
+                // EAGAIN is skipped (tokio's own TcpStream does the same).
+                if n < buf.len() {
+                    ready.clear_ready();
+                }
+                intake.take(&buf[..n], false)
+            }
             Ok(Received::Datagram(n)) => intake.take(&buf[..n], true),
             Ok(Received::Idle) => {
                 ready.clear_ready();

@@ -277,11 +277,13 @@ mod default_mesh {
 
     fn print_idle(idle: &Idle, window: Duration) {
         println!(
-            "{:<24} {:>8} {:>9} {:>11} {:>7}",
-            "process", "CPU %", "RSS MiB", "wake-ups/s", "threads"
+            "{:<24} {:>8} {:>9} {:>11} {:>7} {:>12}",
+            "process", "CPU %", "RSS MiB", "wake-ups/s", "threads", "µs/wake-up"
         );
         for (name, (cpu, rss, wk, th)) in idle {
-            println!("{name:<24} {cpu:>8.2} {rss:>9.1} {wk:>11.1} {th:>7}");
+            // CPU per wake-up: % of one core × 10 000 µs/s ÷ wake-ups/s.
+            let per_wake = if *wk > 0.0 { cpu * 1e4 / wk } else { 0.0 };
+            println!("{name:<24} {cpu:>8.2} {rss:>9.1} {wk:>11.1} {th:>7} {per_wake:>12.0}");
         }
         let sum = |f: &dyn Fn(&str) -> bool| {
             idle.iter()
