@@ -99,6 +99,11 @@ pub fn build_datagram_via_records(
     encode_pose_datagram(&records, buf);
 }
 
+/// How long after a grid point the pose broadcast reads the `SwarmState`: the
+/// swarm queue's tick (`tick_hz` on the same grid, 30 Hz by default like
+/// `broadcast_hz`) publishes it within a millisecond when idle.
+pub const QUEUE_TICK_ALLOWANCE: Duration = Duration::from_millis(2);
+
 /// What the broadcast task needs.
 #[derive(Debug)]
 pub struct Broadcast {
@@ -126,7 +131,11 @@ impl Broadcast {
         // A timerfd, not tokio's wheel (which would add ~16 wake-ups a second to a
         // 30 Hz tick): see skymesh_runtime::timer.
         let timer_err = IpcError::timer("the pose broadcast timer");
-        let mut tick = Ticker::new(self.period).map_err(timer_err)?;
+        // On the machine-wide grid, a little after the swarm queue's tick at the
+        // same rate (its `SwarmState` is then ~2 ms old when sent, not anything up
+        // to a period as with two unrelated clocks).
+        let phase = QUEUE_TICK_ALLOWANCE.min(self.period / 2);
+        let mut tick = Ticker::with_phase(self.period, phase).map_err(timer_err)?;
         loop {
             tokio::select! {
                 _ = stop.cancelled() => return Ok(()),

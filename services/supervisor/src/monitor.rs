@@ -199,21 +199,12 @@ pub fn drain_period(rule: &LivenessRule, mesh: &Mesh) -> Duration {
         .clamp(Duration::from_millis(10), Duration::from_secs(1))
 }
 
-/// The first instant at or after `from_ns` on the grid `k × period + offset` of
-/// `CLOCK_MONOTONIC`: the drain clock ticks on the grid, and the hang checks half a
-/// period after it (when that tick's drain has run), so one wake-up serves them all
-/// instead of one per service at its own deadline.
-pub fn on_grid(from_ns: u64, period: Duration, offset: Duration) -> u64 {
-    let p = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX).max(1);
-    let o = u64::try_from(offset.as_nanos()).unwrap_or(0) % p;
-    let k = from_ns.saturating_sub(o).div_ceil(p);
-    k.saturating_mul(p).saturating_add(o)
-}
-
-/// A tokio instant for a `CLOCK_MONOTONIC` time in ns.
-pub fn instant_at(at_ns: u64) -> tokio::time::Instant {
-    tokio::time::Instant::now() + Duration::from_nanos(at_ns.saturating_sub(monotonic_ns()))
-}
+/// The machine-wide grid of `CLOCK_MONOTONIC` the services' tickers keep
+/// (`skymesh_runtime::timer::grid_at_or_after`): the drain clock ticks on it — with
+/// the services' heartbeats — and the hang checks half a period after it (when
+/// that tick's drain has run), so one wake-up serves them all instead of one per
+/// service at its own deadline.
+pub use skymesh_runtime::timer::{grid_at_or_after as on_grid, instant_at};
 
 /// A timerfd for the supervisor's deadlines, which are seconds away: on tokio's
 /// wheel each would cost a second wake-up at a 64 ms block boundary (see

@@ -14,7 +14,8 @@ use std::time::Duration;
 
 use mavlink::dialects::ardupilotmega::{MavMessage, HOME_POSITION_DATA};
 use mavlink::{MavHeader, MessageData};
-use skymesh_runtime::timer::Timer;
+use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::timer::{self, Timer};
 use tokio::sync::mpsc::{self, error::TrySendError};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
@@ -156,9 +157,17 @@ impl Engine {
         shutdown: CancellationToken,
     ) {
         let dt = dt();
-        let start = Instant::now();
+        // Steps are counted from the last whole second of CLOCK_MONOTONIC, and sim
+        // time starts there too (the vehicle "booted" up to a second earlier): the
+        // physics steps and the telemetry falling due on them keep the
+        // machine-wide grid of the services' tickers (skymesh_runtime::timer), so
+        // a 50 Hz stream goes out on the same instants as their heartbeats and the
+        // processes wake together instead of one after another.
+        let now_ns = monotonic_ns();
+        let start = timer::instant_at(now_ns - now_ns % 1_000_000_000);
         // Wall-clock steps accounted for (simulated or skipped).
-        let mut wall_steps: u64 = 0;
+        let mut wall_steps = (start.elapsed().as_micros() / u128::from(DT_US)) as u64;
+        self.steps = wall_steps;
         loop {
             let wake = start
                 + Duration::from_micros(self.next_wake_step(wall_steps).saturating_mul(DT_US));
