@@ -70,9 +70,6 @@ pub(crate) struct Anticipation {
     /// How late this thread's timer wake-ups came, ns (running average).
     lateness: f64,
     outliers: u32,
-    /// A receive took its sample while spinning: the next one first consumes the
-    /// notifications that sample left (off the latency path).
-    pub(crate) drain_pending: bool,
     /// Receives that polled a window, and those that took their sample in it.
     pub(crate) windows: u64,
     pub(crate) hits: u64,
@@ -139,7 +136,6 @@ impl Anticipation {
             jitter: 0.0,
             lateness: 0.0,
             outliers: 0,
-            drain_pending: false,
             windows: 0,
             hits: 0,
         }

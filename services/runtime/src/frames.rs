@@ -338,7 +338,13 @@ impl FrameSubscriber {
             if let Some(r) = self.try_latest_with(&mut read)? {
                 return Ok(r);
             }
-            wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+            wait_listener(
+                &mut self.afd,
+                &self.blocking.notes,
+                &self.listener,
+                &self.topic,
+            )
+            .await?;
         }
     }
 
@@ -354,7 +360,13 @@ impl FrameSubscriber {
         {
             return Ok(());
         }
-        wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+        wait_listener(
+            &mut self.afd,
+            &self.blocking.notes,
+            &self.listener,
+            &self.topic,
+        )
+        .await?;
         Ok(())
     }
 
@@ -368,7 +380,13 @@ impl FrameSubscriber {
             if let Some(r) = self.try_recv_with(&mut read)? {
                 return Ok(r);
             }
-            wait_listener(&mut self.afd, &self.listener, &self.topic).await?;
+            wait_listener(
+                &mut self.afd,
+                &self.blocking.notes,
+                &self.listener,
+                &self.topic,
+            )
+            .await?;
         }
     }
 

@@ -8,6 +8,7 @@
 use std::ops::ControlFlow;
 use std::os::fd::{AsRawFd, BorrowedFd, RawFd};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -432,6 +433,10 @@ impl Bus {
                 .max_listeners(topic.qos.event_listeners())
                 .max_notifiers(topic.qos.event_notifiers())
                 .max_nodes(topic.qos.max_nodes)
+                // One event id (0): a listener's drain resets every id's counter in
+                // shared memory, 256 atomic swaps over 2 KiB with iceoryx2's default
+                // (255) — per wake-up, in every process.
+                .event_id_max_value(0)
                 .open_or_create()
         })
     }
@@ -584,19 +589,75 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
     Ok(unsafe { AsyncFd::register_with_interest(fd, tokio::io::Interest::READABLE) }?)
 }
 
+/// Whether a listener's notifications have been consumed since it last woke.
+///
+/// iceoryx2's notifier writes to the listener's socket only when the listener's
+/// shared notification state is idle: after one notification, later ones are skipped
+/// until the listener drains (`try_wait`: state back to idle, one datagram read). The
+/// drain therefore need not follow the wake-up at once: the receive paths take the
+/// sample first and drain when they find nothing more, before they wait again (this
+/// keeps the drain's `recvfrom` and event bookkeeping, ~3–5 µs after an idle period,
+/// off every sample's latency; `samples-bench` with a kernel trace,
+/// docs/benchmarks.md). A wait never blocks undrained: it drains, returns, and the
+/// caller looks for samples once more (a sample published after the drain notifies
+/// anew, so none can slip between that look and the block).
+#[derive(Debug)]
+pub(crate) struct Notifications {
+    drained: AtomicBool,
+}
+
+impl Default for Notifications {
+    fn default() -> Notifications {
+        // A new listener may hold a notification already: the first wait drains.
+        Notifications {
+            drained: AtomicBool::new(false),
+        }
+    }
+}
+
+impl Notifications {
+    /// Drains `listener` unless that was done since its last wake-up; true if it
+    /// drained, after which the caller must look for samples before waiting.
+    fn drain_first(&self, listener: &Listener<Svc>, topic: &str) -> Result<bool, IpcError> {
+        if self.drained.swap(true, Ordering::AcqRel) {
+            return Ok(false);
+        }
+        self.drain(listener, topic)?;
+        Ok(true)
+    }
+
+    /// Consumes the listener's pending notifications now.
+    pub(crate) fn drain(&self, listener: &Listener<Svc>, topic: &str) -> Result<(), IpcError> {
+        self.drained.store(true, Ordering::Release);
+        listener
+            .try_wait(|_| {})
+            .map_err(|e| ipc_err("listener wait", topic, e))?;
+        Ok(())
+    }
+
+    /// The listener woke (or a sample was taken without waiting, whose notification
+    /// may be pending): the next wait drains before it blocks.
+    pub(crate) fn woke(&self) {
+        self.drained.store(false, Ordering::Release);
+    }
+}
+
 /// Blocking waits on a listener's socket without an async runtime: the fd sits in a
-/// private epoll set (created on the first wait), so a wait is one `epoll_wait` plus
-/// the listener's non-blocking read. Measured against the alternatives (strace,
-/// samples-bench): the listener's own `blocking_wait`/`timed_wait` also switch the
-/// socket between blocking and non-blocking and set a receive timeout (four `fcntl`
-/// and a `setsockopt` per wake-up), and a `poll` sets up and tears down its wait
-/// queue entry on every call, where epoll keeps it registered.
+/// private epoll set (created on the first wait), so a wait is one `epoll_wait`, and
+/// the listener's non-blocking read happens before the next one (see
+/// [`Notifications`]). Measured against the alternatives (strace, samples-bench): the
+/// listener's own `blocking_wait`/`timed_wait` also switch the socket between
+/// blocking and non-blocking and set a receive timeout (four `fcntl` and a
+/// `setsockopt` per wake-up), and a `poll` sets up and tears down its wait queue
+/// entry on every call, where epoll keeps it registered.
 #[derive(Debug, Default)]
 pub(crate) struct BlockingWait {
     epoll: OnceLock<Epoll>,
     /// A `CLOCK_MONOTONIC` timer in the same epoll set, for anticipating waits
     /// ([`BlockingWait::wait_until`]); created on first use.
     timer: OnceLock<TimerFd>,
+    /// Shared with the subscriber's async receive path.
+    pub(crate) notes: Notifications,
 }
 
 /// epoll data of the listener's fd and of the timer.
@@ -604,24 +665,27 @@ const EPOLL_LISTENER: u64 = 0;
 const EPOLL_TIMER: u64 = 1;
 
 impl BlockingWait {
-    /// Blocks until `listener`'s socket is readable or `timeout` passes (`None` waits
-    /// indefinitely), then consumes the notifications with the non-blocking
-    /// `try_wait`. Returns without error on a timeout or a signal: callers look for
-    /// samples either way.
+    /// Returns when samples may be pending: after draining the notifications of the
+    /// last wake-up (at once), or when `listener`'s socket becomes readable, or after
+    /// `timeout` (`None` waits indefinitely), or on a signal. Callers look for samples
+    /// whichever it was.
     pub(crate) fn wait(
         &self,
         listener: &Listener<Svc>,
         timeout: Option<Duration>,
         topic: &str,
     ) -> Result<(), IpcError> {
+        if self.notes.drain_first(listener, topic)? {
+            return Ok(());
+        }
         let epoll = self.epoll(listener).map_err(wait_err(topic))?;
-        self.wait_events(epoll, listener, timeout, topic).map(drop)
+        self.wait_events(epoll, timeout, topic).map(drop)
     }
 
     /// Like [`BlockingWait::wait`], but also returns at `wake_at_ns`
     /// (`CLOCK_MONOTONIC`, ns; a timer with the kernel's high resolution, where
     /// epoll's own timeout has whole milliseconds). True if the timer ended the
-    /// wait, false on the topic's event (or the timeout, or a signal).
+    /// wait, false otherwise (the topic's event, a drain, the timeout, a signal).
     pub(crate) fn wait_until(
         &self,
         listener: &Listener<Svc>,
@@ -629,6 +693,9 @@ impl BlockingWait {
         timeout: Option<Duration>,
         topic: &str,
     ) -> Result<bool, IpcError> {
+        if self.notes.drain_first(listener, topic)? {
+            return Ok(false);
+        }
         let err = wait_err(topic);
         let epoll = self.epoll(listener).map_err(err)?;
         let timer = match self.timer.get() {
@@ -655,16 +722,15 @@ impl BlockingWait {
                 TimerSetTimeFlags::TFD_TIMER_ABSTIME,
             )
             .map_err(err)?;
-        self.wait_events(epoll, listener, timeout, topic)
+        self.wait_events(epoll, timeout, topic)
     }
 
-    /// One `epoll_wait`; consumes the listener's notifications if it woke, and the
-    /// timer's expiry (also one left armed by an anticipating wait that an event
-    /// ended). True if the timer fired.
+    /// One `epoll_wait`; notes a listener wake-up (its notification is read by the
+    /// next wait) and consumes the timer's expiry (also one left armed by an
+    /// anticipating wait that an event ended). True if the timer fired.
     fn wait_events(
         &self,
         epoll: &Epoll,
-        listener: &Listener<Svc>,
         timeout: Option<Duration>,
         topic: &str,
     ) -> Result<bool, IpcError> {
@@ -679,9 +745,7 @@ impl BlockingWait {
             if e.data() == EPOLL_TIMER {
                 timer_fired = true;
             } else {
-                listener
-                    .try_wait(|_| {})
-                    .map_err(|e| ipc_err("listener wait", topic, e))?;
+                self.notes.woke();
             }
         }
         if timer_fired {
@@ -758,16 +822,6 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
     mut take: impl FnMut() -> Result<Option<R>, E>,
 ) -> Result<Option<R>, E> {
     let lock = || anticipate::lock(anticipation);
-    let drain = || {
-        listener
-            .try_wait(|_| {})
-            .map_err(|e| ipc_err("listener wait", topic, e))
-    };
-    // Samples taken by the last receive's spin left their notifications behind:
-    // consumed now, not on that receive's latency path.
-    if std::mem::take(&mut lock().drain_pending) {
-        drain()?;
-    }
     let mut spun = false;
     loop {
         if let Some(r) = take()? {
@@ -793,9 +847,10 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
                 lock().windows += 1;
                 loop {
                     if let Some(r) = take()? {
-                        let mut a = lock();
-                        a.drain_pending = true;
-                        a.hits += 1;
+                        // Its notification is consumed by the next wait, off the
+                        // latency path.
+                        blocking.notes.woke();
+                        lock().hits += 1;
                         return Ok(Some(r));
                     }
                     if monotonic_ns() >= until || deadline.is_some_and(|d| Instant::now() >= d) {
@@ -808,10 +863,13 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
     }
 }
 
-/// Waits until `listener`'s event fires, registering it with tokio (in `afd`) on first
-/// use. The owner must declare `afd` before `listener` (see [`ListenerFd`]).
+/// Waits until samples may be pending on `listener` (see [`Notifications`]): drains
+/// the last wake-up's notification and returns at once, or waits for the event to
+/// fire. Registers the listener with tokio (in `afd`) on first use. The owner must
+/// declare `afd` before `listener` (see [`ListenerFd`]).
 pub(crate) async fn wait_listener(
     afd: &mut Option<AsyncFd<ListenerFd>>,
+    notes: &Notifications,
     listener: &Listener<Svc>,
     topic: &str,
 ) -> Result<(), IpcError> {
@@ -823,16 +881,19 @@ pub(crate) async fn wait_listener(
         Some(afd) => afd,
         None => afd.insert(register_listener(listener).map_err(wait_err)?),
     };
+    // Undrained after a wake-up, the readiness is still set and this returns at once.
     let mut guard = afd.readable().await.map_err(wait_err)?;
-    listener
-        .try_wait(|_| {})
-        .map_err(|e| ipc_err("listener wait", topic, e))?;
-    // `try_wait` has read the socket until it would block, so the readiness is
-    // used up whether or not it found a notification: clearing it now saves the
-    // next `recv` a useless `readable()` + empty read (one syscall per sample).
-    // A notification arriving after that read is a new edge, which the reactor
-    // reports again (tokio only clears the readiness it handed out).
-    guard.clear_ready();
+    if notes.drain_first(listener, topic)? {
+        // The drain read the socket, so the readiness is used up: clearing it saves
+        // the next wait a useless wake-up. A notification arriving after that read
+        // is a new edge, which the reactor reports again (tokio only clears the
+        // readiness it handed out).
+        guard.clear_ready();
+    } else {
+        // A new edge since the drain: leave it set (and the notification unread)
+        // until the receive finds nothing more.
+        notes.woke();
+    }
     Ok(())
 }
 
@@ -1089,7 +1150,6 @@ impl<T: Sample> Subscriber<T> {
                 || self.try_recv(),
             );
         }
-        let wait = |e| ipc_err("listener wait", &self.topic, e);
         let mut spun = self.spin.is_zero();
         loop {
             if let Some(v) = self.try_recv()? {
@@ -1103,7 +1163,7 @@ impl<T: Sample> Subscriber<T> {
                 // Samples taken while spinning left their notifications behind;
                 // consume them (and look once more), or the wait below would return
                 // at once and the caller would spin a second time.
-                self.listener.try_wait(|_| {}).map_err(wait)?;
+                self.blocking.notes.drain(&self.listener, &self.topic)?;
                 continue;
             }
             let Some(left) = time_left(deadline) else {
@@ -1145,7 +1205,13 @@ impl<T: Sample> Subscriber<T> {
 
     /// Waits until the topic's event fires (a publisher notified).
     async fn wait_readable(&mut self) -> Result<(), IpcError> {
-        wait_listener(&mut self.afd, &self.listener, &self.topic).await
+        wait_listener(
+            &mut self.afd,
+            &self.blocking.notes,
+            &self.listener,
+            &self.topic,
+        )
+        .await
     }
 
     /// Drains everything pending and returns the newest sample, if any.

@@ -230,6 +230,86 @@ fn recv_blocking_waits_wakes_and_times_out_with_and_without_spin() {
     }
 }
 
+/// CPU time of the calling thread.
+fn thread_cpu() -> Duration {
+    let ts = nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).unwrap();
+    Duration::new(ts.tv_sec() as u64, ts.tv_nsec() as u32)
+}
+
+/// The receive paths take a sample before they consume its notification and drain
+/// before they wait again: a stream of samples each published while the receiver is
+/// blocked is received whole (a notification consumed but not looked after would
+/// lose a wake-up and time out), and after the last one the receiver blocks — it
+/// does not poll on an unread notification (measured as the thread's CPU time over
+/// the wait, which a poll would spend whole).
+#[test]
+fn receivers_take_the_sample_first_and_block_again_after_draining() {
+    let d = domain("dr");
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::vehicle_state(4);
+    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+    let idle = Duration::from_millis(300);
+    let publish_stream = |publ: &mut skymesh_runtime::Publisher<VehicleState>| {
+        for i in 1..=50 {
+            std::thread::sleep(Duration::from_micros(if i % 2 == 0 { 200 } else { 1500 }));
+            publ.publish(VehicleState {
+                lat_deg: f64::from(i),
+                ..Default::default()
+            })
+            .unwrap();
+        }
+    };
+
+    // Blocking receive.
+    std::thread::scope(|s| {
+        let p = s.spawn(|| publish_stream(&mut publ));
+        for i in 1..=50 {
+            let v = sub
+                .recv_blocking(Some(Duration::from_secs(5)))
+                .unwrap()
+                .expect("every sample wakes the receiver");
+            assert_eq!(v.lat_deg, f64::from(i));
+        }
+        p.join().unwrap();
+    });
+    let cpu0 = thread_cpu();
+    assert!(sub.recv_blocking(Some(idle)).unwrap().is_none());
+    let spent = thread_cpu() - cpu0;
+    assert!(
+        spent < idle / 3,
+        "blocking wait spent {spent:?} of CPU in {idle:?}"
+    );
+
+    // Async receive, on a current-thread runtime (the receiving thread is this one).
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    std::thread::scope(|s| {
+        let p = s.spawn(|| publish_stream(&mut publ));
+        rt.block_on(async {
+            for i in 51..=100 {
+                let v = sub
+                    .recv_timeout(Duration::from_secs(5))
+                    .await
+                    .unwrap()
+                    .expect("every sample wakes the receiver");
+                assert_eq!(v.lat_deg, f64::from(i - 50));
+            }
+        });
+        p.join().unwrap();
+    });
+    let cpu0 = thread_cpu();
+    rt.block_on(async { assert!(sub.recv_timeout(idle).await.unwrap().is_none()) });
+    let spent = thread_cpu() - cpu0;
+    assert!(
+        spent < idle / 3,
+        "async wait spent {spent:?} of CPU in {idle:?}"
+    );
+}
+
 /// Samples overwritten before a slow reader looked are counted as lost, unless the
 /// subscriber declared it reads only the newest value.
 #[test]

@@ -20,6 +20,10 @@
 //!   with `udp blk`; `SAMPLES_BENCH_TRACE=1` prints every sample's latency and the
 //!   anticipation's windows and hits).
 //!
+//! `SAMPLES_BENCH_STAMPS=FILE` appends `receiver-pid k send-stamp receive-time` (ns,
+//! `CLOCK_MONOTONIC`) of every message to FILE, to join with a kernel trace taken
+//! with the same clock (`perf record -k CLOCK_MONOTONIC`; see docs/benchmarks.md).
+//!
 //! Latency = the receiver's `CLOCK_MONOTONIC` when it holds the sample − the send
 //! stamp carried in it (the bus stamps `header.stamp_ns` just before sending; the
 //! UDP sender writes the same clock just before `send`). CPU per message is
@@ -330,6 +334,9 @@ struct Tally {
     lat: Vec<u64>,
     cpu0: Option<u64>,
     cpu1: u64,
+    /// `(k, send stamp, receive time)` of every message, kept when
+    /// `SAMPLES_BENCH_STAMPS` names a file (to join with a kernel trace).
+    stamps: Option<Vec<(usize, u64, u64)>>,
 }
 
 impl Tally {
@@ -339,12 +346,16 @@ impl Tally {
             lat: Vec::with_capacity(n),
             cpu0: None,
             cpu1: 0,
+            stamps: std::env::var_os("SAMPLES_BENCH_STAMPS").map(|_| Vec::with_capacity(n)),
         }
     }
 
     /// Records message `k` sent at `t0`, received at `t1`; true after the last one.
     fn add(&mut self, k: usize, t0: u64, t1: u64, n: usize) -> bool {
         self.got += 1;
+        if let Some(stamps) = &mut self.stamps {
+            stamps.push((k, t0, t1));
+        }
         if k >= WARMUP {
             // CPU is counted from the end of the last warm-up message's handling.
             if self.cpu0.is_some() {
@@ -359,6 +370,18 @@ impl Tally {
     }
 
     fn report(self) -> anyhow::Result<()> {
+        if let (Some(stamps), Some(path)) = (&self.stamps, std::env::var_os("SAMPLES_BENCH_STAMPS"))
+        {
+            // Appended: one file collects every phase, each line `pid k t0 t1`.
+            let mut f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(path)?;
+            let pid = std::process::id();
+            for (k, t0, t1) in stamps {
+                writeln!(f, "{pid} {k} {t0} {t1}")?;
+            }
+        }
         let cpu = self.cpu1.saturating_sub(self.cpu0.unwrap_or(self.cpu1));
         let mut out = std::io::stdout().lock();
         writeln!(out, "got {} {} {}", self.got, cpu, self.lat.len())?;
