@@ -4,16 +4,18 @@
 # sender work / kernel send / scheduler / return / receiver work (scripts/wake_stages.py).
 # Needs perf with tracepoint access (root). docs/benchmarks.md, "Small samples".
 # usage: scripts/wake-stages.sh [RECEIVERS]   (default iox-blk,udp-blk)
+#        SAMPLES_BENCH=path/to/samples-bench scripts/wake-stages.sh   (another build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 only=${1:-iox-blk,udp-blk}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-cargo build --release -q -p skymesh-e2e --bin samples-bench
+bench=${SAMPLES_BENCH:-target/release/samples-bench}
+[ -n "${SAMPLES_BENCH:-}" ] || cargo build --release -q -p skymesh-e2e --bin samples-bench
 SAMPLES_BENCH_STAMPS="$work/stamps" perf record -q -k CLOCK_MONOTONIC -a -o "$work/perf.data" \
   -e syscalls:sys_enter_sendto,syscalls:sys_exit_epoll_wait,syscalls:sys_exit_recvfrom \
   -e sched:sched_waking,sched:sched_switch \
-  -- target/release/samples-bench --only "$only"
+  -- "$bench" --only "$only"
 # Phase names in run order: each rate runs the receivers in samples-bench's order.
 order=$(for r in 100Hz 1kHz b2b; do for v in iox-blk udp-blk iox-tok udp-tok iox-ant; do
   case ",$only," in *",$v,"*) printf '%s-%s,' "$v" "$r";; esac; done; done)

@@ -73,6 +73,8 @@ def main():
                            ('E return->sample', t1 - x), ('total', t1 - t0)):
                 st[key].append(v)
         print(f'{name} (pid {pid}): {len(st["total"])} messages woken')
+        if not st:
+            continue
         for key in sorted(st):
             a = sorted(st[key])
             n = len(a)

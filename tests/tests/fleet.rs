@@ -7,8 +7,27 @@ use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
     topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand, VehicleState,
 };
+use skymesh_runtime::Subscriber;
 
 const STARTUP: Duration = Duration::from_secs(40);
+
+/// The vehicle's first state with a position: until the autopilot's first
+/// GLOBAL_POSITION_INT reaches the link, its states carry the attitude only
+/// (`position_valid` 0, latitude and longitude 0).
+async fn positioned(sub: &mut Subscriber<VehicleState>, id: u8) -> VehicleState {
+    let deadline = Instant::now() + STARTUP;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let s = sub
+            .recv_timeout(left)
+            .await
+            .unwrap()
+            .unwrap_or_else(|| panic!("no state with a position from vehicle {id}"));
+        if s.position_valid != 0 {
+            return s;
+        }
+    }
+}
 
 #[test]
 fn two_vehicles_fly_independently() {
@@ -46,16 +65,8 @@ fn two_vehicles_fly_independently() {
             .publisher::<VehicleCommand>(&topics::vehicle_command(2))
             .unwrap();
 
-        let a = s1
-            .recv_timeout(STARTUP)
-            .await
-            .unwrap()
-            .expect("no state from vehicle 1");
-        let b = s2
-            .recv_timeout(STARTUP)
-            .await
-            .unwrap()
-            .expect("no state from vehicle 2");
+        let a = positioned(&mut s1, 1).await;
+        let b = positioned(&mut s2, 2).await;
         assert_eq!((a.vehicle_id, b.vehicle_id), (1, 2));
         // Distinct simulators: vehicle 2 stands 10 m east of vehicle 1.
         let east_m = (b.lon_deg - a.lon_deg) * 111_320.0 * a.lat_deg.to_radians().cos();

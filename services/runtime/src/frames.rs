@@ -328,23 +328,37 @@ impl FrameSubscriber {
         Ok(newest.map(|sample| (read(sample.user_header(), sample.payload()), skipped)))
     }
 
+    /// Consumes the last wake-up's notification before a receive looks for frames
+    /// (see `Notifications` in `ipc.rs`).
+    fn settle(&self) -> Result<(), IpcError> {
+        self.blocking
+            .notes
+            .settle_async(self.afd.as_ref(), &self.listener, &self.topic)
+    }
+
+    /// Waits until frames may be pending (see `wait_listener` in `ipc.rs`).
+    async fn wait(&mut self) -> Result<(), IpcError> {
+        wait_listener(
+            &mut self.afd,
+            &self.blocking.notes,
+            &self.listener,
+            &self.topic,
+        )
+        .await
+    }
+
     /// Waits until at least one frame is pending, then behaves like
     /// [`FrameSubscriber::try_latest_with`]. Cancel-safe.
     pub async fn latest_with<R>(
         &mut self,
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<(R, u64), FrameError> {
+        self.settle()?;
         loop {
             if let Some(r) = self.try_latest_with(&mut read)? {
                 return Ok(r);
             }
-            wait_listener(
-                &mut self.afd,
-                &self.blocking.notes,
-                &self.listener,
-                &self.topic,
-            )
-            .await?;
+            self.wait().await?;
         }
     }
 
@@ -353,6 +367,7 @@ impl FrameSubscriber {
     /// return without a frame after a spurious wake-up; the `try_` call then says
     /// `None`.
     pub async fn ready(&mut self) -> Result<(), FrameError> {
+        self.settle()?;
         if self
             .port
             .has_samples()
@@ -360,13 +375,7 @@ impl FrameSubscriber {
         {
             return Ok(());
         }
-        wait_listener(
-            &mut self.afd,
-            &self.blocking.notes,
-            &self.listener,
-            &self.topic,
-        )
-        .await?;
+        self.wait().await?;
         Ok(())
     }
 
@@ -376,17 +385,12 @@ impl FrameSubscriber {
         &mut self,
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<R, FrameError> {
+        self.settle()?;
         loop {
             if let Some(r) = self.try_recv_with(&mut read)? {
                 return Ok(r);
             }
-            wait_listener(
-                &mut self.afd,
-                &self.blocking.notes,
-                &self.listener,
-                &self.topic,
-            )
-            .await?;
+            self.wait().await?;
         }
     }
 
@@ -415,6 +419,7 @@ impl FrameSubscriber {
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
+        self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
                 &self.blocking,

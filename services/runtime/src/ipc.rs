@@ -594,13 +594,14 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
 /// iceoryx2's notifier writes to the listener's socket only when the listener's
 /// shared notification state is idle: after one notification, later ones are skipped
 /// until the listener drains (`try_wait`: state back to idle, one datagram read). The
-/// drain therefore need not follow the wake-up at once: the receive paths take the
-/// sample first and drain when they find nothing more, before they wait again (this
-/// keeps the drain's `recvfrom` and event bookkeeping, ~3–5 µs after an idle period,
-/// off every sample's latency; `samples-bench` with a kernel trace,
-/// docs/benchmarks.md). A wait never blocks undrained: it drains, returns, and the
-/// caller looks for samples once more (a sample published after the drain notifies
-/// anew, so none can slip between that look and the block).
+/// drain therefore need not follow the wake-up at once: a woken receive takes its
+/// sample and returns; the next receive drains first ([`Notifications::settle`]),
+/// then looks for samples, then waits (this keeps the drain's `recvfrom` and event
+/// bookkeeping, ~3–5 µs after an idle period, off every sample's latency, at the
+/// same two looks and one drain per sample; `scripts/wake-stages.sh`,
+/// docs/benchmarks.md). A sample published after the drain notifies anew, so none
+/// can slip between that look and the block; a wait that finds the listener woken
+/// but no sample (a spurious wake-up) drains, returns, and the caller looks again.
 #[derive(Debug)]
 pub(crate) struct Notifications {
     drained: AtomicBool,
@@ -624,6 +625,49 @@ impl Notifications {
         }
         self.drain(listener, topic)?;
         Ok(true)
+    }
+
+    /// At the start of a receive: drains if the listener woke since the last drain
+    /// (its sample was taken, its notification left unread). Looking for samples
+    /// after this and before a wait is then enough: anything published later
+    /// notifies anew.
+    pub(crate) fn settle(&self, listener: &Listener<Svc>, topic: &str) -> Result<(), IpcError> {
+        self.drain_first(listener, topic).map(drop)
+    }
+
+    /// [`Notifications::settle`] for a listener registered with tokio: also clears
+    /// the reactor's readiness the drain used up (or the next wait would return at
+    /// once for nothing). Never waits.
+    pub(crate) fn settle_async(
+        &self,
+        afd: Option<&AsyncFd<ListenerFd>>,
+        listener: &Listener<Svc>,
+        topic: &str,
+    ) -> Result<(), IpcError> {
+        if self.drained.load(Ordering::Acquire) {
+            return Ok(());
+        }
+        let guard = match afd {
+            Some(afd) => {
+                let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+                match afd.poll_read_ready(&mut cx) {
+                    std::task::Poll::Ready(Ok(guard)) => Some(guard),
+                    std::task::Poll::Ready(Err(source)) => {
+                        return Err(IpcError::Wait {
+                            topic: topic.to_string(),
+                            source,
+                        })
+                    }
+                    std::task::Poll::Pending => None,
+                }
+            }
+            None => None,
+        };
+        self.drain(listener, topic)?;
+        if let Some(mut guard) = guard {
+            guard.clear_ready();
+        }
+        Ok(())
     }
 
     /// Consumes the listener's pending notifications now.
@@ -1140,6 +1184,7 @@ impl<T: Sample> Subscriber<T> {
     /// `timeout` without a sample; `timeout = None` waits indefinitely.
     pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
         let deadline = timeout.map(|t| Instant::now() + t);
+        self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
                 &self.blocking,
@@ -1175,6 +1220,7 @@ impl<T: Sample> Subscriber<T> {
 
     /// Waits for the next sample. Cancel-safe: dropping the future loses nothing.
     pub async fn recv(&mut self) -> Result<T, IpcError> {
+        self.settle()?;
         // Spin at most once per call: a wake-up by a notification whose sample the
         // spin already took finds nothing and must block, not spin again.
         let mut spun = self.spin.is_zero();
@@ -1195,12 +1241,20 @@ impl<T: Sample> Subscriber<T> {
     /// Waits for the next sample and hands it to `read` in place (see
     /// [`Subscriber::try_recv_with`]). Cancel-safe.
     pub async fn recv_with<R>(&mut self, mut read: impl FnMut(&T) -> R) -> Result<R, IpcError> {
+        self.settle()?;
         loop {
             if let Some(r) = self.try_recv_with(&mut read)? {
                 return Ok(r);
             }
             self.wait_readable().await?;
         }
+    }
+
+    /// Consumes the last wake-up's notification (see [`Notifications`]).
+    fn settle(&self) -> Result<(), IpcError> {
+        self.blocking
+            .notes
+            .settle_async(self.afd.as_ref(), &self.listener, &self.topic)
     }
 
     /// Waits until the topic's event fires (a publisher notified).
