@@ -51,18 +51,27 @@ async fn ask(
         .unwrap_or_else(|| panic!("no {what} in answer to {m:?}"))
 }
 
-/// The state of power channel `name`, from QueryPowerChannelState.
+/// The state of power channel `name`, from QueryPowerChannelState. The gateway
+/// answers from the last `HardwareState` the hardware service published (on change
+/// and at 1 Hz) and drops the query, counted, until it has one: asked again every
+/// half second until [`REPLY`].
 async fn channel_state(peer: &ImcClient, name: &str) -> ChannelState {
-    match ask(
-        peer,
-        &Message::QueryPowerChannelState,
-        name,
-        |m| matches!(m, Message::PowerChannelState { name: n, .. } if n == name),
-    )
-    .await
-    {
-        Message::PowerChannelState { state, .. } => state,
-        _ => unreachable!(),
+    let deadline = Instant::now() + REPLY;
+    loop {
+        let reply = peer
+            .request(
+                &Message::QueryPowerChannelState,
+                Duration::from_millis(500),
+                |m| matches!(m, Message::PowerChannelState { name: n, .. } if n == name),
+            )
+            .await
+            .unwrap();
+        match reply {
+            Some(Message::PowerChannelState { state, .. }) => return state,
+            Some(_) => unreachable!(),
+            None if Instant::now() < deadline => continue,
+            None => panic!("no {name} in answer to QueryPowerChannelState"),
+        }
     }
 }
 
