@@ -246,6 +246,48 @@ impl Anticipation {
     }
 }
 
+/// How often a polling receive gives its CPU to another runnable thread, ns.
+const YIELD_EVERY_NS: u64 = 25_000;
+
+/// The pause between two looks at shared memory while a receive polls (the
+/// anticipation's window, [`crate::ipc::Subscriber::set_spin`]): a CPU spin hint,
+/// and every [`YIELD_EVERY_NS`] a `sched_yield`.
+///
+/// Why the yield: a poll can last milliseconds, and the thread it waits for (the
+/// publisher) may be woken on the polling thread's CPU. The scheduler then need not
+/// preempt the poll at once (a thread that slept until just now has its slice), so
+/// the publisher waited up to a whole slice, ~1.3 ms on the project's VM, before it
+/// could stamp and send: every third frame of a 30 fps stream was 1.3 ms late and
+/// the frames that were taken in the window came 45–60 µs after their stamp instead
+/// of 5–8 (frames-bench, `FRAMES_BENCH_TRACE`). A `sched_yield` lets whatever is
+/// runnable on this CPU go first; with nothing runnable it returns at once (one
+/// syscall per [`YIELD_EVERY_NS`] of polling).
+#[derive(Debug)]
+pub(crate) struct PollPause {
+    next_yield_ns: u64,
+}
+
+impl PollPause {
+    pub(crate) fn new(now_ns: u64) -> Self {
+        PollPause {
+            next_yield_ns: now_ns.saturating_add(YIELD_EVERY_NS),
+        }
+    }
+
+    /// Pauses between two looks; `now_ns` is the caller's clock reading. True if
+    /// it yielded the CPU.
+    pub(crate) fn pause(&mut self, now_ns: u64) -> bool {
+        if now_ns >= self.next_yield_ns {
+            std::thread::yield_now();
+            self.next_yield_ns = now_ns.saturating_add(YIELD_EVERY_NS);
+            true
+        } else {
+            std::hint::spin_loop();
+            false
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -382,6 +424,33 @@ mod tests {
             "expected {} µs after the grid",
             expected.saturating_sub(grid(21)) / US
         );
+    }
+
+    #[test]
+    fn a_poll_yields_the_cpu_every_interval_and_spins_between() {
+        let start = 5 * MS;
+        let mut pause = PollPause::new(start);
+        let yields: Vec<u64> = (0..=100u64)
+            .map(|i| start + i * US)
+            .filter(|&now| pause.pause(now))
+            .collect();
+        // 100 µs of polling looked at every microsecond: a yield 25, 50, 75 and
+        // 100 µs in, nothing in between.
+        let every = YIELD_EVERY_NS;
+        assert_eq!(
+            yields,
+            vec![
+                start + every,
+                start + 2 * every,
+                start + 3 * every,
+                start + 4 * every
+            ]
+        );
+        // A look that came late (the thread was preempted) restarts the interval.
+        let mut pause = PollPause::new(start);
+        assert!(pause.pause(start + 3 * every + 7 * US));
+        assert!(!pause.pause(start + 4 * every));
+        assert!(pause.pause(start + 4 * every + 7 * US));
     }
 
     #[test]

@@ -25,7 +25,7 @@ use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
-use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan};
+use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
@@ -889,6 +889,7 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
             Plan::SpinUntil(until) => {
                 spun = true;
                 lock().windows += 1;
+                let mut pause = PollPause::new(monotonic_ns());
                 loop {
                     if let Some(r) = take()? {
                         // Its notification is consumed by the next wait, off the
@@ -897,10 +898,11 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
                         lock().hits += 1;
                         return Ok(Some(r));
                     }
-                    if monotonic_ns() >= until || deadline.is_some_and(|d| Instant::now() >= d) {
+                    let now = monotonic_ns();
+                    if now >= until || deadline.is_some_and(|d| Instant::now() >= d) {
                         break;
                     }
-                    std::hint::spin_loop();
+                    pause.pause(now);
                 }
             }
         }
