@@ -458,3 +458,82 @@ async fn a_state_change_is_heartbeated_at_once_not_a_period_later() {
     stop.cancel();
     task.await.unwrap().unwrap();
 }
+
+/// A `select!` loop re-creates every branch's `recv` future whenever any branch
+/// fires. After a receive found the queue empty, those re-created receives wait
+/// for a notification without looking at shared memory again — seen from outside
+/// as a quietly published sample (which notifies nobody) staying unreceived
+/// however often the loop turns, until a notified sample comes: then both, in
+/// order. And through such a loop, under a busy other branch, a stream arrives
+/// whole and in order.
+#[tokio::test(flavor = "current_thread")]
+async fn a_receive_that_found_nothing_waits_for_a_notification_without_looking_again() {
+    let d = domain("ke");
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::vehicle_state(5);
+    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+    let sample = |lat: f64| VehicleState {
+        lat_deg: lat,
+        ..Default::default()
+    };
+
+    // Nothing there: the first receive looks, finds nothing, waits.
+    assert!(sub
+        .recv_timeout(Duration::from_millis(20))
+        .await
+        .unwrap()
+        .is_none());
+    publ.publish_quiet(sample(1.0)).unwrap();
+    let mut tick = tokio::time::interval(Duration::from_millis(1));
+    for _ in 0..50 {
+        tokio::select! {
+            biased;
+            v = sub.recv() => panic!("a quiet sample woke nobody, yet was received: {v:?}"),
+            _ = tick.tick() => {}
+        }
+    }
+    // Still there for a direct look, which takes it.
+    assert_eq!(sub.try_recv().unwrap().map(|v| v.lat_deg), Some(1.0));
+
+    // Quiet then notified: the notification brings both, in order.
+    publ.publish_quiet(sample(2.0)).unwrap();
+    for _ in 0..5 {
+        tokio::select! {
+            biased;
+            v = sub.recv() => panic!("received before any notification: {v:?}"),
+            _ = tick.tick() => {}
+        }
+    }
+    publ.publish(sample(3.0)).unwrap();
+    for want in [2.0, 3.0] {
+        let v = tokio::time::timeout(Duration::from_secs(5), sub.recv())
+            .await
+            .expect("the notified sample wakes the receiver")
+            .unwrap();
+        assert_eq!(v.lat_deg, want);
+    }
+
+    // A stream through a select! loop whose other branch fires all the time.
+    let producer = std::thread::spawn(move || {
+        for i in 1..=300u32 {
+            if i % 3 == 0 {
+                std::thread::sleep(Duration::from_micros(300));
+            }
+            publ.publish(sample(f64::from(i))).unwrap();
+        }
+        publ
+    });
+    let mut got = Vec::new();
+    while got.len() < 300 {
+        tokio::select! {
+            v = sub.recv() => got.push(v.unwrap().lat_deg),
+            _ = tick.tick() => {}
+            _ = tokio::time::sleep(Duration::from_secs(5)) => panic!("stalled after {} samples", got.len()),
+        }
+    }
+    let want: Vec<f64> = (1..=300u32).map(f64::from).collect();
+    assert_eq!(got, want);
+    let _publ = producer.join().unwrap();
+}
