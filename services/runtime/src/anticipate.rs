@@ -249,9 +249,10 @@ impl Anticipation {
 /// How often a polling receive gives its CPU to another runnable thread, ns.
 const YIELD_EVERY_NS: u64 = 25_000;
 
-/// The pause between two looks at shared memory while a receive polls (the
-/// anticipation's window, [`crate::ipc::Subscriber::set_spin`]): a CPU spin hint,
-/// and every [`YIELD_EVERY_NS`] a `sched_yield`.
+/// The pause between two looks at shared memory while an anticipating receive
+/// polls its window: a CPU spin hint, and every [`YIELD_EVERY_NS`] a `sched_yield`.
+/// (`Subscriber::set_spin` keeps a pure spin: its polls are microseconds, and a
+/// yield there handed the CPU to the other side of a spinning ping-pong.)
 ///
 /// Why the yield: a poll can last milliseconds, and the thread it waits for (the
 /// publisher) may be woken on the polling thread's CPU. The scheduler then need not

@@ -714,6 +714,23 @@ impl Notifications {
     fn known_empty(&self) -> bool {
         self.empty.load(Ordering::Acquire)
     }
+
+    /// One look for a sample with `take`, unless the queue is known to be empty
+    /// (then `None` without touching shared memory); a look that finds nothing is
+    /// remembered (see [`Notifications::looked_empty`]).
+    fn look<R>(
+        &self,
+        take: impl FnOnce() -> Result<Option<R>, IpcError>,
+    ) -> Result<Option<R>, IpcError> {
+        if self.known_empty() {
+            return Ok(None);
+        }
+        let got = take()?;
+        if got.is_none() {
+            self.looked_empty();
+        }
+        Ok(got)
+    }
 }
 
 /// Blocking waits on a listener's socket without an async runtime: the fd sits in a
@@ -1260,11 +1277,8 @@ impl<T: Sample> Subscriber<T> {
         // spin already took finds nothing and must block, not spin again.
         let mut spun = self.spin.is_zero();
         loop {
-            if !(spun && self.blocking.notes.known_empty()) {
-                if let Some(v) = self.try_recv()? {
-                    return Ok(v);
-                }
-                self.blocking.notes.looked_empty();
+            if let Some(v) = self.blocking.notes.look(|| self.try_recv())? {
+                return Ok(v);
             }
             if !spun {
                 spun = true;
@@ -1281,11 +1295,8 @@ impl<T: Sample> Subscriber<T> {
     pub async fn recv_with<R>(&mut self, mut read: impl FnMut(&T) -> R) -> Result<R, IpcError> {
         self.settle()?;
         loop {
-            if !self.blocking.notes.known_empty() {
-                if let Some(r) = self.try_recv_with(&mut read)? {
-                    return Ok(r);
-                }
-                self.blocking.notes.looked_empty();
+            if let Some(r) = self.blocking.notes.look(|| self.try_recv_with(&mut read))? {
+                return Ok(r);
             }
             self.wait_readable().await?;
         }
