@@ -12,8 +12,8 @@
 //!
 //! Idle: while [`Engine::idle_until`] says nothing needs every tick (no shot, the
 //! vehicle disarmed, no fence hold), the loop does not tick at `loop_hz`: it sleeps
-//! until the engine's next time-driven deadline (the 5 Hz `ShotStatus`, the
-//! app-session timeout) and also wakes for the vehicle's status, authority,
+//! until the engine's next time-driven deadline (the idle `ShotStatus` once a second
+//! on the whole second, the app-session timeout) and also wakes for the vehicle's status, authority,
 //! arbiter events and acks (a few per second: an arm or an authority change is
 //! handled at once, as the periodic tick did within a period). The vehicle state
 //! and payload (50 Hz and 10 Hz) are not waited for: only the newest matters and it
@@ -71,7 +71,7 @@ pub(crate) async fn run_loop(
     // A timerfd, not tokio's wheel (which would add ~16 wake-ups a second to the
     // 25 Hz tick): see skymesh_runtime::timer.
     let mut interval = Ticker::new(period).context("creating the tick timer")?;
-    // The idle deadlines too (the 5 Hz status: 200 ms, two wake-ups each on the wheel).
+    // The idle deadlines too (on the wheel a sleep longer than 64 ms costs two wake-ups).
     let mut idle_timer = Timer::new().context("creating the idle timer")?;
     let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
     let mut last_tick: Option<u64> = None;

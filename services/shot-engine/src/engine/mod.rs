@@ -129,8 +129,15 @@ use status::StatusKey;
 
 /// A vehicle state older than this (since it was received) is not flown on.
 pub const STATE_MAX_AGE_NS: u64 = 1_000_000_000;
-/// `ShotStatus` is published at least this often (5 Hz) and on every change.
+/// While a shot is active `ShotStatus` is published at least this often (5 Hz, for
+/// its continuous fields: progress, ROI position) and on every change.
 pub const STATUS_PERIOD_NS: u64 = 200_000_000;
+/// Without an active shot the status has no continuous field: it is published on
+/// every change and otherwise once a second, on the machine-wide grid of whole
+/// seconds (`skymesh_runtime::timer::grid_at_or_after`), where the services'
+/// heartbeats fall too, so the idle engine wakes with them instead of five times a
+/// second of its own.
+pub const IDLE_STATUS_PERIOD_NS: u64 = 1_000_000_000;
 /// SHOTMANAGER_ERROR text is cut to this many bytes (the bus carries 240).
 pub const MAX_ERROR_TEXT: usize = 200;
 
@@ -348,9 +355,9 @@ impl Engine {
     /// (`CLOCK_MONOTONIC` ns): `None` while something needs every tick — a shot in
     /// setup or flying, an armed vehicle (rewind breadcrumbs, the geofence check), a
     /// fence hold, breadcrumbs a disarm must still clear. Otherwise a tick only has
-    /// time-driven work: the 5 Hz `ShotStatus` and the app-session timeout, so the
-    /// earlier of the two is the next instant a tick does anything. Everything else
-    /// an idle engine reacts to arrives as a sample the loop waits for.
+    /// time-driven work: the once-a-second idle `ShotStatus` and the app-session
+    /// timeout, so the earlier of the two is the next instant a tick does anything.
+    /// Everything else an idle engine reacts to arrives as a sample the loop waits for.
     pub fn idle_until(&self) -> Option<u64> {
         let armed = self
             .inputs
@@ -364,9 +371,7 @@ impl Engine {
         {
             return None;
         }
-        let status_due = self
-            .last_status
-            .map_or(0, |(_, at)| at.saturating_add(STATUS_PERIOD_NS));
+        let status_due = self.periodic_status_at();
         let session_timeout = self.out.app_connected.then(|| {
             let timeout =
                 u64::try_from(self.settings.app_session_timeout.as_nanos()).unwrap_or(u64::MAX);

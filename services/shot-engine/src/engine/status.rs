@@ -1,10 +1,15 @@
 //! The `ShotStatus` sample: published when a discrete field changes (shot, phase,
-//! app, authority, ROI validity, cruise speed, last exit) and at least every
-//! [`STATUS_PERIOD_NS`] (5 Hz) for the continuous ones (progress, ROI position).
+//! app, authority, ROI validity, cruise speed, last exit), at least every
+//! [`STATUS_PERIOD_NS`] (5 Hz) while a shot is active for the continuous ones
+//! (progress, ROI position), and once a second on the whole-second grid without one
+//! ([`IDLE_STATUS_PERIOD_NS`]: nothing in it can change but through a discrete field).
+
+use std::time::Duration;
 
 use skymesh_ipc_types::{FixedStr, ShotPhase, ShotStatus};
+use skymesh_runtime::timer::grid_at_or_after;
 
-use super::{Engine, STATUS_PERIOD_NS};
+use super::{Engine, IDLE_STATUS_PERIOD_NS, STATUS_PERIOD_NS};
 
 /// The fields of a `ShotStatus` whose change publishes it at once.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,12 +66,30 @@ impl Engine {
         };
         let due = match self.last_status {
             None => true,
-            Some((last, at)) => last != key || now_ns.saturating_sub(at) >= STATUS_PERIOD_NS,
+            Some((last, _)) => last != key || now_ns >= self.periodic_status_at(),
         };
         if !due {
             return None;
         }
         self.last_status = Some((key, now_ns));
         Some(s)
+    }
+
+    /// When the status is next due without a change (`CLOCK_MONOTONIC` ns; 0 before
+    /// the first): [`STATUS_PERIOD_NS`] after the last one while a shot is active, else
+    /// the first whole second at least [`IDLE_STATUS_PERIOD_NS`] after it.
+    pub(crate) fn periodic_status_at(&self) -> u64 {
+        let Some((_, at)) = self.last_status else {
+            return 0;
+        };
+        if self.active.is_some() {
+            return at.saturating_add(STATUS_PERIOD_NS);
+        }
+        let second = Duration::from_nanos(IDLE_STATUS_PERIOD_NS);
+        grid_at_or_after(
+            at.saturating_add(IDLE_STATUS_PERIOD_NS),
+            second,
+            Duration::ZERO,
+        )
     }
 }
