@@ -1,5 +1,7 @@
 //! The bus through real iceoryx2 shared memory, inside one process.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 use skymesh_ipc_types::{topics, ServiceId, VehicleState};
@@ -515,22 +517,50 @@ async fn a_receive_that_found_nothing_waits_for_a_notification_without_looking_a
         assert_eq!(v.lat_deg, want);
     }
 
-    // A stream through a select! loop whose other branch fires all the time.
+    // A stream through a select! loop whose other branch fires all the time. The
+    // producer stays at most 4 samples ahead of the receiver (the topic buffers 8
+    // and overwrites the oldest), so a loaded machine cannot lose samples to
+    // overflow: a stall can only be a missed wake-up, and says what a direct look
+    // finds. (Without the bound, a receiver starved for a millisecond by a busy CI
+    // machine lost samples and the loop waited for ever: its stall timer was
+    // re-created on every tick.)
+    let taken = Arc::new(AtomicUsize::new(0));
+    let seen = taken.clone();
     let producer = std::thread::spawn(move || {
-        for i in 1..=300u32 {
+        let give_up = std::time::Instant::now() + Duration::from_secs(60);
+        for i in 1..=300usize {
+            while i > seen.load(Ordering::Acquire) + 4 {
+                if std::time::Instant::now() > give_up {
+                    return publ;
+                }
+                std::thread::sleep(Duration::from_micros(50));
+            }
             if i % 3 == 0 {
                 std::thread::sleep(Duration::from_micros(300));
             }
-            publ.publish(sample(f64::from(i))).unwrap();
+            publ.publish(sample(i as f64)).unwrap();
         }
         publ
     });
     let mut got = Vec::new();
+    let stall = tokio::time::sleep(Duration::from_secs(10));
+    tokio::pin!(stall);
     while got.len() < 300 {
         tokio::select! {
-            v = sub.recv() => got.push(v.unwrap().lat_deg),
+            v = sub.recv() => {
+                got.push(v.unwrap().lat_deg);
+                taken.store(got.len(), Ordering::Release);
+                stall.as_mut().reset(tokio::time::Instant::now() + Duration::from_secs(10));
+            }
             _ = tick.tick() => {}
-            _ = tokio::time::sleep(Duration::from_secs(5)) => panic!("stalled after {} samples", got.len()),
+            () = &mut stall => {
+                let waiting = sub.try_recv().unwrap().map(|v| v.lat_deg);
+                panic!(
+                    "stalled 10 s after {} samples (last {:?}); a direct look finds {waiting:?}",
+                    got.len(),
+                    got.last()
+                );
+            }
         }
     }
     let want: Vec<f64> = (1..=300u32).map(f64::from).collect();
