@@ -13,9 +13,9 @@
 //! Idle: while [`Engine::idle_until`] says nothing needs every tick (no shot, the
 //! vehicle disarmed, no fence hold), the loop does not tick at `loop_hz`: it sleeps
 //! until the engine's next time-driven deadline (the idle `ShotStatus` once a second
-//! on the whole second, the app-session timeout) and also wakes for the vehicle's status, authority,
-//! arbiter events and acks (a few per second: an arm or an authority change is
-//! handled at once, as the periodic tick did within a period). The vehicle state
+//! on the whole second, the app-session timeout) and also wakes for the vehicle's
+//! status, authority, arbiter events and acks (a few per second: an arm or an
+//! authority change is handled at once, as the periodic tick did within a period). The vehicle state
 //! and payload (50 Hz and 10 Hz) are not waited for: only the newest matters and it
 //! is read at every tick and before every app message or button. Once something
 //! needs ticks the interval restarts, a period after that moment.
