@@ -52,15 +52,19 @@ pub enum DropReason {
     Loop,
     /// For the autopilot while its link is down.
     LinkDown,
+    /// A `udpout` destination nothing listens at (it answered with ICMP port
+    /// unreachable): it gets one frame a second until it listens again.
+    NotListening,
 }
 
 impl DropReason {
-    const ALL: [DropReason; 5] = [
+    const ALL: [DropReason; 6] = [
         DropReason::QueueFull,
         DropReason::Malformed,
         DropReason::SendError,
         DropReason::Loop,
         DropReason::LinkDown,
+        DropReason::NotListening,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -70,6 +74,7 @@ impl DropReason {
             DropReason::SendError => "send_error",
             DropReason::Loop => "loop",
             DropReason::LinkDown => "link_down",
+            DropReason::NotListening => "not_listening",
         }
     }
 }

@@ -83,6 +83,10 @@ pub enum BroadcastSkip {
     NoState,
     /// The latest `SwarmState` is older than `state_timeout_s`.
     Stale,
+    /// One destination's datagram not sent: nothing listens there (it answered an
+    /// earlier one with ICMP port unreachable) and its once-a-second probe is not
+    /// due. Counted per destination, not per tick.
+    NotListening,
 }
 
 impl BroadcastSkip {
@@ -90,6 +94,7 @@ impl BroadcastSkip {
         match self {
             BroadcastSkip::NoState => "no_state",
             BroadcastSkip::Stale => "stale",
+            BroadcastSkip::NotListening => "not_listening",
         }
     }
 }

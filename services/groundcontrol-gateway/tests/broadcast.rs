@@ -126,3 +126,82 @@ async fn two_hundred_fifty_drones_fit_one_datagram() {
     assert_eq!(poses[249].tracking, [249.0, 498.0, 10.0]);
     gw.stop().await;
 }
+
+/// A destination nothing listens at (ICMP port unreachable) gets one datagram a
+/// second, the rest counted `not_listening`, while a listening one beside it gets
+/// every tick; once something listens there it gets every tick too.
+#[tokio::test]
+async fn a_destination_nobody_listens_at_gets_a_datagram_a_second_until_it_listens() {
+    use gc_proto::PoseDatagramError;
+    use skymesh_groundcontrol_gateway::client::PoseListener;
+    let closed = {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        s.local_addr().expect("addr")
+    };
+    let mut gw = Gateway::start_with(|s| {
+        s.broadcast_period = Duration::from_millis(20);
+        s.broadcast_destinations.insert(0, closed);
+    })
+    .await;
+    publish_until_broadcast(&mut gw, swarm_state(2, 1.0)).await;
+    let datagrams = |gw: &Gateway| {
+        gw.metric("skymesh_gc_broadcast_datagrams_total", "")
+            .unwrap_or(0.0)
+    };
+    let skipped = |gw: &Gateway| {
+        gw.metric("skymesh_gc_broadcast_skipped_total", "reason=not_listening")
+            .unwrap_or(0.0)
+    };
+    let (sent0, skipped0) = (datagrams(&gw), skipped(&gw));
+    // 1.5 s at 50 Hz: the listening destination gets every tick.
+    let mut heard = 0;
+    let t0 = tokio::time::Instant::now();
+    while t0.elapsed() < Duration::from_millis(1500) {
+        gw.publish_state(swarm_state(2, 1.0));
+        while gw
+            .poses
+            .recv(Duration::from_millis(40))
+            .await
+            .expect("udp")
+            .is_some()
+        {
+            heard += 1;
+        }
+    }
+    let (sent, skip) = (datagrams(&gw) - sent0, skipped(&gw) - skipped0);
+    assert!(
+        heard >= 40,
+        "the listening destination got {heard} datagrams in 1.5 s"
+    );
+    // Sent = the listener's + the closed port's probes (one a second, and one whose
+    // refusal a send found).
+    assert!(
+        sent <= f64::from(heard) + 4.0 && skip >= f64::from(heard) - 8.0,
+        "listener heard {heard}; sent {sent}, skipped not_listening {skip}"
+    );
+    // Now something listens at the closed port: every tick reaches it again.
+    let mut late = PoseListener::bind(closed)
+        .await
+        .expect("bind the closed port");
+    let t1 = tokio::time::Instant::now();
+    let mut got = 0;
+    while got < 25 {
+        assert!(
+            t1.elapsed() < PATIENCE,
+            "{got} datagrams within {PATIENCE:?} of listening"
+        );
+        gw.publish_state(swarm_state(2, 1.0));
+        while let Some((_, poses)) = late.recv(Duration::from_millis(40)).await.expect("udp") {
+            let poses: Result<Vec<PoseRecord>, PoseDatagramError> = poses;
+            assert_eq!(poses.expect("records").len(), 2);
+            got += 1;
+        }
+        while gw.poses.recv(Duration::ZERO).await.expect("udp").is_some() {}
+    }
+    assert!(
+        t1.elapsed() < Duration::from_secs(6),
+        "every tick again only after {:?}",
+        t1.elapsed()
+    );
+    gw.stop().await;
+}

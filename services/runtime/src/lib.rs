@@ -25,6 +25,7 @@ pub mod health;
 pub mod ipc;
 pub mod net;
 pub mod rate;
+pub mod refusals;
 mod service;
 pub mod signals;
 pub mod stats;
