@@ -28,9 +28,10 @@
 //! the default `127.0.0.1:6666` while no GroundControl runs) gets one datagram a
 //! second instead of `broadcast_hz` until one draws no refusal
 //! ([`skymesh_runtime::refusals`]); the others are counted as skipped
-//! (`reason="not_listening"`). A datagram to a closed loopback port cost this
-//! process ~50 µs of CPU, at 30 Hz most of its idle cost. Broadcast addresses
-//! never refuse.
+//! (`reason="not_listening"`). While every destination refuses the task does not
+//! tick at all: it sleeps until the first probe is due (the ticks it skips are
+//! counted the same way). A datagram to a closed loopback port cost this process
+//! ~50 µs of CPU, at 30 Hz most of its idle cost. Broadcast addresses never refuse.
 //!
 //! Size: 84 bytes per drone, so 250 drones are 21 000 bytes in one datagram. That
 //! is one datagram on loopback (MTU 64 KiB), but on Ethernet or Wi-Fi (MTU 1500)
@@ -45,7 +46,7 @@ use std::time::Duration;
 use gc_proto::{encode_pose_datagram, PoseRecord, POSE_FLAGS_MASK, POSE_RECORD_LEN};
 use skymesh_ipc_types::{SwarmDrone, SwarmState, SWARM_MAX_DRONES};
 use skymesh_runtime::refusals::{self, Admit, Refusals};
-use skymesh_runtime::timer::Ticker;
+use skymesh_runtime::timer::{instant_at, Ticker};
 use skymesh_runtime::{IpcError, Subscriber};
 use tokio::net::UdpSocket;
 use tokio::time::Instant;
@@ -241,6 +242,16 @@ impl Broadcast {
                         }
                     }
                 }
+            }
+            // Nobody listens anywhere: nothing to send until the first probe is due.
+            if let Some(at_ns) = refusals.all_refusing_until(&self.destinations) {
+                let at = instant_at(at_ns);
+                let skipped = at.saturating_duration_since(Instant::now()).as_nanos()
+                    / self.period.as_nanos().max(1);
+                for _ in 0..skipped * self.destinations.len() as u128 {
+                    metrics.broadcast_skipped(BroadcastSkip::NotListening);
+                }
+                tick.skip_to(at);
             }
         }
     }

@@ -64,9 +64,15 @@ impl Ports {
             replies: bus
                 .subscriber::<SwarmReply>(&topics::swarm_reply())
                 .context("opening the swarm_reply topic")?,
-            state: bus
-                .subscriber::<SwarmState>(&topics::swarm_state())
-                .context("opening the swarm_state topic")?,
+            state: {
+                let mut state = bus
+                    .subscriber::<SwarmState>(&topics::swarm_state())
+                    .context("opening the swarm_state topic")?;
+                // The broadcast sends the newest; one it never read (it slept
+                // while no destination listened) is not lost.
+                state.set_newest_only();
+                state
+            },
         })
     }
 }

@@ -205,3 +205,73 @@ async fn a_destination_nobody_listens_at_gets_a_datagram_a_second_until_it_liste
     );
     gw.stop().await;
 }
+
+/// With every destination refusing, the broadcast sleeps until a probe is due
+/// instead of ticking: it reads the swarm queue's state a few times a second, not
+/// every tick, and counts none of what it did not read as lost.
+#[tokio::test]
+async fn with_nobody_listening_anywhere_the_broadcast_sleeps_between_probes() {
+    let closed = {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        s.local_addr().expect("addr")
+    };
+    let mut gw = Gateway::start_with(|s| {
+        s.broadcast_period = Duration::from_millis(20);
+        s.broadcast_destinations = vec![closed];
+    })
+    .await;
+    let topic = "topic=skymesh/swarm/state";
+    let received = |gw: &Gateway| {
+        gw.metric("skymesh_topic_samples_received_total", topic)
+            .unwrap_or(0.0)
+    };
+    // Until the first refusal is known the broadcast ticks.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while gw
+        .metric("skymesh_gc_broadcast_skipped_total", "reason=not_listening")
+        .is_none()
+    {
+        assert!(tokio::time::Instant::now() < deadline, "never refused");
+        gw.publish_state(swarm_state(2, 1.0));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    // 2 s of state at 50 Hz, 100 samples: ticking every 20 ms would read ~100.
+    let before = received(&gw);
+    for _ in 0..100 {
+        gw.publish_state(swarm_state(2, 1.0));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let read = received(&gw) - before;
+    assert!(
+        read <= 20.0,
+        "read {read} of 100 states while nobody listened"
+    );
+    assert_eq!(
+        gw.metric("skymesh_topic_samples_lost_total", topic)
+            .unwrap_or(0.0),
+        0.0,
+        "states the broadcast slept through are not lost"
+    );
+    // Something listens now: every tick again.
+    let mut late = skymesh_groundcontrol_gateway::client::PoseListener::bind(closed)
+        .await
+        .expect("bind the closed port");
+    let t1 = tokio::time::Instant::now();
+    let mut got = 0;
+    while got < 25 {
+        assert!(
+            t1.elapsed() < PATIENCE,
+            "{got} datagrams within {PATIENCE:?}"
+        );
+        gw.publish_state(swarm_state(2, 1.0));
+        while late
+            .recv(Duration::from_millis(40))
+            .await
+            .expect("udp")
+            .is_some()
+        {
+            got += 1;
+        }
+    }
+    gw.stop().await;
+}

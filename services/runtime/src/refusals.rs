@@ -229,6 +229,19 @@ impl Refusals {
         }
     }
 
+    /// When every one of `destinations` is refusing: the time (`CLOCK_MONOTONIC`
+    /// ns) the first of them is due a probe, until which a sender has nothing to
+    /// send and need not wake. `None` if any of them is not refusing (or there are
+    /// none).
+    pub fn all_refusing_until(&self, destinations: &[SocketAddr]) -> Option<u64> {
+        let mut first: Option<u64> = None;
+        for to in destinations {
+            let gate = self.gate(*to).filter(|g| g.refused)?;
+            first = Some(first.map_or(gate.next_probe_ns, |f| f.min(gate.next_probe_ns)));
+        }
+        first
+    }
+
     /// Whether `to` is refusing (sent one probe a period).
     pub fn is_refusing(&self, to: SocketAddr) -> bool {
         self.gate(to).is_some_and(|g| g.refused)
@@ -312,6 +325,39 @@ mod tests {
         assert_eq!(g.admit(3 * S + 9, S), (Admit::Skip, false));
         assert_eq!(g.admit(3 * S + 10, S), (Admit::Send, true));
         assert_eq!(g.admit(3 * S + 11, S), (Admit::Send, false));
+    }
+
+    #[test]
+    fn a_sender_may_sleep_only_while_every_destination_refuses() {
+        let a: SocketAddr = "127.0.0.1:1".parse().unwrap();
+        let b: SocketAddr = "127.0.0.1:2".parse().unwrap();
+        let refused = |to| Report {
+            destination: to,
+            error: Errno::ECONNREFUSED,
+        };
+        let mut r = Refusals::with_period("test", Duration::from_nanos(S));
+        assert_eq!(r.all_refusing_until(&[]), None);
+        assert_eq!(r.all_refusing_until(&[a, b]), None);
+        r.report_at(refused(a), 100);
+        assert_eq!(r.all_refusing_until(&[a, b]), None, "b still listens");
+        assert_eq!(r.all_refusing_until(&[a]), Some(S + 100));
+        r.report_at(refused(b), 300);
+        assert_eq!(
+            r.all_refusing_until(&[a, b]),
+            Some(S + 100),
+            "the first probe due"
+        );
+        r.heard(a);
+        assert_eq!(r.all_refusing_until(&[a, b]), None);
+        // Other errors (host unreachable, message too long) close no gate.
+        r.report_at(
+            Report {
+                destination: a,
+                error: Errno::EHOSTUNREACH,
+            },
+            400,
+        );
+        assert!(!r.is_refusing(a));
     }
 
     /// A loopback port with nothing bound to it: bind, note the port, close.

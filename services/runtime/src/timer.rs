@@ -266,6 +266,13 @@ impl Ticker {
         };
     }
 
+    /// No tick before `at`: the next is the first grid point at or after it (`at`
+    /// itself under a paused test clock). For a loop that knows it has nothing to
+    /// do until then.
+    pub fn skip_to(&mut self, at: Instant) {
+        self.next = self.at_or_after(at);
+    }
+
     /// The next tick comes at once (then on the grid).
     pub fn reset_immediately(&mut self) {
         self.next = Instant::now();
@@ -437,5 +444,26 @@ mod tests {
             t = next;
         }
         assert_eq!(t, day + 3 * S);
+    }
+
+    #[tokio::test]
+    async fn a_ticker_skipped_ahead_ticks_next_on_the_grid_at_or_after_that_time() {
+        let period = Duration::from_millis(10);
+        let mut t = Ticker::new(period).unwrap();
+        t.tick().await.unwrap();
+        let at = Instant::now() + Duration::from_millis(95);
+        t.skip_to(at);
+        let due = t.tick().await.unwrap();
+        assert!(due >= at, "ticked before the time skipped to");
+        assert!(Instant::now() >= at);
+        // On the grid, up to the conversion between the two clocks (µs).
+        let off = monotonic_ns_of(due) % nanos(period);
+        assert!(
+            off < 100_000 || off > nanos(period) - 100_000,
+            "{off} ns off the grid"
+        );
+        // And on the grid's period after it.
+        let next = t.tick().await.unwrap();
+        assert_eq!(next - due, period);
     }
 }
