@@ -127,17 +127,42 @@ async fn two_hundred_fifty_drones_fit_one_datagram() {
     gw.stop().await;
 }
 
+/// A loopback address nothing listens at: a port bound and closed again.
+fn closed_port() -> std::net::SocketAddr {
+    let s = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    s.local_addr().expect("addr")
+}
+
+/// Starts listening at `closed` and publishes state until 25 datagrams of two
+/// drones arrived there (a probe a second would take 25 s: more than
+/// [`PATIENCE`]); returns how long that took.
+async fn listen_until_every_tick(gw: &mut Gateway, closed: std::net::SocketAddr) -> Duration {
+    let mut late = skymesh_groundcontrol_gateway::client::PoseListener::bind(closed)
+        .await
+        .expect("bind the closed port");
+    let t1 = tokio::time::Instant::now();
+    let mut got = 0;
+    while got < 25 {
+        assert!(
+            t1.elapsed() < PATIENCE,
+            "{got} datagrams within {PATIENCE:?} of listening"
+        );
+        gw.publish_state(swarm_state(2, 1.0));
+        while let Some((_, poses)) = late.recv(Duration::from_millis(40)).await.expect("udp") {
+            assert_eq!(poses.expect("records").len(), 2);
+            got += 1;
+        }
+        while gw.poses.recv(Duration::ZERO).await.expect("udp").is_some() {}
+    }
+    t1.elapsed()
+}
+
 /// A destination nothing listens at (ICMP port unreachable) gets one datagram a
 /// second, the rest counted `not_listening`, while a listening one beside it gets
 /// every tick; once something listens there it gets every tick too.
 #[tokio::test]
 async fn a_destination_nobody_listens_at_gets_a_datagram_a_second_until_it_listens() {
-    use gc_proto::PoseDatagramError;
-    use skymesh_groundcontrol_gateway::client::PoseListener;
-    let closed = {
-        let s = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
-        s.local_addr().expect("addr")
-    };
+    let closed = closed_port();
     let mut gw = Gateway::start_with(|s| {
         s.broadcast_period = Duration::from_millis(20);
         s.broadcast_destinations.insert(0, closed);
@@ -180,28 +205,10 @@ async fn a_destination_nobody_listens_at_gets_a_datagram_a_second_until_it_liste
         "listener heard {heard}; sent {sent}, skipped not_listening {skip}"
     );
     // Now something listens at the closed port: every tick reaches it again.
-    let mut late = PoseListener::bind(closed)
-        .await
-        .expect("bind the closed port");
-    let t1 = tokio::time::Instant::now();
-    let mut got = 0;
-    while got < 25 {
-        assert!(
-            t1.elapsed() < PATIENCE,
-            "{got} datagrams within {PATIENCE:?} of listening"
-        );
-        gw.publish_state(swarm_state(2, 1.0));
-        while let Some((_, poses)) = late.recv(Duration::from_millis(40)).await.expect("udp") {
-            let poses: Result<Vec<PoseRecord>, PoseDatagramError> = poses;
-            assert_eq!(poses.expect("records").len(), 2);
-            got += 1;
-        }
-        while gw.poses.recv(Duration::ZERO).await.expect("udp").is_some() {}
-    }
+    let after = listen_until_every_tick(&mut gw, closed).await;
     assert!(
-        t1.elapsed() < Duration::from_secs(6),
-        "every tick again only after {:?}",
-        t1.elapsed()
+        after < Duration::from_secs(6),
+        "every tick again only after {after:?}"
     );
     gw.stop().await;
 }
@@ -211,10 +218,7 @@ async fn a_destination_nobody_listens_at_gets_a_datagram_a_second_until_it_liste
 /// every tick, and counts none of what it did not read as lost.
 #[tokio::test]
 async fn with_nobody_listening_anywhere_the_broadcast_sleeps_between_probes() {
-    let closed = {
-        let s = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
-        s.local_addr().expect("addr")
-    };
+    let closed = closed_port();
     let mut gw = Gateway::start_with(|s| {
         s.broadcast_period = Duration::from_millis(20);
         s.broadcast_destinations = vec![closed];
@@ -253,25 +257,6 @@ async fn with_nobody_listening_anywhere_the_broadcast_sleeps_between_probes() {
         "states the broadcast slept through are not lost"
     );
     // Something listens now: every tick again.
-    let mut late = skymesh_groundcontrol_gateway::client::PoseListener::bind(closed)
-        .await
-        .expect("bind the closed port");
-    let t1 = tokio::time::Instant::now();
-    let mut got = 0;
-    while got < 25 {
-        assert!(
-            t1.elapsed() < PATIENCE,
-            "{got} datagrams within {PATIENCE:?}"
-        );
-        gw.publish_state(swarm_state(2, 1.0));
-        while late
-            .recv(Duration::from_millis(40))
-            .await
-            .expect("udp")
-            .is_some()
-        {
-            got += 1;
-        }
-    }
+    listen_until_every_tick(&mut gw, closed).await;
     gw.stop().await;
 }
