@@ -422,7 +422,8 @@ mod tests {
     fn a_closed_port_gets_one_probe_a_period_and_the_stream_when_it_opens() {
         let s = sender();
         let closed = closed_port();
-        let period = Duration::from_millis(200);
+        // Long enough that a stalled test thread does not reach a probe early.
+        let period = Duration::from_millis(500);
         let mut r = Refusals::with_period("test", period);
         // The first datagram goes; its refusal fails the next send, which reads it.
         assert_eq!(r.admit(&s, closed), Admit::Send);

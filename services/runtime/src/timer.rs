@@ -456,14 +456,18 @@ mod tests {
         let due = t.tick().await.unwrap();
         assert!(due >= at, "ticked before the time skipped to");
         assert!(Instant::now() >= at);
-        // On the grid, up to the conversion between the two clocks (µs).
-        let off = monotonic_ns_of(due) % nanos(period);
-        assert!(
-            off < 100_000 || off > nanos(period) - 100_000,
-            "{off} ns off the grid"
-        );
-        // And on the grid's period after it.
+        // On the grid, up to the conversion between the two clocks (ns to µs).
+        let on_grid = |at: Instant| {
+            let off = monotonic_ns_of(at) % nanos(period);
+            assert!(
+                off < 100_000 || off > nanos(period) - 100_000,
+                "{off} ns off the grid"
+            );
+        };
+        on_grid(due);
+        // And the grid's ticks after it (a loaded machine may skip one).
         let next = t.tick().await.unwrap();
-        assert_eq!(next - due, period);
+        on_grid(next);
+        assert!(next - due >= period - Duration::from_micros(100));
     }
 }
