@@ -21,13 +21,14 @@ use iceoryx2::service::ipc_threadsafe;
 use nix::sys::epoll::{Epoll, EpollCreateFlags, EpollEvent, EpollFlags, EpollTimeout};
 use nix::sys::time::TimeSpec;
 use nix::sys::timerfd::{ClockId, Expiration, TimerFd, TimerFlags, TimerSetTimeFlags};
-use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
+use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic, TopicQos};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
 use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
+use crate::futex::{FutexWait, WakeEvent, WakeSvc};
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
 
 /// The iceoryx2 service flavour every skymesh process uses.
@@ -228,35 +229,33 @@ impl Domain {
         format!("{}_", self.name)
     }
 
+    /// The prefix of this domain's futex wake-up files (see [`crate::futex`]): not
+    /// an extension of [`Domain::prefix`] (a domain name has no `.`), so neither
+    /// kind of service ever lists or opens the other's files.
+    pub fn wake_prefix(&self) -> String {
+        format!("{}.fx_", self.name)
+    }
+
+    /// The iceoryx2 config of this domain's futex wake-up services: [`Domain::config`]
+    /// under [`Domain::wake_prefix`].
+    pub fn wake_config(&self) -> Config {
+        let mut config = self.config.clone();
+        config.global.prefix = FileName::new(self.wake_prefix().as_bytes())
+            .expect("a valid domain name makes a valid file name");
+        config
+    }
+
     /// Removes the stale resources of every dead node of this domain. Returns the
     /// names of the nodes cleaned and how many could not be.
     ///
     /// A dead node is only recognisable once its process has been reaped, so the
     /// supervisor calls this after `waitpid`.
     pub fn cleanup_dead_nodes(&self) -> (Vec<String>, usize) {
-        let mut cleaned = Vec::new();
-        let mut failed = 0;
-        let result = Node::<Svc>::list(&self.config, |state| {
-            if let NodeState::Dead(view) = state {
-                let name = view
-                    .details()
-                    .as_ref()
-                    .map(|d| d.name().as_str().to_string())
-                    .unwrap_or_default();
-                match view.try_remove_stale_resources() {
-                    Ok(()) => cleaned.push(name),
-                    Err(e) => {
-                        tracing::warn!(node = %name, error = ?e, "stale node cleanup failed");
-                        failed += 1;
-                    }
-                }
-            }
-            CallbackProgression::Continue
-        });
-        if let Err(e) = result {
-            tracing::warn!(error = ?e, "listing iceoryx2 nodes failed");
-        }
-        (cleaned, failed)
+        let (cleaned, failed) = cleanup_dead::<Svc>(&self.config);
+        // The same processes' futex wake-up nodes (see `crate::futex`), not reported
+        // by name a second time.
+        let (_, wake_failed) = cleanup_dead::<WakeSvc>(&self.wake_config());
+        (cleaned, failed + wake_failed)
     }
 
     /// Names and pids of the live nodes of this domain.
@@ -273,9 +272,10 @@ impl Domain {
         out
     }
 
-    /// Files this domain left in `/dev/shm` and under the iceoryx2 root path.
+    /// Files this domain left in `/dev/shm` and under the iceoryx2 root path (both
+    /// prefixes).
     pub fn leftover_files(&self) -> Vec<PathBuf> {
-        let prefix = self.prefix();
+        let prefixes = [self.prefix(), self.wake_prefix()];
         let root = PathBuf::from(self.config.global.root_path().to_string());
         let mut dirs = vec![PathBuf::from("/dev/shm")];
         for sub in ["", "services", "nodes"] {
@@ -289,7 +289,8 @@ impl Domain {
             };
             for entry in rd.flatten() {
                 let name = entry.file_name();
-                if name.to_string_lossy().starts_with(&prefix) {
+                let name = name.to_string_lossy();
+                if prefixes.iter().any(|p| name.starts_with(p.as_str())) {
                     out.push(entry.path());
                 }
             }
@@ -319,8 +320,38 @@ impl Domain {
     }
 }
 
+/// Removes the stale resources of every dead node of service kind `S` under
+/// `config`; the names cleaned and how many could not be.
+fn cleanup_dead<S: iceoryx2::service::Service>(config: &Config) -> (Vec<String>, usize) {
+    let mut cleaned = Vec::new();
+    let mut failed = 0;
+    let result = Node::<S>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            let name = view
+                .details()
+                .as_ref()
+                .map(|d| d.name().as_str().to_string())
+                .unwrap_or_default();
+            match view.try_remove_stale_resources() {
+                Ok(()) => cleaned.push(name),
+                Err(e) => {
+                    tracing::warn!(node = %name, error = ?e, "stale node cleanup failed");
+                    failed += 1;
+                }
+            }
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = result {
+        tracing::warn!(error = ?e, "listing iceoryx2 nodes failed");
+    }
+    (cleaned, failed)
+}
+
 struct BusInner {
     node: Node<Svc>,
+    /// The same node's twin for the futex wake-up events (see [`crate::futex`]).
+    wake_node: Node<WakeSvc>,
     name: String,
     service: ServiceId,
     instance: u16,
@@ -345,8 +376,8 @@ impl core::fmt::Debug for Bus {
 
 /// Retries `open` a few times, cleaning dead nodes in between: many processes
 /// restarting at once can race stale-resource cleanup (iceoryx2 issue #1578).
-pub(crate) fn with_retry<T, E: core::fmt::Debug>(
-    node: &Node<Svc>,
+pub(crate) fn with_retry<S: iceoryx2::service::Service, T, E: core::fmt::Debug>(
+    node: &Node<S>,
     what: &str,
     op: &'static str,
     mut open: impl FnMut() -> Result<T, E>,
@@ -384,9 +415,16 @@ impl Bus {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Svc>()
             .map_err(|e| ipc_err("create node", name, e))?;
+        let wake_node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&domain.wake_config())
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<WakeSvc>()
+            .map_err(|e| ipc_err("create futex wake-up node", name, e))?;
         Ok(Bus {
             inner: Arc::new(BusInner {
                 node,
+                wake_node,
                 name: name.to_string(),
                 service,
                 instance,
@@ -436,6 +474,23 @@ impl Bus {
                 // One event id (0): a listener's drain resets every id's counter in
                 // shared memory, 256 atomic swaps over 2 KiB with iceoryx2's default
                 // (255) — per wake-up, in every process.
+                .event_id_max_value(0)
+                .open_or_create()
+        })
+    }
+
+    /// The topic's futex wake-up event (see [`crate::futex`]), same QoS as its
+    /// socket event.
+    pub(crate) fn open_wake_event(&self, topic: &Topic) -> Result<WakeEvent, IpcError> {
+        let service_name =
+            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
+        let node = &self.inner.wake_node;
+        with_retry(node, &topic.name, "open futex event", || {
+            node.service_builder(&service_name)
+                .event()
+                .max_listeners(topic.qos.event_listeners())
+                .max_notifiers(topic.qos.event_notifiers())
+                .max_nodes(topic.qos.max_nodes)
                 .event_id_max_value(0)
                 .open_or_create()
         })
@@ -493,6 +548,11 @@ impl Bus {
             .notifier_builder()
             .create()
             .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
+        let wake_notifier = self
+            .open_wake_event(topic)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| ipc_err("create futex notifier", &topic.name, e))?;
         let published = self.inner.stats.counter(
             "skymesh_topic_samples_published_total",
             &[("topic", family)],
@@ -500,6 +560,7 @@ impl Bus {
         Ok(Publisher {
             port,
             notifier,
+            wake_notifier,
             seq: 0,
             service: self.inner.service.to_wire(),
             instance: self.inner.instance,
@@ -550,6 +611,8 @@ impl Bus {
             spin: Duration::ZERO,
             newest_only: false,
             anticipation: Anticipating::default(),
+            futex: None,
+            qos: topic.qos,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -994,6 +1057,9 @@ pub(crate) async fn wait_listener(
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
     notifier: Notifier<Svc>,
+    /// Wakes the topic's futex receivers (see [`crate::futex`]); with none, a few
+    /// atomic loads.
+    wake_notifier: Notifier<WakeSvc>,
     seq: u64,
     service: u16,
     instance: u16,
@@ -1044,6 +1110,9 @@ impl<T: Sample> Publisher<T> {
             self.notifier
                 .notify()
                 .map_err(|e| ipc_err("notify", &self.topic, e))?;
+            self.wake_notifier
+                .notify()
+                .map_err(|e| ipc_err("notify futex receivers", &self.topic, e))?;
         }
         self.published.inc();
         Ok(self.seq)
@@ -1108,6 +1177,9 @@ pub struct Subscriber<T: Sample> {
     newest_only: bool,
     /// Set by [`Subscriber::set_anticipate`].
     anticipation: Anticipating,
+    /// Set by [`Subscriber::set_futex_wake`].
+    futex: Option<FutexWait>,
+    qos: TopicQos,
     topic: String,
     _bus: Bus,
 }
@@ -1210,6 +1282,27 @@ impl<T: Sample> Subscriber<T> {
         self.anticipation.stats()
     }
 
+    /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's futex
+    /// event instead of its socket event: one system call per wake-up instead of
+    /// two, for a thread that blocks on one topic (a control loop at hundreds of Hz
+    /// to kHz). Less CPU per message and a faster wake-up than a blocking UDP
+    /// `recv` (see `samples-bench`, docs/benchmarks.md). A timed receive starts a
+    /// watchdog thread for this subscriber (see the `futex` module). Async receives
+    /// are unchanged (they need the socket's file descriptor);
+    /// [`Subscriber::set_anticipate`], which waits on a timer beside the event, takes
+    /// precedence. Publishers of every topic notify both events.
+    pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
+        if self.futex.is_none() {
+            let topic = Topic {
+                name: self.topic.clone(),
+                qos: self.qos,
+            };
+            let event = self._bus.open_wake_event(&topic)?;
+            self.futex = Some(FutexWait::new(event, &self.topic)?);
+        }
+        Ok(())
+    }
+
     /// Polls for up to the configured spin time; `Some` if a sample came.
     fn spin_recv(&self) -> Result<Option<T>, IpcError> {
         if self.spin.is_zero() {
@@ -1232,6 +1325,9 @@ impl<T: Sample> Subscriber<T> {
     /// does), after the optional spin (see [`Subscriber::set_spin`]). `None` after
     /// `timeout` without a sample; `timeout = None` waits indefinitely.
     pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
+        if let (Some(futex), None) = (&self.futex, self.anticipation.get()) {
+            return self.recv_blocking_futex(futex, timeout);
+        }
         let deadline = timeout.map(|t| Instant::now() + t);
         self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {
@@ -1264,6 +1360,40 @@ impl<T: Sample> Subscriber<T> {
                 return Ok(None);
             };
             self.blocking.wait(&self.listener, left, &self.topic)?;
+        }
+    }
+
+    /// [`Subscriber::recv_blocking`] on the futex event. Its drain is user space (a
+    /// semaphore decrement), so unlike the socket path it happens inside the wait,
+    /// and a sample taken without waiting leaves at most one notification, which
+    /// makes the next wait return once for nothing.
+    fn recv_blocking_futex(
+        &self,
+        futex: &FutexWait,
+        timeout: Option<Duration>,
+    ) -> Result<Option<T>, IpcError> {
+        let deadline_ns = timeout.map(|t| {
+            monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX))
+        });
+        let mut spun = self.spin.is_zero();
+        loop {
+            if let Some(v) = self.try_recv()? {
+                return Ok(Some(v));
+            }
+            if !spun {
+                spun = true;
+                if let Some(v) = self.spin_recv()? {
+                    return Ok(Some(v));
+                }
+                // As in the socket path: consume what the samples taken while
+                // spinning notified, and look once more.
+                futex.drain()?;
+                continue;
+            }
+            if deadline_ns.is_some_and(|d| monotonic_ns() >= d) {
+                return Ok(None);
+            }
+            futex.wait(deadline_ns)?;
         }
     }
 

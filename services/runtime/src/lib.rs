@@ -21,6 +21,7 @@ pub mod clock;
 pub mod config;
 pub mod exit;
 pub mod frames;
+mod futex;
 pub mod health;
 pub mod ipc;
 pub mod net;

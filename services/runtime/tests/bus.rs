@@ -101,10 +101,17 @@ async fn domains_are_isolated_and_leave_no_files_behind() {
         assert!(!d1.leftover_files().is_empty());
         assert_eq!(d1.live_nodes().len(), 1);
     }
-    // After every node is gone, only iceoryx2's global management file may remain;
-    // the supervisor removes it.
+    // After every node is gone, only iceoryx2's global management file of each
+    // prefix (the socket and the futex services) may remain; the supervisor removes
+    // them.
     let left = d1.leftover_files();
-    assert!(left.len() <= 1, "{left:?}");
+    assert!(
+        left.len() <= 2
+            && left
+                .iter()
+                .all(|p| p.to_string_lossy().ends_with(".global_mgmt")),
+        "{left:?}"
+    );
     d1.remove_leftover_files();
     d2.remove_leftover_files();
     assert!(d1.leftover_files().is_empty());
@@ -566,4 +573,157 @@ async fn a_receive_that_found_nothing_waits_for_a_notification_without_looking_a
     let want: Vec<f64> = (1..=300u32).map(f64::from).collect();
     assert_eq!(got, want);
     let _publ = producer.join().unwrap();
+}
+
+/// Publishes one sample on `topic` after `after` unless `cancel` is set first: a
+/// receive that should time out but instead hangs (a watchdog that never fires)
+/// gets this sample and fails its assertion instead of hanging the test.
+fn rescue(
+    bus: &Bus,
+    topic: &skymesh_ipc_types::Topic,
+    after: Duration,
+) -> (
+    Arc<std::sync::atomic::AtomicBool>,
+    std::thread::JoinHandle<()>,
+) {
+    let cancel = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut publ = bus.publisher::<VehicleState>(topic).unwrap();
+    let c = Arc::clone(&cancel);
+    let t = std::thread::spawn(move || {
+        let t0 = std::time::Instant::now();
+        while t0.elapsed() < after {
+            if c.load(Ordering::SeqCst) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        publ.publish(VehicleState {
+            lat_deg: -1.0,
+            ..Default::default()
+        })
+        .unwrap();
+    });
+    (cancel, t)
+}
+
+/// `set_futex_wake`: blocking receives sleep on the topic's futex event. With and
+/// without a spin: a receive with nothing pending times out (its watchdog wakes it),
+/// a stream published while the receiver blocks arrives whole and in order (a
+/// publisher that did not notify the futex event would leave every receive to time
+/// out), and after it the receiver blocks rather than polls (thread CPU over the
+/// wait).
+#[test]
+fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
+    for (tag, spin) in [("fx0", Duration::ZERO), ("fx1", Duration::from_micros(300))] {
+        let d = domain(tag);
+        let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+        let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+        let topic = topics::vehicle_state(5);
+        let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+        sub.set_futex_wake().unwrap();
+        sub.set_spin(spin);
+        let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+
+        let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(10));
+        let t0 = std::time::Instant::now();
+        let got = sub.recv_blocking(Some(Duration::from_millis(30))).unwrap();
+        let waited = t0.elapsed();
+        cancel.store(true, Ordering::SeqCst);
+        rescuer.join().unwrap();
+        assert!(got.is_none(), "{spin:?}: the watchdog never ended the wait");
+        assert!(waited >= Duration::from_millis(30), "{spin:?}: {waited:?}");
+
+        std::thread::scope(|s| {
+            let p = s.spawn(|| {
+                for i in 1..=50 {
+                    std::thread::sleep(Duration::from_micros(if i % 2 == 0 { 200 } else { 1500 }));
+                    publ.publish(VehicleState {
+                        lat_deg: f64::from(i),
+                        ..Default::default()
+                    })
+                    .unwrap();
+                }
+            });
+            for i in 1..=50 {
+                let v = sub
+                    .recv_blocking(Some(Duration::from_secs(5)))
+                    .unwrap()
+                    .expect("every sample wakes the receiver");
+                assert_eq!(v.lat_deg, f64::from(i), "{spin:?}");
+            }
+            p.join().unwrap();
+        });
+        let idle = Duration::from_millis(300);
+        let cpu0 = thread_cpu();
+        assert!(sub.recv_blocking(Some(idle)).unwrap().is_none());
+        let spent = thread_cpu() - cpu0;
+        assert!(
+            spent < idle / 3,
+            "{spin:?}: blocking wait spent {spent:?} of CPU in {idle:?}"
+        );
+    }
+}
+
+/// The watchdog sleeps towards the last deadline it saw; a receive whose deadline
+/// comes earlier (a shorter timeout than the last) must wake it, or that receive
+/// would wait out the longer timeout. A second futex receiver on the topic, woken
+/// by the first one's watchdog, keeps waiting until its own deadline.
+#[test]
+fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
+    let d = domain("fxt");
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::vehicle_state(6);
+    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
+    sub.set_futex_wake().unwrap();
+    let mut other = b.subscriber::<VehicleState>(&topic).unwrap();
+    other.set_futex_wake().unwrap();
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+
+    // A long timeout, ended by a sample: the watchdog now sleeps towards ~8 s.
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            std::thread::sleep(Duration::from_millis(20));
+            publ.publish(VehicleState::default()).unwrap();
+        });
+        assert!(sub
+            .recv_blocking(Some(Duration::from_secs(8)))
+            .unwrap()
+            .is_some());
+    });
+    assert!(other.try_recv().unwrap().is_some());
+
+    // The rescue sample at 4 s comes before the old deadline: without the early
+    // wake-up the short receive below gets it instead of timing out.
+    let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(4));
+    let t0 = std::time::Instant::now();
+    let got = sub.recv_blocking(Some(Duration::from_millis(40))).unwrap();
+    let waited = t0.elapsed();
+    assert!(
+        got.is_none(),
+        "the short timeout waited for the old deadline"
+    );
+    assert!(waited >= Duration::from_millis(40), "{waited:?}");
+
+    // The other receiver, woken by this one's watchdog, waits on.
+    let other_wait = Duration::from_millis(600);
+    std::thread::scope(|s| {
+        let o = s.spawn(|| {
+            let t0 = std::time::Instant::now();
+            let got = other.recv_blocking(Some(other_wait)).unwrap();
+            (got, t0.elapsed())
+        });
+        assert!(sub
+            .recv_blocking(Some(Duration::from_millis(40)))
+            .unwrap()
+            .is_none());
+        let (got, waited) = o.join().unwrap();
+        assert!(got.is_none());
+        assert!(
+            waited >= other_wait,
+            "woken by the other receiver's watchdog, returned after {waited:?}"
+        );
+    });
+    cancel.store(true, Ordering::SeqCst);
+    rescuer.join().unwrap();
 }

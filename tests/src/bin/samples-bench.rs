@@ -11,6 +11,9 @@
 //! `SCALE` multiplying the counts, five receivers per rate, in this order:
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
+//! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
+//!   on the topic's futex event (one system call per wake-up, against the socket
+//!   event's two);
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
@@ -66,6 +69,8 @@ const SPIN: Duration = Duration::from_micros(200);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Via {
     IoxBlocking,
+    /// `recv_blocking` with `Subscriber::set_futex_wake`.
+    IoxFutex,
     UdpBlocking,
     IoxTokio,
     UdpTokio,
@@ -77,8 +82,9 @@ enum Via {
 const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
 
 impl Via {
-    const ALL: [Via; 5] = [
+    const ALL: [Via; 6] = [
         Via::IoxBlocking,
+        Via::IoxFutex,
         Via::UdpBlocking,
         Via::IoxTokio,
         Via::UdpTokio,
@@ -88,6 +94,7 @@ impl Via {
     fn arg(self) -> &'static str {
         match self {
             Via::IoxBlocking => "iox-blk",
+            Via::IoxFutex => "iox-fx",
             Via::UdpBlocking => "udp-blk",
             Via::IoxTokio => "iox-tok",
             Via::UdpTokio => "udp-tok",
@@ -105,7 +112,7 @@ impl Via {
     fn is_iox(self) -> bool {
         matches!(
             self,
-            Via::IoxBlocking | Via::IoxTokio | Via::IoxAnticipating
+            Via::IoxBlocking | Via::IoxFutex | Via::IoxTokio | Via::IoxAnticipating
         )
     }
 }
@@ -242,6 +249,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
         }
         for (label, udp, iox) in [
             ("blk", Via::UdpBlocking, Via::IoxBlocking),
+            ("fx", Via::UdpBlocking, Via::IoxFutex),
             ("tok", Via::UdpTokio, Via::IoxTokio),
             ("ant", Via::UdpBlocking, Via::IoxAnticipating),
         ] {
@@ -459,12 +467,15 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             .build()
     };
     match via {
-        Via::IoxBlocking | Via::IoxTokio | Via::IoxAnticipating => {
+        Via::IoxBlocking | Via::IoxFutex | Via::IoxTokio | Via::IoxAnticipating => {
             let domain = Domain::load(domain, None)?;
             let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
             let mut sub = bus.subscriber::<VehicleState>(&bench_topic("one_way", n))?;
             if via == Via::IoxAnticipating {
                 sub.set_anticipate(ANT_MAX_SPIN);
+            }
+            if via == Via::IoxFutex {
+                sub.set_futex_wake()?;
             }
             println!("ready");
             if via != Via::IoxTokio {
