@@ -348,6 +348,28 @@ fn cleanup_dead<S: iceoryx2::service::Service>(config: &Config) -> (Vec<String>,
     (cleaned, failed)
 }
 
+/// `topic`'s event service of service kind `S` on `node`, created if needed.
+fn open_event_of<S: iceoryx2::service::Service>(
+    node: &Node<S>,
+    topic: &Topic,
+    op: &'static str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<S>, IpcError> {
+    let service_name =
+        ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
+    with_retry(node, &topic.name, op, || {
+        node.service_builder(&service_name)
+            .event()
+            .max_listeners(topic.qos.event_listeners())
+            .max_notifiers(topic.qos.event_notifiers())
+            .max_nodes(topic.qos.max_nodes)
+            // One event id (0): a listener's drain resets every id's counter in
+            // shared memory, 256 atomic swaps over 2 KiB with iceoryx2's default
+            // (255) — per wake-up, in every process.
+            .event_id_max_value(0)
+            .open_or_create()
+    })
+}
+
 struct BusInner {
     node: Node<Svc>,
     /// The same node's twin for the futex wake-up events (see [`crate::futex`]).
@@ -461,39 +483,13 @@ impl Bus {
         &self,
         topic: &Topic,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, IpcError> {
-        let service_name =
-            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
-        with_retry(&self.inner.node, &topic.name, "open event", || {
-            self.inner
-                .node
-                .service_builder(&service_name)
-                .event()
-                .max_listeners(topic.qos.event_listeners())
-                .max_notifiers(topic.qos.event_notifiers())
-                .max_nodes(topic.qos.max_nodes)
-                // One event id (0): a listener's drain resets every id's counter in
-                // shared memory, 256 atomic swaps over 2 KiB with iceoryx2's default
-                // (255) — per wake-up, in every process.
-                .event_id_max_value(0)
-                .open_or_create()
-        })
+        open_event_of(&self.inner.node, topic, "open event")
     }
 
     /// The topic's futex wake-up event (see [`crate::futex`]), same QoS as its
     /// socket event.
     pub(crate) fn open_wake_event(&self, topic: &Topic) -> Result<WakeEvent, IpcError> {
-        let service_name =
-            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
-        let node = &self.inner.wake_node;
-        with_retry(node, &topic.name, "open futex event", || {
-            node.service_builder(&service_name)
-                .event()
-                .max_listeners(topic.qos.event_listeners())
-                .max_notifiers(topic.qos.event_notifiers())
-                .max_nodes(topic.qos.max_nodes)
-                .event_id_max_value(0)
-                .open_or_create()
-        })
+        open_event_of(&self.inner.wake_node, topic, "open futex event")
     }
 
     fn open_pubsub<T: Sample>(
@@ -1325,10 +1321,23 @@ impl<T: Sample> Subscriber<T> {
     /// does), after the optional spin (see [`Subscriber::set_spin`]). `None` after
     /// `timeout` without a sample; `timeout = None` waits indefinitely.
     pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
-        if let (Some(futex), None) = (&self.futex, self.anticipation.get()) {
-            return self.recv_blocking_futex(futex, timeout);
-        }
         let deadline = timeout.map(|t| Instant::now() + t);
+        if let (Some(futex), None) = (&self.futex, self.anticipation.get()) {
+            // Its drain is user space (a semaphore decrement), so unlike the socket
+            // path's it happens inside the wait; a sample taken without waiting
+            // leaves at most one notification, which makes the next wait return
+            // once for nothing.
+            return self.blocking_loop(
+                deadline,
+                || futex.drain(),
+                |left| {
+                    futex.wait(left.map(|l| {
+                        monotonic_ns()
+                            .saturating_add(u64::try_from(l.as_nanos()).unwrap_or(u64::MAX))
+                    }))
+                },
+            );
+        }
         self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
@@ -1340,6 +1349,24 @@ impl<T: Sample> Subscriber<T> {
                 || self.try_recv(),
             );
         }
+        self.blocking_loop(
+            deadline,
+            || self.blocking.notes.drain(&self.listener, &self.topic),
+            |left| self.blocking.wait(&self.listener, left, &self.topic),
+        )
+    }
+
+    /// A blocking receive on either event: look; spin once if set; then `wait` for
+    /// at most what is left until `deadline` and look again. Samples taken while
+    /// spinning left their notifications behind: `drain` consumes them (and the
+    /// loop looks once more), or the wait would return at once and the caller would
+    /// spin a second time.
+    fn blocking_loop(
+        &self,
+        deadline: Option<Instant>,
+        drain: impl Fn() -> Result<(), IpcError>,
+        wait: impl Fn(Option<Duration>) -> Result<(), IpcError>,
+    ) -> Result<Option<T>, IpcError> {
         let mut spun = self.spin.is_zero();
         loop {
             if let Some(v) = self.try_recv()? {
@@ -1350,50 +1377,13 @@ impl<T: Sample> Subscriber<T> {
                 if let Some(v) = self.spin_recv()? {
                     return Ok(Some(v));
                 }
-                // Samples taken while spinning left their notifications behind;
-                // consume them (and look once more), or the wait below would return
-                // at once and the caller would spin a second time.
-                self.blocking.notes.drain(&self.listener, &self.topic)?;
+                drain()?;
                 continue;
             }
             let Some(left) = time_left(deadline) else {
                 return Ok(None);
             };
-            self.blocking.wait(&self.listener, left, &self.topic)?;
-        }
-    }
-
-    /// [`Subscriber::recv_blocking`] on the futex event. Its drain is user space (a
-    /// semaphore decrement), so unlike the socket path it happens inside the wait,
-    /// and a sample taken without waiting leaves at most one notification, which
-    /// makes the next wait return once for nothing.
-    fn recv_blocking_futex(
-        &self,
-        futex: &FutexWait,
-        timeout: Option<Duration>,
-    ) -> Result<Option<T>, IpcError> {
-        let deadline_ns = timeout.map(|t| {
-            monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX))
-        });
-        let mut spun = self.spin.is_zero();
-        loop {
-            if let Some(v) = self.try_recv()? {
-                return Ok(Some(v));
-            }
-            if !spun {
-                spun = true;
-                if let Some(v) = self.spin_recv()? {
-                    return Ok(Some(v));
-                }
-                // As in the socket path: consume what the samples taken while
-                // spinning notified, and look once more.
-                futex.drain()?;
-                continue;
-            }
-            if deadline_ns.is_some_and(|d| monotonic_ns() >= d) {
-                return Ok(None);
-            }
-            futex.wait(deadline_ns)?;
+            wait(left)?;
         }
     }
 

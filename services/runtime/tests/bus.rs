@@ -245,6 +245,18 @@ fn thread_cpu() -> Duration {
     Duration::new(ts.tv_sec() as u64, ts.tv_nsec() as u32)
 }
 
+/// Runs `wait` (a receive that finds nothing for `idle`) and checks the thread slept
+/// through it: a wait that polls would spend the whole of `idle` on the CPU.
+fn assert_blocks(idle: Duration, what: &str, wait: impl FnOnce()) {
+    let cpu0 = thread_cpu();
+    wait();
+    let spent = thread_cpu() - cpu0;
+    assert!(
+        spent < idle / 3,
+        "{what} spent {spent:?} of CPU in {idle:?}"
+    );
+}
+
 /// The receive paths take a sample before they consume its notification and drain
 /// before they wait again: a stream of samples each published while the receiver is
 /// blocked is received whole (a notification consumed but not looked after would
@@ -283,13 +295,9 @@ fn receivers_take_the_sample_first_and_block_again_after_draining() {
         }
         p.join().unwrap();
     });
-    let cpu0 = thread_cpu();
-    assert!(sub.recv_blocking(Some(idle)).unwrap().is_none());
-    let spent = thread_cpu() - cpu0;
-    assert!(
-        spent < idle / 3,
-        "blocking wait spent {spent:?} of CPU in {idle:?}"
-    );
+    assert_blocks(idle, "blocking wait", || {
+        assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())
+    });
 
     // Async receive, on a current-thread runtime (the receiving thread is this one).
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -310,13 +318,9 @@ fn receivers_take_the_sample_first_and_block_again_after_draining() {
         });
         p.join().unwrap();
     });
-    let cpu0 = thread_cpu();
-    rt.block_on(async { assert!(sub.recv_timeout(idle).await.unwrap().is_none()) });
-    let spent = thread_cpu() - cpu0;
-    assert!(
-        spent < idle / 3,
-        "async wait spent {spent:?} of CPU in {idle:?}"
-    );
+    assert_blocks(idle, "async wait", || {
+        rt.block_on(async { assert!(sub.recv_timeout(idle).await.unwrap().is_none()) })
+    });
 }
 
 /// Samples overwritten before a slow reader looked are counted as lost, unless the
@@ -654,13 +658,9 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
             p.join().unwrap();
         });
         let idle = Duration::from_millis(300);
-        let cpu0 = thread_cpu();
-        assert!(sub.recv_blocking(Some(idle)).unwrap().is_none());
-        let spent = thread_cpu() - cpu0;
-        assert!(
-            spent < idle / 3,
-            "{spin:?}: blocking wait spent {spent:?} of CPU in {idle:?}"
-        );
+        assert_blocks(idle, &format!("{spin:?}: blocking wait"), || {
+            assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())
+        });
     }
 }
 
