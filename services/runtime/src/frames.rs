@@ -14,16 +14,16 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
+use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic, TopicQos};
 use tokio::io::unix::AsyncFd;
 
 use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
+use crate::futex::FutexWait;
 use crate::ipc::{
     ipc_err, recv_anticipating, time_left, wait_listener, with_retry, BlockingWait, Bus, IpcError,
-    ListenerFd, Svc, WaitSource,
+    ListenerFd, Svc, WaitSource, Wakers,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -86,21 +86,17 @@ impl Bus {
             });
         }
         let pubsub = self.open_frames(topic)?;
-        let event = self.open_event(topic)?;
         let port = pubsub
             .publisher_builder()
             .initial_max_slice_len(max_len.max(1))
             .allocation_strategy(AllocationStrategy::Static)
             .create()
             .map_err(|e| ipc_err("create frame publisher", &topic.name, e))?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
+        let wakers = self.wakers(topic)?;
         let origin = self.origin();
         Ok(FramePublisher {
             port,
-            notifier,
+            wakers,
             seq: 0,
             service: origin.service,
             instance: origin.instance,
@@ -145,6 +141,8 @@ impl Bus {
             last_seq: Mutex::new(HashMap::new()),
             warn: Mutex::new(WarnLimiter::default()),
             anticipation: Anticipating::default(),
+            futex: None,
+            qos: topic.qos,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -154,7 +152,7 @@ impl Bus {
 /// Publishes frames of one stream, written in place in shared memory.
 pub struct FramePublisher {
     port: iceoryx2::port::publisher::Publisher<Svc, [u8], FrameHeader>,
-    notifier: Notifier<Svc>,
+    wakers: Wakers,
     seq: u64,
     service: u16,
     instance: u16,
@@ -226,9 +224,7 @@ impl FramePublisher {
             .send()
             .map_err(|e| ipc_err("send frame", &self.topic, e))?;
         self.seq = seq;
-        self.notifier
-            .notify()
-            .map_err(|e| ipc_err("notify", &self.topic, e))?;
+        self.wakers.notify(&self.topic)?;
         self.published.inc();
         Ok(seq)
     }
@@ -259,6 +255,9 @@ pub struct FrameSubscriber {
     warn: Mutex<WarnLimiter<&'static str>>,
     /// Set by [`FrameSubscriber::set_anticipate`].
     anticipation: Anticipating,
+    /// Set by [`FrameSubscriber::set_futex_wake`].
+    futex: Option<FutexWait>,
+    qos: TopicQos,
     topic: String,
     _bus: Bus,
 }
@@ -409,6 +408,19 @@ impl FrameSubscriber {
         self.anticipation.stats()
     }
 
+    /// [`FrameSubscriber::recv_blocking_with`] sleeps on the stream's futex event:
+    /// see [`crate::Subscriber::set_futex_wake`]. `set_anticipate` takes precedence.
+    pub fn set_futex_wake(&mut self) -> Result<(), FrameError> {
+        if self.futex.is_none() {
+            let topic = Topic {
+                name: self.topic.clone(),
+                qos: self.qos,
+            };
+            self.futex = Some(self._bus.futex_wait(&topic)?);
+        }
+        Ok(())
+    }
+
     /// Waits on the calling thread, without an async runtime, for the next frame and
     /// hands it to `read` in place (see [`FrameSubscriber::try_recv_with`]): blocks in
     /// the kernel on the stream's event, as a blocking socket read does. `None` after
@@ -419,7 +431,13 @@ impl FrameSubscriber {
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
-        self.blocking.notes.settle(&self.listener, &self.topic)?;
+        let futex = self
+            .futex
+            .as_ref()
+            .filter(|_| self.anticipation.get().is_none());
+        if futex.is_none() {
+            self.blocking.notes.settle(&self.listener, &self.topic)?;
+        }
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(
                 &self.blocking,
@@ -437,7 +455,10 @@ impl FrameSubscriber {
             let Some(left) = time_left(deadline) else {
                 return Ok(None);
             };
-            self.blocking.wait(&self.listener, left, &self.topic)?;
+            match futex {
+                Some(futex) => futex.wait(left)?,
+                None => self.blocking.wait(&self.listener, left, &self.topic)?,
+            }
         }
     }
 

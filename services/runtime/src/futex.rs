@@ -139,10 +139,13 @@ impl FutexWait {
     }
 
     /// Blocks until the topic's futex event is notified (a sample was published,
-    /// a notification was pending, or this receive's watchdog fired at
-    /// `deadline_ns`), or a signal arrives. Callers look for samples and at the clock
-    /// whichever it was.
-    pub(crate) fn wait(&self, deadline_ns: Option<u64>) -> Result<(), IpcError> {
+    /// a notification was pending, or this receive's watchdog fired after
+    /// `timeout`; `None` waits indefinitely), or a signal arrives. Callers look for
+    /// samples and at the clock whichever it was.
+    pub(crate) fn wait(&self, timeout: Option<Duration>) -> Result<(), IpcError> {
+        let deadline_ns = timeout.map(|t| {
+            monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX))
+        });
         let watch = match deadline_ns {
             Some(d) => {
                 let dog = self.watchdog()?;

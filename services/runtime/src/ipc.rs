@@ -28,7 +28,7 @@ use tokio_util::sync::CancellationToken;
 use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
-use crate::futex::{FutexWait, WakeEvent, WakeSvc};
+use crate::futex::{FutexWait, WakeSvc};
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
 
 /// The iceoryx2 service flavour every skymesh process uses.
@@ -320,6 +320,27 @@ impl Domain {
     }
 }
 
+/// A publisher's two notifiers: the topic's socket event (async and epoll waiters)
+/// and its futex event (blocking receivers that asked for it; see [`crate::futex`]).
+/// With nobody listening on one, its notify is a few atomic loads.
+pub(crate) struct Wakers {
+    socket: Notifier<Svc>,
+    futex: Notifier<WakeSvc>,
+}
+
+impl Wakers {
+    /// Wakes every receiver of the topic, on either event.
+    pub(crate) fn notify(&self, topic: &str) -> Result<(), IpcError> {
+        self.socket
+            .notify()
+            .map_err(|e| ipc_err("notify", topic, e))?;
+        self.futex
+            .notify()
+            .map_err(|e| ipc_err("notify futex receivers", topic, e))?;
+        Ok(())
+    }
+}
+
 /// Removes the stale resources of every dead node of service kind `S` under
 /// `config`; the names cleaned and how many could not be.
 fn cleanup_dead<S: iceoryx2::service::Service>(config: &Config) -> (Vec<String>, usize) {
@@ -486,10 +507,24 @@ impl Bus {
         open_event_of(&self.inner.node, topic, "open event")
     }
 
-    /// The topic's futex wake-up event (see [`crate::futex`]), same QoS as its
-    /// socket event.
-    pub(crate) fn open_wake_event(&self, topic: &Topic) -> Result<WakeEvent, IpcError> {
-        open_event_of(&self.inner.wake_node, topic, "open futex event")
+    /// A publisher's notifiers of both of `topic`'s events.
+    pub(crate) fn wakers(&self, topic: &Topic) -> Result<Wakers, IpcError> {
+        let socket = self
+            .open_event(topic)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
+        let futex = open_event_of(&self.inner.wake_node, topic, "open futex event")?
+            .notifier_builder()
+            .create()
+            .map_err(|e| ipc_err("create futex notifier", &topic.name, e))?;
+        Ok(Wakers { socket, futex })
+    }
+
+    /// A listener on `topic`'s futex event, for a subscriber's `set_futex_wake`.
+    pub(crate) fn futex_wait(&self, topic: &Topic) -> Result<FutexWait, IpcError> {
+        let event = open_event_of(&self.inner.wake_node, topic, "open futex event")?;
+        FutexWait::new(event, &topic.name)
     }
 
     fn open_pubsub<T: Sample>(
@@ -535,28 +570,18 @@ impl Bus {
         family: &str,
     ) -> Result<Publisher<T>, IpcError> {
         let pubsub = self.open_pubsub::<T>(topic)?;
-        let event = self.open_event(topic)?;
         let port = pubsub
             .publisher_builder()
             .create()
             .map_err(|e| ipc_err("create publisher", &topic.name, e))?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
-        let wake_notifier = self
-            .open_wake_event(topic)?
-            .notifier_builder()
-            .create()
-            .map_err(|e| ipc_err("create futex notifier", &topic.name, e))?;
+        let wakers = self.wakers(topic)?;
         let published = self.inner.stats.counter(
             "skymesh_topic_samples_published_total",
             &[("topic", family)],
         );
         Ok(Publisher {
             port,
-            notifier,
-            wake_notifier,
+            wakers,
             seq: 0,
             service: self.inner.service.to_wire(),
             instance: self.inner.instance,
@@ -1052,10 +1077,7 @@ pub(crate) async fn wait_listener(
 /// Sends samples of one type on one topic.
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
-    notifier: Notifier<Svc>,
-    /// Wakes the topic's futex receivers (see [`crate::futex`]); with none, a few
-    /// atomic loads.
-    wake_notifier: Notifier<WakeSvc>,
+    wakers: Wakers,
     seq: u64,
     service: u16,
     instance: u16,
@@ -1103,12 +1125,7 @@ impl<T: Sample> Publisher<T> {
 
     fn sent(&mut self, wake: bool) -> Result<u64, IpcError> {
         if wake {
-            self.notifier
-                .notify()
-                .map_err(|e| ipc_err("notify", &self.topic, e))?;
-            self.wake_notifier
-                .notify()
-                .map_err(|e| ipc_err("notify futex receivers", &self.topic, e))?;
+            self.wakers.notify(&self.topic)?;
         }
         self.published.inc();
         Ok(self.seq)
@@ -1293,8 +1310,7 @@ impl<T: Sample> Subscriber<T> {
                 name: self.topic.clone(),
                 qos: self.qos,
             };
-            let event = self._bus.open_wake_event(&topic)?;
-            self.futex = Some(FutexWait::new(event, &self.topic)?);
+            self.futex = Some(self._bus.futex_wait(&topic)?);
         }
         Ok(())
     }
@@ -1327,16 +1343,7 @@ impl<T: Sample> Subscriber<T> {
             // path's it happens inside the wait; a sample taken without waiting
             // leaves at most one notification, which makes the next wait return
             // once for nothing.
-            return self.blocking_loop(
-                deadline,
-                || futex.drain(),
-                |left| {
-                    futex.wait(left.map(|l| {
-                        monotonic_ns()
-                            .saturating_add(u64::try_from(l.as_nanos()).unwrap_or(u64::MAX))
-                    }))
-                },
-            );
+            return self.blocking_loop(deadline, || futex.drain(), |left| futex.wait(left));
         }
         self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {

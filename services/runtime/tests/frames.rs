@@ -359,3 +359,50 @@ fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
     let stats = sub.anticipation().expect("on");
     assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
 }
+
+/// `set_futex_wake` on a frame stream: every frame published while the receiver
+/// blocks wakes it, in order (a frame publisher that did not notify the futex event
+/// would leave each receive to time out), and the receive times out when the
+/// stream stops.
+#[test]
+fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
+    let d = domain("fx");
+    let bus = Bus::open(&d, "frame-fx", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::camera_frames("futex");
+    let mut sub = bus.frame_subscriber(&topic).unwrap();
+    sub.set_futex_wake().unwrap();
+    let (f, w, h, s) = FRAMES[4];
+    let len = f.frame_len(w, h, s).unwrap() as usize;
+    let mut publ = bus.frame_publisher(&topic, len).unwrap();
+    const N: u64 = 40;
+    std::thread::scope(|scope| {
+        let publisher = scope.spawn(move || {
+            for i in 1..=N {
+                std::thread::sleep(Duration::from_millis(3));
+                publ.publish_with(len, |hd, pixels| {
+                    hd.frame_seq = i;
+                    hd.set_geometry(f, w, h, s);
+                    pixels.fill(i as u8);
+                })
+                .unwrap();
+            }
+            publ
+        });
+        for i in 1..=N {
+            let (seq, first) = sub
+                .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
+                    (hd.frame_seq, pixels[0])
+                })
+                .unwrap()
+                .expect("every frame wakes the receiver");
+            assert_eq!((seq, first), (i, i as u8));
+        }
+        let _publ = publisher.join().unwrap();
+        let t0 = std::time::Instant::now();
+        assert!(sub
+            .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
+            .unwrap()
+            .is_none());
+        assert!(t0.elapsed() >= Duration::from_millis(30));
+    });
+}

@@ -6,7 +6,7 @@
 //! cargo run --release -p skymesh-e2e --bin frames-bench [-- FRAMES_PER_PHASE]
 //! ```
 //!
-//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, six phases per size in this
+//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, eight phases per size in this
 //! order (fresh child process each), FRAMES_PER_PHASE frames each (default 200), the
 //! first [`WARMUP`] not counted (page faults of fresh mappings, first wake-ups):
 //!
@@ -28,6 +28,10 @@
 //! - `ant`: `xfer` with the iceoryx2 receiver anticipating the next frame
 //!   (`FrameSubscriber::set_anticipate`, [`ANT_MAX_SPIN`]); compared with a fresh
 //!   socket `xfer` phase. The receiver prints its learnt period, windows and hits.
+//!
+//! - `fx`: `xfer` with the iceoryx2 receiver blocking on the stream's futex event
+//!   (`FrameSubscriber::set_futex_wake`) instead of its socket event; compared with a
+//!   fresh socket `xfer` phase.
 //!
 //! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_TRACE=1` makes the `ant`
 //! receiver print every frame's latency and anticipation state (stderr).
@@ -70,6 +74,9 @@ enum Mode {
     /// Transfer only, the iceoryx2 receiver anticipating the next frame
     /// (`FrameSubscriber::set_anticipate`); its socket phase is `xfer`'s.
     Ant,
+    /// Transfer only, the iceoryx2 receiver woken through the futex event
+    /// (`FrameSubscriber::set_futex_wake`); its socket phase is `xfer`'s.
+    Fx,
 }
 
 /// The anticipating receiver's longest poll per frame.
@@ -81,13 +88,14 @@ impl Mode {
             Mode::Full => "full",
             Mode::Xfer => "xfer",
             Mode::Ant => "ant",
+            Mode::Fx => "fx",
         }
     }
 
     /// The socket phase compared with this one.
     fn socket(self) -> Mode {
         match self {
-            Mode::Ant => Mode::Xfer,
+            Mode::Ant | Mode::Fx => Mode::Xfer,
             m => m,
         }
     }
@@ -97,6 +105,7 @@ impl Mode {
             "full" => Ok(Mode::Full),
             "xfer" => Ok(Mode::Xfer),
             "ant" => Ok(Mode::Ant),
+            "fx" => Ok(Mode::Fx),
             _ => anyhow::bail!("unknown mode `{s}`"),
         }
     }
@@ -193,7 +202,7 @@ fn driver(frames: usize) -> Result<()> {
             continue;
         }
         let len = (w * h * 3) as usize;
-        for mode in [Mode::Full, Mode::Xfer, Mode::Ant] {
+        for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx] {
             let iox = iox_run(w, h, frames, mode)?;
             let uds = uds_run(len, frames, mode.socket())?;
             let (pi, pu) = (iox.p(), uds.p());
@@ -238,7 +247,7 @@ fn driver(frames: usize) -> Result<()> {
             iox_p.push((w, mode, pi));
         }
     }
-    println!("iceoryx2 publisher, per frame (xfer and ant phases): µs");
+    println!("iceoryx2 publisher, per frame (xfer, ant and fx phases): µs");
     println!(
         "{:>9} {:>4} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
         "size",
@@ -270,7 +279,7 @@ fn driver(frames: usize) -> Result<()> {
             se[2] / 1e3,
         );
     }
-    for mode in [Mode::Full, Mode::Xfer, Mode::Ant] {
+    for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx] {
         let find = |w: u32| iox_p.iter().find(|e| e.0 == w && e.1 == mode).map(|e| e.2);
         if let (Some(small), Some(big)) = (find(640), find(1920)) {
             println!(
@@ -286,7 +295,7 @@ fn driver(frames: usize) -> Result<()> {
 }
 
 fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
-    let name = format!("fb{}{w}{}", std::process::id(), &mode.arg()[..1]);
+    let name = format!("fb{}{w}{}", std::process::id(), mode.arg());
     let domain = DomainGuard(Domain::load(&name, None)?);
     let len = (w * h * 3) as usize;
     let bus = Bus::open(
@@ -337,7 +346,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     drop(publ);
     drop(bus);
     let (loan, write, send) = match mode {
-        Mode::Xfer | Mode::Ant => (loan, write, send),
+        Mode::Xfer | Mode::Ant | Mode::Fx => (loan, write, send),
         Mode::Full => (Vec::new(), Vec::new(), Vec::new()),
     };
     Ok(Phase {
@@ -356,6 +365,9 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
     if mode == Mode::Ant {
         sub.set_anticipate(ANT_MAX_SPIN);
     }
+    if mode == Mode::Fx {
+        sub.set_futex_wake()?;
+    }
     let mut tally = Tally::new(frames, WARMUP);
     println!("ready");
     // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
@@ -368,7 +380,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
                 let t1 = monotonic_ns();
                 (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
             }
-            Mode::Xfer | Mode::Ant => {
+            Mode::Xfer | Mode::Ant | Mode::Fx => {
                 let t1 = monotonic_ns();
                 let ends = (
                     pixels.first().copied().unwrap_or(0),
@@ -382,7 +394,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
         ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
         match mode {
             Mode::Full => check_sum(k, n, sum)?,
-            Mode::Xfer | Mode::Ant => check_ends(k, ends)?,
+            Mode::Xfer | Mode::Ant | Mode::Fx => check_ends(k, ends)?,
         }
         tally.add(k, t0, t1);
         if std::env::var_os("FRAMES_BENCH_TRACE").is_some() {
@@ -433,7 +445,7 @@ fn uds_run(len: usize, frames: usize, mode: Mode) -> Result<Phase> {
                 buf[HEAD..].fill(fill_value(k));
                 t0
             }
-            Mode::Xfer | Mode::Ant => {
+            Mode::Xfer | Mode::Ant | Mode::Fx => {
                 buf[HEAD..].fill(fill_value(k));
                 monotonic_ns()
             }
@@ -479,7 +491,7 @@ fn uds_receiver(path: &str, len: usize, frames: usize, mode: Mode) -> Result<()>
                 check_sum(k, n, sum)?;
                 tally.add(k, t0, t1);
             }
-            Mode::Xfer | Mode::Ant => {
+            Mode::Xfer | Mode::Ant | Mode::Fx => {
                 let t1 = monotonic_ns();
                 check_ends(k, (buf[0], buf[len - 1]))?;
                 tally.add(k, t0, t1);
