@@ -411,14 +411,9 @@ impl FrameSubscriber {
     /// [`FrameSubscriber::recv_blocking_with`] sleeps on the stream's futex event:
     /// see [`crate::Subscriber::set_futex_wake`]. `set_anticipate` takes precedence.
     pub fn set_futex_wake(&mut self) -> Result<(), FrameError> {
-        if self.futex.is_none() {
-            let topic = Topic {
-                name: self.topic.clone(),
-                qos: self.qos,
-            };
-            self.futex = Some(self._bus.futex_wait(&topic)?);
-        }
-        Ok(())
+        Ok(self
+            ._bus
+            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?)
     }
 
     /// Waits on the calling thread, without an async runtime, for the next frame and

@@ -521,10 +521,23 @@ impl Bus {
         Ok(Wakers { socket, futex })
     }
 
-    /// A listener on `topic`'s futex event, for a subscriber's `set_futex_wake`.
-    pub(crate) fn futex_wait(&self, topic: &Topic) -> Result<FutexWait, IpcError> {
-        let event = open_event_of(&self.inner.wake_node, topic, "open futex event")?;
-        FutexWait::new(event, &topic.name)
+    /// A subscriber's `set_futex_wake`: puts a listener on the topic's futex event
+    /// in `slot`, unless one is there.
+    pub(crate) fn futex_wait_into(
+        &self,
+        slot: &mut Option<FutexWait>,
+        name: &str,
+        qos: TopicQos,
+    ) -> Result<(), IpcError> {
+        if slot.is_none() {
+            let topic = Topic {
+                name: name.to_string(),
+                qos,
+            };
+            let event = open_event_of(&self.inner.wake_node, &topic, "open futex event")?;
+            *slot = Some(FutexWait::new(event, name)?);
+        }
+        Ok(())
     }
 
     fn open_pubsub<T: Sample>(
@@ -1298,21 +1311,15 @@ impl<T: Sample> Subscriber<T> {
     /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's futex
     /// event instead of its socket event: one system call per wake-up instead of
     /// two, for a thread that blocks on one topic (a control loop at hundreds of Hz
-    /// to kHz). Less CPU per message and a faster wake-up than a blocking UDP
-    /// `recv` (see `samples-bench`, docs/benchmarks.md). A timed receive starts a
+    /// to kHz). At 1 kHz it wakes faster than a blocking UDP `recv`, in most runs
+    /// with less CPU per message (`samples-bench`, docs/benchmarks.md). A timed receive starts a
     /// watchdog thread for this subscriber (see the `futex` module). Async receives
     /// are unchanged (they need the socket's file descriptor);
     /// [`Subscriber::set_anticipate`], which waits on a timer beside the event, takes
     /// precedence. Publishers of every topic notify both events.
     pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
-        if self.futex.is_none() {
-            let topic = Topic {
-                name: self.topic.clone(),
-                qos: self.qos,
-            };
-            self.futex = Some(self._bus.futex_wait(&topic)?);
-        }
-        Ok(())
+        self._bus
+            .futex_wait_into(&mut self.futex, &self.topic, self.qos)
     }
 
     /// Polls for up to the configured spin time; `Some` if a sample came.

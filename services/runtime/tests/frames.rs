@@ -311,26 +311,24 @@ fn a_frame_whose_header_does_not_describe_its_pixels_is_not_sent() {
     assert_eq!(seq, 1);
 }
 
-/// `set_anticipate` on a frame stream: every frame of a 100 fps stream arrives in
-/// order through the blocking receive, some are taken by polling in the window
-/// around their expected time, and the receive times out when the stream stops.
-#[test]
-fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
-    let d = domain("ant");
-    let bus = Bus::open(&d, "frame-ant", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::camera_frames("anticipate");
-    let mut sub = bus.frame_subscriber(&topic).unwrap();
-    sub.set_anticipate(Duration::from_millis(2));
+/// Publishes `n` small frames on `topic`, one every `period` (on a fixed
+/// schedule), while `sub` receives them with `recv_blocking_with`: each must arrive,
+/// in order; then a receive with nothing published times out.
+fn blocking_receive_takes_a_periodic_stream(
+    bus: &Bus,
+    topic: &skymesh_ipc_types::Topic,
+    sub: &skymesh_runtime::FrameSubscriber,
+    n: u64,
+    period: Duration,
+) {
     let (f, w, h, s) = FRAMES[4];
     let len = f.frame_len(w, h, s).unwrap() as usize;
-    let mut publ = bus.frame_publisher(&topic, len).unwrap();
-    const N: u64 = 120;
-    const PERIOD: Duration = Duration::from_millis(10);
+    let mut publ = bus.frame_publisher(topic, len).unwrap();
     std::thread::scope(|scope| {
         let publisher = scope.spawn(move || {
             let t0 = std::time::Instant::now();
-            for i in 1..=N {
-                let due = t0 + PERIOD * i as u32;
+            for i in 1..=n {
+                let due = t0 + period * i as u32;
                 std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
                 publ.publish_with(len, |hd, pixels| {
                     hd.frame_seq = i;
@@ -341,7 +339,7 @@ fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
             }
             publ
         });
-        for i in 1..=N {
+        for i in 1..=n {
             let (seq, first) = sub
                 .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
                     (hd.frame_seq, pixels[0])
@@ -351,11 +349,26 @@ fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
             assert_eq!((seq, first), (i, i as u8));
         }
         let _publ = publisher.join().unwrap();
+        let t0 = std::time::Instant::now();
         assert!(sub
             .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
             .unwrap()
             .is_none());
+        assert!(t0.elapsed() >= Duration::from_millis(30));
     });
+}
+
+/// `set_anticipate` on a frame stream: every frame of a 100 fps stream arrives in
+/// order through the blocking receive, some are taken by polling in the window
+/// around their expected time, and the receive times out when the stream stops.
+#[test]
+fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
+    let d = domain("ant");
+    let bus = Bus::open(&d, "frame-ant", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::camera_frames("anticipate");
+    let mut sub = bus.frame_subscriber(&topic).unwrap();
+    sub.set_anticipate(Duration::from_millis(2));
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 120, Duration::from_millis(10));
     let stats = sub.anticipation().expect("on");
     assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
 }
@@ -371,38 +384,5 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     let topic = topics::camera_frames("futex");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_futex_wake().unwrap();
-    let (f, w, h, s) = FRAMES[4];
-    let len = f.frame_len(w, h, s).unwrap() as usize;
-    let mut publ = bus.frame_publisher(&topic, len).unwrap();
-    const N: u64 = 40;
-    std::thread::scope(|scope| {
-        let publisher = scope.spawn(move || {
-            for i in 1..=N {
-                std::thread::sleep(Duration::from_millis(3));
-                publ.publish_with(len, |hd, pixels| {
-                    hd.frame_seq = i;
-                    hd.set_geometry(f, w, h, s);
-                    pixels.fill(i as u8);
-                })
-                .unwrap();
-            }
-            publ
-        });
-        for i in 1..=N {
-            let (seq, first) = sub
-                .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
-                    (hd.frame_seq, pixels[0])
-                })
-                .unwrap()
-                .expect("every frame wakes the receiver");
-            assert_eq!((seq, first), (i, i as u8));
-        }
-        let _publ = publisher.join().unwrap();
-        let t0 = std::time::Instant::now();
-        assert!(sub
-            .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
-            .unwrap()
-            .is_none());
-        assert!(t0.elapsed() >= Duration::from_millis(30));
-    });
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(3));
 }
