@@ -430,6 +430,7 @@ impl FrameSubscriber {
             .futex
             .as_ref()
             .filter(|_| self.anticipation.get().is_none());
+        let deadline_ns = futex.and_then(|_| crate::futex::deadline_ns(timeout));
         if futex.is_none() {
             self.blocking.notes.settle(&self.listener, &self.topic)?;
         }
@@ -451,7 +452,7 @@ impl FrameSubscriber {
                 return Ok(None);
             };
             match futex {
-                Some(futex) => futex.wait(left)?,
+                Some(futex) => futex.wait(deadline_ns)?,
                 None => self.blocking.wait(&self.listener, left, &self.topic)?,
             }
         }

@@ -28,7 +28,8 @@
 //! is still waiting then, notifies the topic's futex event. The receive publishes its
 //! deadline in an atomic (no system call); the watchdog wakes at most once per
 //! deadline, and is woken early only when a deadline comes before the one it sleeps
-//! towards (a shorter timeout than the last). Its notify wakes every futex receiver
+//! towards (a shorter timeout than the last, or any while it sleeps with nothing to
+//! watch: then it never wakes by itself). Its notify wakes every futex receiver
 //! of the topic, in every process: those find no sample and wait again. That happens
 //! only when a timeout expires, i.e. when the topic has gone quiet.
 
@@ -86,6 +87,12 @@ impl iceoryx2::service::internal::ServiceInternal<WakeSvc> for WakeSvc {}
 /// The event service port factory of a topic's futex event.
 pub(crate) type WakeEvent = iceoryx2::service::port_factory::event::PortFactory<WakeSvc>;
 
+/// The `CLOCK_MONOTONIC` deadline (ns) of a receive with `timeout`, for
+/// [`FutexWait::wait`]: computed once per receive, not per wait.
+pub(crate) fn deadline_ns(timeout: Option<Duration>) -> Option<u64> {
+    timeout.map(|t| monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX)))
+}
+
 /// `deadline_ns` when no receive is waiting.
 const NOT_WAITING: u64 = 0;
 
@@ -139,13 +146,10 @@ impl FutexWait {
     }
 
     /// Blocks until the topic's futex event is notified (a sample was published,
-    /// a notification was pending, or this receive's watchdog fired after
-    /// `timeout`; `None` waits indefinitely), or a signal arrives. Callers look for
-    /// samples and at the clock whichever it was.
-    pub(crate) fn wait(&self, timeout: Option<Duration>) -> Result<(), IpcError> {
-        let deadline_ns = timeout.map(|t| {
-            monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX))
-        });
+    /// a notification was pending, or this receive's watchdog fired at
+    /// `deadline_ns`, see [`deadline_ns`]; `None` waits indefinitely), or a signal
+    /// arrives. Callers look for samples and at the clock whichever it was.
+    pub(crate) fn wait(&self, deadline_ns: Option<u64>) -> Result<(), IpcError> {
         let watch = match deadline_ns {
             Some(d) => {
                 let dog = self.watchdog()?;
@@ -213,9 +217,9 @@ fn stop(dog: Watchdog) {
     let _ = dog.thread.join();
 }
 
-/// How long the watchdog sleeps while no receive is waiting; a receive whose deadline
-/// comes earlier wakes it.
-const IDLE_LOOK: Duration = Duration::from_secs(1);
+/// `looks_at_ns` while no receive is waiting: the watchdog sleeps until the next
+/// timed wait wakes it (any deadline is earlier).
+const NEVER: u64 = u64::MAX;
 
 fn watchdog_loop(watch: &Watch, notifier: &Notifier<WakeSvc>, topic: &str) {
     // The deadline this watchdog has already fired for: a receive that is slow to
@@ -225,7 +229,7 @@ fn watchdog_loop(watch: &Watch, notifier: &Notifier<WakeSvc>, topic: &str) {
         let now = monotonic_ns();
         let deadline = watch.deadline_ns.load(Ordering::SeqCst);
         let look_at = if deadline == NOT_WAITING || deadline == fired {
-            now + IDLE_LOOK.as_nanos() as u64
+            NEVER
         } else if now >= deadline {
             if let Err(e) = notifier.notify() {
                 tracing::warn!(topic, error = ?e, "futex watchdog could not wake a timed-out receive");
@@ -243,7 +247,9 @@ fn watchdog_loop(watch: &Watch, notifier: &Notifier<WakeSvc>, topic: &str) {
         if watch.deadline_ns.load(Ordering::SeqCst) != deadline {
             continue;
         }
-        if look_at > now {
+        if look_at == NEVER {
+            std::thread::park();
+        } else if look_at > now {
             std::thread::park_timeout(Duration::from_nanos(look_at - now));
         }
     }

@@ -1350,7 +1350,8 @@ impl<T: Sample> Subscriber<T> {
             // path's it happens inside the wait; a sample taken without waiting
             // leaves at most one notification, which makes the next wait return
             // once for nothing.
-            return self.blocking_loop(deadline, || futex.drain(), |left| futex.wait(left));
+            let deadline_ns = crate::futex::deadline_ns(timeout);
+            return self.blocking_loop(deadline, || futex.drain(), |_| futex.wait(deadline_ns));
         }
         self.blocking.notes.settle(&self.listener, &self.topic)?;
         if let Some(a) = self.anticipation.get() {
