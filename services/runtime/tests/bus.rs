@@ -622,7 +622,15 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
         let d = domain(tag);
         let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
         let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-        let topic = topics::vehicle_state(5);
+        // Room for the whole stream: a receiver stalled by a loaded machine must not
+        // lose samples to overwriting (that is not what this test is about).
+        let topic = skymesh_ipc_types::Topic {
+            qos: skymesh_ipc_types::TopicQos {
+                buffer: 64,
+                ..skymesh_ipc_types::TopicQos::STATE
+            },
+            ..topics::vehicle_state(5)
+        };
         let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
         sub.set_futex_wake().unwrap();
         sub.set_spin(spin);
@@ -637,6 +645,7 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
         assert!(got.is_none(), "{spin:?}: the watchdog never ended the wait");
         assert!(waited >= Duration::from_millis(30), "{spin:?}: {waited:?}");
 
+        let t0 = std::time::Instant::now();
         std::thread::scope(|s| {
             let p = s.spawn(|| {
                 for i in 1..=50 {
@@ -657,6 +666,12 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
             }
             p.join().unwrap();
         });
+        // Woken by each sample, not by the 5 s watchdog: the stream takes ~45 ms.
+        let took = t0.elapsed();
+        assert!(
+            took < Duration::from_secs(4),
+            "{spin:?}: stream took {took:?}"
+        );
         let idle = Duration::from_millis(300);
         assert_blocks(idle, &format!("{spin:?}: blocking wait"), || {
             assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())

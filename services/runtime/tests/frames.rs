@@ -384,5 +384,5 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     let topic = topics::camera_frames("futex");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_futex_wake().unwrap();
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(3));
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
 }
