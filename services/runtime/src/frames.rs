@@ -16,14 +16,13 @@ use std::time::{Duration, Instant};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic, TopicQos};
-use tokio::io::unix::AsyncFd;
 
 use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::futex::FutexWait;
 use crate::ipc::{
-    ipc_err, recv_anticipating, time_left, wait_listener, with_retry, BlockingWait, Bus, IpcError,
-    ListenerFd, Svc, WaitSource, Wakers,
+    ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SocketWait, Svc, WaitSource,
+    Wakers,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -119,16 +118,11 @@ impl Bus {
             .subscriber_builder()
             .create()
             .map_err(|e| ipc_err("create frame subscriber", &topic.name, e))?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| ipc_err("create listener", &topic.name, e))?;
+        let socket = SocketWait::new(event, &topic.name)?;
         let labels = [("topic", topic.name.as_str())];
         let stats = self.stats();
         Ok(FrameSubscriber {
-            afd: None,
-            blocking: BlockingWait::default(),
-            listener,
+            socket,
             port,
             received: stats.counter("skymesh_topic_samples_received_total", &labels),
             lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
@@ -241,11 +235,9 @@ impl FramePublisher {
 
 /// Receives frames of one stream, read in place in shared memory.
 pub struct FrameSubscriber {
-    // Declared first: must drop before `listener` (see `ipc::ListenerFd`).
-    afd: Option<AsyncFd<ListenerFd>>,
-    // The listener's fd in an epoll set, for `recv_blocking_with`; also dropped first.
-    blocking: BlockingWait,
-    listener: Listener<Svc>,
+    /// The stream's socket event: async receives, and blocking ones without the
+    /// futex wake-up.
+    socket: SocketWait,
     port: iceoryx2::port::subscriber::Subscriber<Svc, [u8], FrameHeader>,
     received: Counter,
     lost: Counter,
@@ -330,20 +322,12 @@ impl FrameSubscriber {
     /// Consumes the last wake-up's notification before a receive looks for frames
     /// (see `Notifications` in `ipc.rs`).
     fn settle(&self) -> Result<(), IpcError> {
-        self.blocking
-            .notes
-            .settle_async(self.afd.as_ref(), &self.listener, &self.topic)
+        self.socket.settle_async(&self.topic)
     }
 
     /// Waits until frames may be pending (see `wait_listener` in `ipc.rs`).
     async fn wait(&mut self) -> Result<(), IpcError> {
-        wait_listener(
-            &mut self.afd,
-            &self.blocking.notes,
-            &self.listener,
-            &self.topic,
-        )
-        .await
+        self.socket.wait_async(&self.topic).await
     }
 
     /// Waits until at least one frame is pending, then behaves like
@@ -411,9 +395,10 @@ impl FrameSubscriber {
     /// [`FrameSubscriber::recv_blocking_with`] sleeps on the stream's futex event:
     /// see [`crate::Subscriber::set_futex_wake`]. `set_anticipate` takes precedence.
     pub fn set_futex_wake(&mut self) -> Result<(), FrameError> {
-        Ok(self
-            ._bus
-            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?)
+        self._bus
+            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?;
+        self.socket.release();
+        Ok(())
     }
 
     /// Waits on the calling thread, without an async runtime, for the next frame and
@@ -432,17 +417,12 @@ impl FrameSubscriber {
             .filter(|_| self.anticipation.get().is_none());
         let deadline_ns = futex.and_then(|_| crate::futex::deadline_ns(timeout));
         if futex.is_none() {
-            self.blocking.notes.settle(&self.listener, &self.topic)?;
+            self.socket.settle(&self.topic)?;
         }
         if let Some(a) = self.anticipation.get() {
-            return recv_anticipating(
-                &self.blocking,
-                &self.listener,
-                a,
-                deadline,
-                &self.topic,
-                || self.try_recv_with(&mut read),
-            );
+            return recv_anticipating(&self.socket, a, deadline, &self.topic, || {
+                self.try_recv_with(&mut read)
+            });
         }
         loop {
             if let Some(r) = self.try_recv_with(&mut read)? {
@@ -453,7 +433,7 @@ impl FrameSubscriber {
             };
             match futex {
                 Some(futex) => futex.wait(deadline_ns)?,
-                None => self.blocking.wait(&self.listener, left, &self.topic)?,
+                None => self.socket.wait_blocking(left, &self.topic)?,
             }
         }
     }
@@ -498,7 +478,7 @@ impl FrameSubscriber {
 }
 
 impl WaitSource for FrameSubscriber {
-    fn listener(&self) -> &Listener<Svc> {
-        &self.listener
+    fn listener(&self) -> Result<&Listener<Svc>, IpcError> {
+        self.socket.listener(&self.topic)
     }
 }

@@ -623,16 +623,11 @@ impl Bus {
             .subscriber_builder()
             .create()
             .map_err(|e| ipc_err("create subscriber", &topic.name, e))?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| ipc_err("create listener", &topic.name, e))?;
+        let socket = SocketWait::new(event, &topic.name)?;
         let labels = [("topic", family)];
         let stats = &self.inner.stats;
         Ok(Subscriber {
-            afd: None,
-            blocking: BlockingWait::default(),
-            listener,
+            socket,
             port,
             received: stats.counter("skymesh_topic_samples_received_total", &labels),
             lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
@@ -656,7 +651,7 @@ impl Bus {
 /// The listener's file descriptor, registered with tokio's reactor.
 ///
 /// Holds only the number; the fd is owned by the [`Listener`], which outlives the
-/// registration because [`Subscriber`] declares `afd` before `listener` (fields drop
+/// registration because [`SocketWait`] declares `afd` before `listener` (fields drop
 /// in declaration order, so epoll deregistration happens before the fd closes).
 #[derive(Debug)]
 pub(crate) struct ListenerFd(RawFd);
@@ -682,8 +677,101 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
     let fd = ListenerFd(listener_fd(listener).as_raw_fd());
     // SAFETY: the registration requires the fd to stay open, and not be closed by us,
     // for as long as it is registered. We never close it, and the `AsyncFd` holding it
-    // is dropped before the `Listener` that owns the fd (see `Subscriber` field order).
+    // is dropped before the `Listener` that owns the fd (`SocketWait`'s field order
+    // and `release`).
     Ok(unsafe { AsyncFd::register_with_interest(fd, tokio::io::Interest::READABLE) }?)
+}
+
+/// A subscriber's wait on its topic's socket event: the listener, its epoll set
+/// (blocking receives) and its tokio registration (async receives).
+///
+/// The listener is created with the subscriber. `set_futex_wake` releases it
+/// ([`SocketWait::release`]): a receiver that sleeps on the futex event would
+/// otherwise keep a listener nobody drains — a port, a socket holding one unread
+/// datagram (iceoryx2 writes no more until a drain), and a connection every
+/// publish looks at. A later wait on the socket event (an async receive, an
+/// anticipating one, [`wait_loop`]) creates it again, with fresh bookkeeping.
+#[derive(Debug)]
+pub(crate) struct SocketWait {
+    // Declared first: must drop before `listener` (see `ListenerFd`). Registered
+    // with tokio on the first async wait, so blocking users need no runtime.
+    afd: Option<AsyncFd<ListenerFd>>,
+    // The listener's fd in an epoll set, for blocking waits; also dropped first.
+    pub(crate) blocking: BlockingWait,
+    listener: OnceLock<Listener<Svc>>,
+    event: iceoryx2::service::port_factory::event::PortFactory<Svc>,
+}
+
+impl SocketWait {
+    pub(crate) fn new(
+        event: iceoryx2::service::port_factory::event::PortFactory<Svc>,
+        topic: &str,
+    ) -> Result<SocketWait, IpcError> {
+        let wait = SocketWait {
+            afd: None,
+            blocking: BlockingWait::default(),
+            listener: OnceLock::new(),
+            event,
+        };
+        wait.listener(topic)?;
+        Ok(wait)
+    }
+
+    /// The listener, created again if it was released.
+    pub(crate) fn listener(&self, topic: &str) -> Result<&Listener<Svc>, IpcError> {
+        if let Some(l) = self.listener.get() {
+            return Ok(l);
+        }
+        let l = self
+            .event
+            .listener_builder()
+            .create()
+            .map_err(|e| ipc_err("create listener", topic, e))?;
+        // A racing creation on another thread wins; this one is dropped unused.
+        let _ = self.listener.set(l);
+        Ok(self.listener.get().expect("set above"))
+    }
+
+    /// Drops the listener (publishers stop notifying it) and everything tied to its
+    /// file descriptor and its notifications.
+    pub(crate) fn release(&mut self) {
+        self.afd = None;
+        self.blocking = BlockingWait::default();
+        self.listener = OnceLock::new();
+    }
+
+    /// [`Notifications::settle`] on this listener.
+    pub(crate) fn settle(&self, topic: &str) -> Result<(), IpcError> {
+        self.blocking.notes.settle(self.listener(topic)?, topic)
+    }
+
+    /// [`Notifications::settle_async`] on this listener.
+    pub(crate) fn settle_async(&self, topic: &str) -> Result<(), IpcError> {
+        self.blocking
+            .notes
+            .settle_async(self.afd.as_ref(), self.listener(topic)?, topic)
+    }
+
+    /// [`BlockingWait::wait`] on this listener.
+    pub(crate) fn wait_blocking(
+        &self,
+        timeout: Option<Duration>,
+        topic: &str,
+    ) -> Result<(), IpcError> {
+        self.blocking.wait(self.listener(topic)?, timeout, topic)
+    }
+
+    /// [`Notifications::drain`] of this listener.
+    pub(crate) fn drain(&self, topic: &str) -> Result<(), IpcError> {
+        self.blocking.notes.drain(self.listener(topic)?, topic)
+    }
+
+    /// Waits until samples may be pending (see [`wait_listener`]).
+    pub(crate) async fn wait_async(&mut self, topic: &str) -> Result<(), IpcError> {
+        self.listener(topic)?;
+        let listener = self.listener.get().expect("created above");
+        wait_listener(&mut self.afd, &self.blocking.notes, listener, topic).await
+    }
 }
 
 /// Whether a listener's notifications have been consumed since it last woke.
@@ -1002,14 +1090,14 @@ pub(crate) fn time_left(deadline: Option<Instant>) -> Option<Option<Duration>> {
 /// `anticipation`); between tries the thread sleeps, spins or blocks as the
 /// anticipation plans. `None` once `deadline` has passed without a sample.
 pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
-    blocking: &BlockingWait,
-    listener: &Listener<Svc>,
+    socket: &SocketWait,
     anticipation: &Mutex<Anticipation>,
     deadline: Option<Instant>,
     topic: &str,
     mut take: impl FnMut() -> Result<Option<R>, E>,
 ) -> Result<Option<R>, E> {
     let lock = || anticipate::lock(anticipation);
+    let (blocking, listener) = (&socket.blocking, socket.listener(topic)?);
     let mut spun = false;
     loop {
         if let Some(r) = take()? {
@@ -1181,12 +1269,9 @@ impl<T: Sample> Publisher<T> {
 
 /// Receives samples of one type from one topic.
 pub struct Subscriber<T: Sample> {
-    // Declared first: must drop before `listener` (see `ListenerFd`). Registered
-    // with tokio on the first `recv`, so blocking users need no runtime.
-    afd: Option<AsyncFd<ListenerFd>>,
-    // The listener's fd in an epoll set, for `recv_blocking`; also dropped first.
-    blocking: BlockingWait,
-    listener: Listener<Svc>,
+    /// The topic's socket event: async receives, and blocking ones without the
+    /// futex wake-up.
+    socket: SocketWait,
     port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
     received: Counter,
     lost: Counter,
@@ -1319,7 +1404,9 @@ impl<T: Sample> Subscriber<T> {
     /// precedence. Publishers of every topic notify both events.
     pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
         self._bus
-            .futex_wait_into(&mut self.futex, &self.topic, self.qos)
+            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?;
+        self.socket.release();
+        Ok(())
     }
 
     /// Polls for up to the configured spin time; `Some` if a sample came.
@@ -1353,21 +1440,14 @@ impl<T: Sample> Subscriber<T> {
             let deadline_ns = crate::futex::deadline_ns(timeout);
             return self.blocking_loop(deadline, || futex.drain(), |_| futex.wait(deadline_ns));
         }
-        self.blocking.notes.settle(&self.listener, &self.topic)?;
+        self.socket.settle(&self.topic)?;
         if let Some(a) = self.anticipation.get() {
-            return recv_anticipating(
-                &self.blocking,
-                &self.listener,
-                a,
-                deadline,
-                &self.topic,
-                || self.try_recv(),
-            );
+            return recv_anticipating(&self.socket, a, deadline, &self.topic, || self.try_recv());
         }
         self.blocking_loop(
             deadline,
-            || self.blocking.notes.drain(&self.listener, &self.topic),
-            |left| self.blocking.wait(&self.listener, left, &self.topic),
+            || self.socket.drain(&self.topic),
+            |left| self.socket.wait_blocking(left, &self.topic),
         )
     }
 
@@ -1412,7 +1492,7 @@ impl<T: Sample> Subscriber<T> {
         // spin already took finds nothing and must block, not spin again.
         let mut spun = self.spin.is_zero();
         loop {
-            if let Some(v) = self.blocking.notes.look(|| self.try_recv())? {
+            if let Some(v) = self.socket.blocking.notes.look(|| self.try_recv())? {
                 return Ok(v);
             }
             if !spun {
@@ -1430,7 +1510,12 @@ impl<T: Sample> Subscriber<T> {
     pub async fn recv_with<R>(&mut self, mut read: impl FnMut(&T) -> R) -> Result<R, IpcError> {
         self.settle()?;
         loop {
-            if let Some(r) = self.blocking.notes.look(|| self.try_recv_with(&mut read))? {
+            if let Some(r) = self
+                .socket
+                .blocking
+                .notes
+                .look(|| self.try_recv_with(&mut read))?
+            {
                 return Ok(r);
             }
             self.wait_readable().await?;
@@ -1439,20 +1524,12 @@ impl<T: Sample> Subscriber<T> {
 
     /// Consumes the last wake-up's notification (see [`Notifications`]).
     fn settle(&self) -> Result<(), IpcError> {
-        self.blocking
-            .notes
-            .settle_async(self.afd.as_ref(), &self.listener, &self.topic)
+        self.socket.settle_async(&self.topic)
     }
 
     /// Waits until the topic's event fires (a publisher notified).
     async fn wait_readable(&mut self) -> Result<(), IpcError> {
-        wait_listener(
-            &mut self.afd,
-            &self.blocking.notes,
-            &self.listener,
-            &self.topic,
-        )
-        .await
+        self.socket.wait_async(&self.topic).await
     }
 
     /// Drains everything pending and returns the newest sample, if any.
@@ -1488,13 +1565,15 @@ pub enum Wake {
 
 /// Something a [`wait_loop`] can block on. Implemented by every [`Subscriber`].
 pub trait WaitSource {
+    /// The topic's socket event listener (created again if `set_futex_wake`
+    /// released it).
     #[doc(hidden)]
-    fn listener(&self) -> &Listener<Svc>;
+    fn listener(&self) -> Result<&Listener<Svc>, IpcError>;
 }
 
 impl<T: Sample> WaitSource for Subscriber<T> {
-    fn listener(&self) -> &Listener<Svc> {
-        &self.listener
+    fn listener(&self) -> Result<&Listener<Svc>, IpcError> {
+        self.socket.listener(&self.topic)
     }
 }
 
@@ -1516,9 +1595,13 @@ pub fn wait_loop(
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| ipc_err("create waitset", "wait_loop", e))?;
-    let guards = sources
+    let listeners = sources
         .iter()
-        .map(|s| waitset.attach_notification(s.listener()))
+        .map(|s| s.listener())
+        .collect::<Result<Vec<_>, _>>()?;
+    let guards = listeners
+        .iter()
+        .map(|l| waitset.attach_notification(*l))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| ipc_err("attach", "wait_loop", e))?;
     let tick = interval
@@ -1535,7 +1618,7 @@ pub fn wait_loop(
                         if id.has_event_from(guard) {
                             // Consume the wake-up before the callback drains samples, so
                             // a sample published meanwhile wakes us again.
-                            let _ = sources[i].listener().try_wait(|_| {});
+                            let _ = listeners[i].try_wait(|_| {});
                             flow = on_wake(Wake::Topic(i));
                         }
                     }
@@ -1563,6 +1646,80 @@ pub fn wait_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `set_futex_wake` releases the subscriber's socket listener (nobody would
+    /// drain it; publishers stop looking at it). An async receive
+    /// afterwards creates it again, takes what was published while there was none
+    /// (though an async receive before had found the queue empty), and is woken by
+    /// what comes later; blocking futex receives go on working, and so does a
+    /// blocking wait on the new socket listener (an anticipating receive), though a
+    /// blocking socket receive before had registered the old one with epoll.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_futex_subscriber_leaves_the_socket_event_until_it_waits_on_it() {
+        use skymesh_ipc_types::{topics, VehicleState};
+        let d = Domain::load(&format!("ut{}fxsock", std::process::id()), None).unwrap();
+        {
+            let bus = Bus::open(&d, "fx-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+            let topic = topics::vehicle_state(9);
+            let event = bus.open_event(&topic).unwrap();
+            let listeners = || event.dynamic_config().number_of_listeners();
+            let mut publ = bus.publisher::<VehicleState>(&topic).unwrap();
+            let mut sub = bus.subscriber::<VehicleState>(&topic).unwrap();
+            let second = Duration::from_secs(1);
+            assert_eq!(listeners(), 1, "a new subscriber waits on the socket event");
+            let short = Duration::from_millis(20);
+            assert!(sub.recv_timeout(short).await.unwrap().is_none());
+            assert!(sub.recv_blocking(Some(short)).unwrap().is_none());
+            sub.set_futex_wake().unwrap();
+            assert_eq!(listeners(), 0, "set_futex_wake keeps a socket listener");
+
+            publ.publish(VehicleState::default()).unwrap();
+            let got = sub
+                .recv_blocking(Some(second))
+                .unwrap()
+                .expect("futex receive");
+            assert_eq!(got.header.seq, 1);
+            assert_eq!(listeners(), 0, "a futex receive created a socket listener");
+
+            publ.publish(VehicleState::default()).unwrap();
+            let got = tokio::time::timeout(second, sub.recv())
+                .await
+                .expect("async receive");
+            assert_eq!(
+                got.unwrap().header.seq,
+                2,
+                "the sample sent with no listener"
+            );
+            assert_eq!(listeners(), 1, "an async receive needs the socket listener");
+            let late = tokio::spawn(async move {
+                tokio::time::sleep(Duration::from_millis(50)).await;
+                publ.publish(VehicleState::default()).unwrap();
+                publ
+            });
+            let got = tokio::time::timeout(second, sub.recv())
+                .await
+                .expect("woken");
+            assert_eq!(got.unwrap().header.seq, 3);
+            let mut publ = late.await.unwrap();
+
+            publ.publish(VehicleState::default()).unwrap();
+            let got = sub
+                .recv_blocking(Some(second))
+                .unwrap()
+                .expect("futex again");
+            assert_eq!(got.header.seq, 4);
+
+            sub.set_anticipate(Duration::from_micros(100));
+            let late = std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(50));
+                publ.publish(VehicleState::default()).unwrap();
+            });
+            let got = sub.recv_blocking(Some(second)).unwrap();
+            assert_eq!(got.expect("woken on the new socket listener").header.seq, 5);
+            late.join().unwrap();
+        }
+        d.remove_leftover_files();
+    }
 
     #[test]
     fn shm_room_check_names_the_dir_and_the_numbers() {
