@@ -9,7 +9,6 @@
 //! Wake-up, sequence stamping and stats are those of the typed channels in
 //! [`crate::ipc`]: one event per topic, `skymesh_topic_samples_*_total` counters.
 
-use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -21,8 +20,8 @@ use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::futex::FutexWait;
 use crate::ipc::{
-    ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SocketWait, Svc, WaitSource,
-    Wakers,
+    ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SeqTable, SocketWait, Svc,
+    WaitSource, Wakers,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -132,7 +131,7 @@ impl Bus {
                 &labels,
                 &LATENCY_BOUNDS_S,
             ),
-            last_seq: Mutex::new(HashMap::new()),
+            last_seq: Mutex::default(),
             warn: Mutex::new(WarnLimiter::default()),
             anticipation: Anticipating::default(),
             futex: None,
@@ -243,7 +242,7 @@ pub struct FrameSubscriber {
     lost: Counter,
     invalid: Counter,
     age: Histogram,
-    last_seq: Mutex<HashMap<(u16, u16), u64>>,
+    last_seq: Mutex<SeqTable>,
     warn: Mutex<WarnLimiter<&'static str>>,
     /// Set by [`FrameSubscriber::set_anticipate`].
     anticipation: Anticipating,
@@ -463,7 +462,7 @@ impl FrameSubscriber {
             .last_seq
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .insert((h.service, h.instance), h.seq);
+            .replace((h.service, h.instance), h.seq);
         if let Some(prev) = prev {
             // A lower sequence means the publisher restarted; not a loss.
             if h.seq > prev + 1 {

@@ -636,7 +636,7 @@ impl Bus {
                 &labels,
                 &LATENCY_BOUNDS_S,
             ),
-            last_seq: Mutex::new(Vec::new()),
+            last_seq: Mutex::default(),
             spin: Duration::ZERO,
             newest_only: false,
             anticipation: Anticipating::default(),
@@ -1175,6 +1175,40 @@ pub(crate) async fn wait_listener(
     Ok(())
 }
 
+/// The last sequence number seen from each publisher `(service, instance)` of a
+/// topic, for gap counting: a topic has one or a few publishers, so the first
+/// [`SeqTable::INLINE`] live in the subscriber itself (no allocation for a receive to
+/// miss in the cache after an idle period) and are scanned without hashing.
+#[derive(Debug, Default)]
+pub(crate) struct SeqTable {
+    inline: [((u16, u16), u64); SeqTable::INLINE],
+    len: usize,
+    more: Vec<((u16, u16), u64)>,
+}
+
+impl SeqTable {
+    const INLINE: usize = 4;
+
+    /// Records `seq` as `publisher`'s last; returns the one before, if any.
+    pub(crate) fn replace(&mut self, publisher: (u16, u16), seq: u64) -> Option<u64> {
+        let (inline, more) = (&mut self.inline[..self.len], &mut self.more);
+        if let Some((_, last)) = inline
+            .iter_mut()
+            .chain(more.iter_mut())
+            .find(|(k, _)| *k == publisher)
+        {
+            return Some(std::mem::replace(last, seq));
+        }
+        if self.len < Self::INLINE {
+            self.inline[self.len] = (publisher, seq);
+            self.len += 1;
+        } else {
+            self.more.push((publisher, seq));
+        }
+        None
+    }
+}
+
 /// Sends samples of one type on one topic.
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
@@ -1276,11 +1310,10 @@ pub struct Subscriber<T: Sample> {
     received: Counter,
     lost: Counter,
     age: Histogram,
-    /// Last sequence seen per publisher `(service, instance)`, for gap counting: a
-    /// short list (a topic has one or a few publishers), scanned without hashing.
-    /// Behind a mutex so reads work through `&self` (the blocking wait loop holds
-    /// shared references while the callback receives); never contended in practice.
-    last_seq: Mutex<Vec<((u16, u16), u64)>>,
+    /// Last sequence seen per publisher, for gap counting. Behind a mutex so reads
+    /// work through `&self` (the blocking wait loop holds shared references while the
+    /// callback receives); never contended in practice.
+    last_seq: Mutex<SeqTable>,
     /// How long a receive polls shared memory before it blocks (see
     /// [`Subscriber::set_spin`]); zero = block at once.
     spin: Duration,
@@ -1338,17 +1371,11 @@ impl<T: Sample> Subscriber<T> {
         self.received.inc();
         self.anticipation.observe(h.stamp_ns);
         self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
-        let key = (h.service, h.instance);
-        let prev = {
-            let mut seen = self.last_seq.lock().unwrap_or_else(|p| p.into_inner());
-            match seen.iter_mut().find(|(k, _)| *k == key) {
-                Some((_, last)) => Some(std::mem::replace(last, h.seq)),
-                None => {
-                    seen.push((key, h.seq));
-                    None
-                }
-            }
-        };
+        let prev = self
+            .last_seq
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .replace((h.service, h.instance), h.seq);
         if let Some(prev) = prev {
             // A lower sequence means the publisher restarted; not a loss.
             if h.seq > prev + 1 && !self.newest_only {
@@ -1719,6 +1746,25 @@ mod tests {
             late.join().unwrap();
         }
         d.remove_leftover_files();
+    }
+
+    #[test]
+    fn the_sequence_table_keeps_each_publisher_apart_beyond_its_inline_slots() {
+        let mut t = SeqTable::default();
+        let n = SeqTable::INLINE as u16 + 3;
+        for p in 0..n {
+            assert_eq!(t.replace((p, 1), 10 + u64::from(p)), None, "publisher {p}");
+        }
+        for p in (0..n).rev() {
+            let prev = t.replace((p, 1), 100 + u64::from(p));
+            assert_eq!(prev, Some(10 + u64::from(p)), "publisher {p}");
+        }
+        assert_eq!(
+            t.replace((0, 2), 5),
+            None,
+            "another instance is another publisher"
+        );
+        assert_eq!(t.replace((n - 1, 1), 7), Some(100 + u64::from(n - 1)));
     }
 
     #[test]
