@@ -1700,12 +1700,12 @@ mod tests {
             sub.set_futex_wake().unwrap();
             assert_eq!(listeners(), 0, "set_futex_wake keeps a socket listener");
 
+            let blocking_seq = |sub: &Subscriber<VehicleState>| {
+                let got = sub.recv_blocking(Some(second)).unwrap();
+                got.expect("a blocking receive timed out").header.seq
+            };
             publ.publish(VehicleState::default()).unwrap();
-            let got = sub
-                .recv_blocking(Some(second))
-                .unwrap()
-                .expect("futex receive");
-            assert_eq!(got.header.seq, 1);
+            assert_eq!(blocking_seq(&sub), 1);
             assert_eq!(listeners(), 0, "a futex receive created a socket listener");
 
             publ.publish(VehicleState::default()).unwrap();
@@ -1730,19 +1730,14 @@ mod tests {
             let mut publ = late.await.unwrap();
 
             publ.publish(VehicleState::default()).unwrap();
-            let got = sub
-                .recv_blocking(Some(second))
-                .unwrap()
-                .expect("futex again");
-            assert_eq!(got.header.seq, 4);
+            assert_eq!(blocking_seq(&sub), 4, "futex again");
 
             sub.set_anticipate(Duration::from_micros(100));
             let late = std::thread::spawn(move || {
                 std::thread::sleep(Duration::from_millis(50));
                 publ.publish(VehicleState::default()).unwrap();
             });
-            let got = sub.recv_blocking(Some(second)).unwrap();
-            assert_eq!(got.expect("woken on the new socket listener").header.seq, 5);
+            assert_eq!(blocking_seq(&sub), 5, "woken on the new socket listener");
             late.join().unwrap();
         }
         d.remove_leftover_files();

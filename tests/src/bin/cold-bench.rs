@@ -45,6 +45,22 @@ fn cold<T>(buf: &mut [u8], k: usize, op: impl FnOnce() -> T) -> (u64, T) {
     (monotonic_ns() - t0, r)
 }
 
+/// A cold raw iceoryx2 receive + copy + release: its time (ns) and the sample's sequence.
+fn raw_receive<S: iceoryx2::service::Service>(
+    sub: &iceoryx2::port::subscriber::Subscriber<S, VehicleState, ()>,
+    buf: &mut [u8],
+    k: usize,
+) -> Result<(u64, u64)> {
+    let (ns, v) = cold(buf, k, || {
+        sub.receive()
+            .map(|o| o.map(|smp| -> VehicleState { *smp.payload() }))
+    });
+    let v = v
+        .map_err(|e| anyhow!("iceoryx2 receive: {e:?}"))?
+        .ok_or_else(|| anyhow!("raw: no sample"))?;
+    Ok((ns, v.header.seq))
+}
+
 fn main() -> Result<()> {
     let mut rounds = 1000usize;
     let mut futex = false;
@@ -137,16 +153,8 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         sent.map_err(|e| err(&e))?;
         notified.map_err(|e| err(&e))?;
         t[2].push(p2);
-        let (g2, v) = cold(&mut buf, k, || {
-            ts_sub
-                .receive()
-                .map(|o| o.map(|smp| -> VehicleState { *smp.payload() }))
-        });
-        seqs += v
-            .map_err(|e| err(&e))?
-            .ok_or_else(|| anyhow!("raw: no sample"))?
-            .header
-            .seq;
+        let (g2, seq) = raw_receive(&ts_sub, &mut buf, k)?;
+        seqs += seq;
         t[3].push(g2);
         diff[0].push(p as i64 - p2 as i64);
         diff[1].push(g as i64 - g2 as i64);
@@ -154,16 +162,8 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         let (p3, r) = cold(&mut buf, k, || st_pub.send_copy(s));
         r.map_err(|e| err(&e))?;
         t[4].push(p3);
-        let (g3, v) = cold(&mut buf, k, || {
-            st_sub
-                .receive()
-                .map(|o| o.map(|smp| -> VehicleState { *smp.payload() }))
-        });
-        seqs += v
-            .map_err(|e| err(&e))?
-            .ok_or_else(|| anyhow!("raw: no sample"))?
-            .header
-            .seq;
+        let (g3, seq) = raw_receive(&st_sub, &mut buf, k)?;
+        seqs += seq;
         t[5].push(g3);
     }
     black_box(seqs);
