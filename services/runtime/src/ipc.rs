@@ -1423,12 +1423,15 @@ impl<T: Sample> Subscriber<T> {
     /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's futex
     /// event instead of its socket event: one system call per wake-up instead of
     /// two, for a thread that blocks on one topic (a control loop at hundreds of Hz
-    /// to kHz). At 1 kHz it wakes faster than a blocking UDP `recv`, in most runs
-    /// with less CPU per message (`samples-bench`, docs/benchmarks.md). A timed receive starts a
+    /// to kHz). At 1 kHz it wakes faster than a blocking UDP `recv` (every run
+    /// measured) at about the same receiver CPU per message (less in seven runs of
+    /// eleven; `samples-bench`, docs/benchmarks.md). A timed receive starts a
     /// watchdog thread for this subscriber (see the `futex` module). Async receives
-    /// are unchanged (they need the socket's file descriptor);
-    /// [`Subscriber::set_anticipate`], which waits on a timer beside the event, takes
-    /// precedence. Publishers of every topic notify both events.
+    /// still wait on the socket event (they need its file descriptor): this call
+    /// releases the subscriber's socket listener, which the first socket wait
+    /// creates again. [`Subscriber::set_anticipate`], which waits on a timer beside
+    /// the socket event, takes precedence. Publishers of every topic notify both
+    /// events.
     pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
         self._bus
             .futex_wait_into(&mut self.futex, &self.topic, self.qos)?;
