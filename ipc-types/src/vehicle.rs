@@ -189,6 +189,21 @@ impl VehicleStatus {
     pub fn is_link_up(&self) -> bool {
         self.link_up != 0
     }
+
+    /// `CLOCK_MONOTONIC` nanoseconds when the autopilot heartbeat this status
+    /// describes arrived (its mode, armed state and system status come from that
+    /// heartbeat), or `None` before the first. Publishers republish the last
+    /// heartbeat's fields between heartbeats (autopilot-link once a second), so a
+    /// status stamped after an event may still describe the vehicle before it; this
+    /// says when the description is from. It errs late, by the millisecond
+    /// `heartbeat_age_ms` is counted in plus the publisher's own delay.
+    pub fn heartbeat_ns(&self) -> Option<u64> {
+        (self.heartbeat_age_ms != u32::MAX).then(|| {
+            self.header
+                .stamp_ns
+                .saturating_sub(u64::from(self.heartbeat_age_ms) * 1_000_000)
+        })
+    }
 }
 
 crate::impl_sample!(VehicleState, VehicleStatus);
@@ -218,5 +233,17 @@ mod tests {
         assert_eq!(s.flight_mode(), FlightMode::Unknown);
         s.mode = FlightMode::Guided.to_wire();
         assert_eq!(s.flight_mode(), FlightMode::Guided);
+    }
+
+    #[test]
+    fn heartbeat_time_is_the_stamp_less_the_age() {
+        let mut s = VehicleStatus {
+            heartbeat_age_ms: 250,
+            ..Default::default()
+        };
+        s.header.stamp_ns = 2_000_000_000;
+        assert_eq!(s.heartbeat_ns(), Some(1_750_000_000));
+        s.heartbeat_age_ms = u32::MAX;
+        assert_eq!(s.heartbeat_ns(), None);
     }
 }

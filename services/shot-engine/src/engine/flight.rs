@@ -137,6 +137,8 @@ pub(crate) struct Flight {
     pub confirmed: bool,
     pub guided_command_id: Option<u32>,
     pub guided_asked_ns: u64,
+    /// A heartbeat that arrived after `guided_asked_ns` showed GUIDED: from then on,
+    /// any other mode means the pilot took the vehicle back.
     pub guided_seen: bool,
     pub camera: Camera,
     pub last_step_ns: Option<u64>,
@@ -218,7 +220,6 @@ impl Engine {
 
     /// Starts the flying phase of the active shot: authority, ROI, GUIDED.
     pub(crate) fn begin_flight(&mut self, roi: Option<GeoPoint>, now_ns: u64) {
-        let guided_now = self.inputs.mode() == FlightMode::Guided;
         let Some(active) = self.active.as_mut() else {
             return;
         };
@@ -227,7 +228,9 @@ impl Engine {
             confirmed: false,
             guided_command_id: None,
             guided_asked_ns: now_ns,
-            guided_seen: guided_now,
+            // Even when the last status says GUIDED: it may predate a LOITER of ours
+            // (the shot before ended a moment ago) that no heartbeat has shown yet.
+            guided_seen: false,
             camera: Camera::default(),
             last_step_ns: None,
             stale_logged: false,
@@ -375,8 +378,11 @@ impl Engine {
             self.exit_shot(ExitReason::LinkDown);
             return;
         }
-        let mode = status.flight_mode();
         let Some(flight) = self.active.as_mut().and_then(|a| a.flight.as_mut()) else {
+            return;
+        };
+        // A heartbeat from before the GUIDED request says nothing about it.
+        let Some(mode) = self.inputs.mode_since(flight.guided_asked_ns) else {
             return;
         };
         if mode == FlightMode::Guided {

@@ -379,12 +379,11 @@ impl Engine {
             self.exit_shot(ExitReason::Geofence);
         }
         self.out.app(SoloMessage::GeofenceActivated);
-        let guided = self.inputs.mode() == FlightMode::Guided;
         let first_command_id = self.out.peek_id();
         self.out.command(Command::GrabFlightAuthority);
-        if !guided {
-            self.out.command(Command::SetMode(FlightMode::Guided));
-        }
+        // Asked for even when the last status says GUIDED: it may predate a LOITER
+        // (a shot that just ended) that no heartbeat has shown yet.
+        self.out.command(Command::SetMode(FlightMode::Guided));
         let goto_id = self
             .out
             .command(goto(&hold_point, self.settings.limits.max_speed_mps));
@@ -393,7 +392,7 @@ impl Engine {
             first_command_id,
             goto_id,
             asked_ns: now_ns,
-            guided_seen: guided,
+            guided_seen: false,
             grabbed_ns: now_ns,
         });
     }
@@ -404,17 +403,21 @@ impl Engine {
             self.fence.hold = None;
             return;
         }
-        let mode = self.inputs.mode();
         let Some(hold) = self.fence.hold.as_mut() else {
             return;
         };
-        if mode == FlightMode::Guided {
-            hold.guided_seen = true;
-        } else if hold.guided_seen {
-            tracing::info!(%mode, "geofence hold: the pilot changed the mode; the vehicle is theirs");
-            self.fence.hold = None;
-            return;
-        } else if now_ns.saturating_sub(hold.asked_ns) > GUIDED_TIMEOUT_NS {
+        // Only a heartbeat from after the GUIDED request tells what became of it.
+        let mode = self.inputs.mode_since(hold.asked_ns);
+        match mode {
+            Some(FlightMode::Guided) => hold.guided_seen = true,
+            Some(mode) if hold.guided_seen => {
+                tracing::info!(%mode, "geofence hold: the pilot changed the mode; the vehicle is theirs");
+                self.fence.hold = None;
+                return;
+            }
+            _ => {}
+        }
+        if !hold.guided_seen && now_ns.saturating_sub(hold.asked_ns) > GUIDED_TIMEOUT_NS {
             tracing::warn!("geofence hold: the vehicle did not switch to GUIDED; given up");
             self.out
                 .error("geofence: could not hold the vehicle (no GUIDED); the arbiter's fence still applies");

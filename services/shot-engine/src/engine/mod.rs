@@ -169,6 +169,17 @@ impl Inputs {
             .map_or(FlightMode::Unknown, VehicleStatus::flight_mode)
     }
 
+    /// The mode, if the last status describes a heartbeat that arrived at or after
+    /// `since_ns`; `None` if it is older. Only such a status can tell whether a mode
+    /// request sent at `since_ns` took effect: the last mode known when the request
+    /// goes out may already be stale (the engine's own LOITER at the end of the shot
+    /// before, not yet in a heartbeat), and a heartbeat the autopilot sent just
+    /// before it switched arrives after the request.
+    fn mode_since(&self, since_ns: u64) -> Option<FlightMode> {
+        let status = self.status.as_ref()?;
+        (status.heartbeat_ns()? >= since_ns).then(|| status.flight_mode())
+    }
+
     /// The vehicle as the shots see it, if a valid position is fresh at `now_ns`.
     fn view(&self, now_ns: u64) -> Option<VehicleView> {
         let (s, rx_ns) = self.state.as_ref()?;

@@ -58,6 +58,42 @@ fn a_status_before_guided_took_effect_does_not_end_the_shot() {
     assert!(h.engine.is_flying());
 }
 
+/// A shot that ended a moment ago asked for LOITER, but no heartbeat has shown it yet:
+/// the last status still says GUIDED. The next shot must not take that for its own
+/// GUIDED, or the heartbeat the autopilot sent in LOITER, just before it switched to
+/// the new shot's GUIDED, ends the new shot. (The end-to-end Solo test hit this.)
+#[test]
+fn a_shot_right_after_another_waits_for_its_own_guided() {
+    let mut h = Harness::ready();
+    h.orbiting();
+    h.run(200);
+    let out = h.app(SoloMessage::SetCurrentShot(NONE));
+    assert!(cmds(&out).contains(&Command::SetMode(FlightMode::Loiter)));
+    // The next shot 40 ms later; still no heartbeat since the LOITER.
+    h.tick();
+    h.app(SoloMessage::SetCurrentShot(ORBIT));
+    h.app(SoloMessage::Location(loc(30.0)));
+    assert!(h.engine.is_flying());
+    // autopilot-link's once-a-second status repeats the last heartbeat (GUIDED, from
+    // before both requests): not evidence for the new one.
+    h.now += 300 * MS;
+    h.status.heartbeat_age_ms = 900;
+    h.push_status();
+    h.status.heartbeat_age_ms = 0;
+    // The heartbeat sent in LOITER, arriving after the new request.
+    let out = h.set_mode(FlightMode::Loiter);
+    assert!(
+        h.engine.is_flying(),
+        "ended by a heartbeat from before the switch: {out:?}"
+    );
+    // The new shot's GUIDED, then the pilot takes the vehicle: that ends it.
+    h.set_mode(FlightMode::Guided);
+    assert!(h.engine.is_flying());
+    h.set_mode(FlightMode::PosHold);
+    assert!(!h.engine.is_flying());
+    assert_eq!(h.engine.last_exit(), "mode_change");
+}
+
 #[test]
 fn guided_refused_or_never_reached_ends_the_shot() {
     let mut h = Harness::ready();

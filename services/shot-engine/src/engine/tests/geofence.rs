@@ -386,13 +386,15 @@ fn a_shot_flying_at_the_fence_ends_with_the_reason_geofence() {
         h.counter("skymesh_shot_exits_total", &[("reason", "geofence")]),
         1
     );
-    // The shot's ROI cleared and authority handed to the hold; already GUIDED.
+    // The shot's ROI cleared and authority handed to the hold, which asks for GUIDED
+    // again: the status saying GUIDED may predate a LOITER no heartbeat showed yet.
     assert_eq!(
         kinds(&out),
         [
             CommandKind::ClearRoi,
             CommandKind::ReleaseFlightAuthority,
             CommandKind::GrabFlightAuthority,
+            CommandKind::SetMode,
             CommandKind::GoTo
         ]
     );
@@ -487,6 +489,36 @@ fn the_pilot_changing_the_mode_during_a_hold_takes_the_vehicle() {
     let out = h.tick();
     assert!(out.commands.is_empty() && out.to_app.is_empty());
     assert!(!h.engine.fence.holding());
+}
+
+/// Only a heartbeat from after the hold asked for GUIDED counts: autopilot-link's
+/// once-a-second status repeating an older GUIDED is not the hold's, and a mode
+/// after it is not the pilot taking over.
+#[test]
+fn a_heartbeat_from_before_the_holds_request_is_not_its_guided() {
+    let mut h = Harness::ready();
+    h.fence(&field());
+    h.place(20.0, 5.0);
+    h.tick();
+    assert!(h.engine.fence.holding());
+    h.now += 200 * MS;
+    h.status.mode = FlightMode::Guided.to_wire();
+    h.status.heartbeat_age_ms = 900;
+    h.push_status();
+    h.tick();
+    h.status.heartbeat_age_ms = 0;
+    h.set_mode(FlightMode::AltHold);
+    h.tick();
+    assert!(
+        h.engine.fence.holding(),
+        "the repeated GUIDED was taken for the hold's"
+    );
+    // No GUIDED from after the request within the timeout: given up, and said so
+    // (the pilot flying away meanwhile: no new hold).
+    h.place(22.0, -2.0);
+    let out = h.run(6_000);
+    assert!(!h.engine.fence.holding());
+    assert!(error_text(&out).contains("no GUIDED"), "{out:?}");
 }
 
 #[test]

@@ -128,8 +128,11 @@ impl Harness {
         self.push_state();
     }
 
+    /// The status as autopilot-link publishes it: stamped now, describing a
+    /// heartbeat `status.heartbeat_age_ms` old.
     pub fn push_status(&mut self) {
-        let s = self.status;
+        let mut s = self.status;
+        s.header.stamp_ns = self.now;
         self.engine.handle_status(&s, self.now);
     }
 
