@@ -20,7 +20,9 @@ use dji_proto::{codes, TopicKind};
 use serde_json::{json, Value};
 use skymesh_dji_gateway::cloud::{Cloud, DrcCloud};
 use skymesh_e2e::{Mesh, MeshOptions};
-use skymesh_ipc_types::{Command, CommandKind, CommandSource, PayloadState, VehicleState};
+use skymesh_ipc_types::{
+    Command, CommandKind, CommandSource, FlightMode, PayloadState, VehicleState,
+};
 use solo_common::{metric, ne, offset, runtime, speed, Vehicle, STARTUP};
 
 /// The payload the gateway is configured with (`[payload] payload_index`).
@@ -1122,7 +1124,9 @@ async fn look_at_points_the_camera(x: &mut Ctx) {
 
 /// fly_to_point, fly_to_point_update to a new target mid-flight → arrival there
 /// (wayline_ok, result 0); another fly_to_point stopped mid-flight → wayline_cancel
-/// and the vehicle stops short of it.
+/// and the vehicle stops short of it; then a fly_to_point right after the local
+/// operator switched to LOITER flies (the gateway asks for GUIDED regardless of the
+/// last status).
 async fn fly_to_point_update_and_stop(x: &mut Ctx) {
     let s = x.state().await;
     let here = pos(&s);
@@ -1229,6 +1233,34 @@ async fn fly_to_point_update_and_stop(x: &mut Ctx) {
         codes::NO_TASK,
     )
     .await;
+    x.cloud.take_events("fly_to_point_progress");
+
+    // The local operator switches to LOITER and hands authority back; the cloud takes
+    // it and flies on at once, most likely before a heartbeat has shown LOITER (the
+    // status repeats the last heartbeat's GUIDED for up to a second). The gateway
+    // asks for GUIDED all the same, or the vehicle would stay in LOITER.
+    x.v.operator(Command::SetMode(FlightMode::Loiter)).await;
+    x.v.operator(Command::ReleaseFlightAuthority).await;
+    x.expect("flight_authority_grab", json!({}), codes::OK)
+        .await;
+    let s = x.state().await;
+    let target = offset(pos(&s), 15.0, 0.0);
+    x.expect(
+        "fly_to_point",
+        fly_to("e2e-after-loiter", target, x.height(alt), 5),
+        codes::OK,
+    )
+    .await;
+    let done = x
+        .event_within(
+            "fly_to_point_progress",
+            FLIGHT,
+            "flyto right after LOITER done",
+            |d| d["fly_to_id"] == "e2e-after-loiter" && is_terminal(&d["status"]),
+        )
+        .await;
+    assert_eq!(done["data"]["status"], "wayline_ok", "{done}");
+    assert_eq!(x.v.status().await.flight_mode(), FlightMode::Guided);
     x.cloud.take_events("fly_to_point_progress");
 }
 

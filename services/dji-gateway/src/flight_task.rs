@@ -134,18 +134,18 @@ impl Task {
     async fn start(&mut self) -> u32 {
         let link = &self.shared.link;
         let snap = link.snapshot();
-        let mode = snap.status.map(|s| s.flight_mode());
-        let guided = mode == Some(FlightMode::Guided);
         let Some(climb) = self.spec.climb_alt_rel_m else {
             // fly_to_point: only a flying vehicle can fly to a point.
             if !is_flying(&snap) {
                 return codes::WRONG_STATE;
             }
-            let mut cmds = Vec::new();
-            if !guided {
-                cmds.push(Command::SetMode(FlightMode::Guided));
-            }
-            cmds.push(self.goto(&self.spec.target));
+            // GUIDED even when the last status says GUIDED: it repeats the last
+            // heartbeat, which may predate a LOITER no heartbeat has shown yet; ArduPilot
+            // accepts a request for its current mode and changes nothing.
+            let cmds = [
+                Command::SetMode(FlightMode::Guided),
+                self.goto(&self.spec.target),
+            ];
             self.stage = Stage::Transit;
             return run_commands(link, self.method, &cmds).await;
         };
@@ -169,9 +169,7 @@ impl Task {
             ]);
             self.stage = Stage::Climb;
         } else {
-            if !guided {
-                cmds.push(Command::SetMode(FlightMode::Guided));
-            }
+            cmds.push(Command::SetMode(FlightMode::Guided));
             if f64::from(here.alt_rel_m) < climb - radius {
                 cmds.push(self.goto(&climb_point));
                 self.stage = Stage::Climb;

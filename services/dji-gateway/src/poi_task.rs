@@ -64,15 +64,17 @@ async fn run(
         p.max_circle_speed_mps,
     );
     let link = &shared.link;
-    let mut start = Vec::new();
-    if link.snapshot().status.map(|s| s.flight_mode()) != Some(FlightMode::Guided) {
-        start.push(Command::SetMode(FlightMode::Guided));
-    }
-    start.push(Command::SetRoi {
-        lat_deg: point.lat_deg,
-        lon_deg: point.lon_deg,
-        alt_rel_m: point.alt_rel_m,
-    });
+    // GUIDED is asked for even when the last status says GUIDED: that status repeats
+    // the last heartbeat, which may predate a LOITER (a Solo shot that just ended);
+    // ArduPilot answers a request for its current mode as accepted and changes nothing.
+    let start = [
+        Command::SetMode(FlightMode::Guided),
+        Command::SetRoi {
+            lat_deg: point.lat_deg,
+            lon_deg: point.lon_deg,
+            alt_rel_m: point.alt_rel_m,
+        },
+    ];
     let r = run_commands(link, "poi_mode_enter", &start).await;
     shared.emit.reply(request, r);
     if r != codes::OK {
