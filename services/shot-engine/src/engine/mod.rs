@@ -173,8 +173,10 @@ impl Inputs {
     /// `since_ns`; `None` if it is older. Only such a status can tell whether a mode
     /// request sent at `since_ns` took effect: the last mode known when the request
     /// goes out may already be stale (the engine's own LOITER at the end of the shot
-    /// before, not yet in a heartbeat), and a heartbeat the autopilot sent just
-    /// before it switched arrives after the request.
+    /// before, not yet in a heartbeat). Even such a status may still show the mode
+    /// from before the switch (a heartbeat the autopilot sent just before it switched
+    /// arrives after the request), so a request is done when one shows the mode asked
+    /// for, and only after that does another mode mean the pilot changed it.
     fn mode_since(&self, since_ns: u64) -> Option<FlightMode> {
         let status = self.status.as_ref()?;
         (status.heartbeat_ns()? >= since_ns).then(|| status.flight_mode())
