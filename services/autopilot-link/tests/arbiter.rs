@@ -158,9 +158,11 @@ async fn the_arbiter_brakes_when_a_velocity_stream_stops() {
     mesh.take_off(5.0).await;
 
     // 2 m/s north at 20 Hz; each setpoint is good for 200 ms. Expected stop: 0.2 s
-    // until the stream counts as stopped + 0.8 s of braking at vehicle-sim's 2.5 m/s²,
-    // leaving margin under the 1.5 s bound on a loaded machine. (With the default
-    // 500 ms max age the same holds up to about 2.5 m/s.)
+    // until the stream counts as stopped + 0.8 s of braking at vehicle-sim's 2.5 m/s²
+    // (about 1 s). Without the arbiter's brake, vehicle-sim's own 3 s velocity timeout
+    // and the same braking would take 3.8 s: the 3 s bound tells the two apart with
+    // room for a loaded machine. (With the default 500 ms max age the same holds up to
+    // about 2.5 m/s.)
     let mut last_stamp = 0;
     let start = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(50));
@@ -188,7 +190,7 @@ async fn the_arbiter_brakes_when_a_velocity_stream_stops() {
     let took = Duration::from_nanos(stopped.header.stamp_ns.saturating_sub(last_stamp));
     println!("below 0.3 m/s {took:?} after the last setpoint");
     assert!(
-        took < Duration::from_millis(1500),
+        took < Duration::from_secs(3),
         "below 0.3 m/s after {took:?}"
     );
     let event = arb.wait_event(ArbiterEventKind::StaleBrake).await;
