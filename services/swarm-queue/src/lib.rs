@@ -33,6 +33,13 @@
 //! bounding box, animation file) and again when they start (a position from the
 //! vehicle, flying); a refusal at either point is the command's one reply.
 //!
+//! `EXT_WAYPOINT`, `EXT_WAYPOINT_FOLLOW` (the first of a stream), `EXT_GO_HOME`,
+//! `SET_MANUAL_TARGET` and a flown `EXT_PLAYBACK_ANIM` send `SetMode(Guided)` and
+//! wait for its acceptance before their first position target, also when the last
+//! `VehicleStatus` says GUIDED: it repeats a heartbeat up to a second old, and a
+//! LOITER chosen since would make the vehicle ignore the target. A manual target that
+//! replaces a running position command asks only when the status shows another mode.
+//!
 //! | command | execution | finishes (reply) |
 //! |---|---|---|
 //! | `EXT_GO_EXTERNAL` | `SetMode(Guided)` → `Arm` → `Takeoff(takeoff_alt_m)`, each after the previous one's acceptance | height above home ≥ `takeoff_alt_m − waypoint_tolerance_m`; at once if already flying (armed, above `landed_alt_m`); `Timeout` after `timeouts.takeoff_s` |

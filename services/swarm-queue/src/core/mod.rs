@@ -907,7 +907,9 @@ impl Swarm {
         if let Err(e) = self.fit_box(idx, &mut c) {
             return self.refuse(cmd, id, &e);
         }
+        let mut steering = false;
         if let Some(r) = self.drones[idx].current.take() {
+            steering = matches!(r.exec, Exec::Waypoint { .. });
             self.reply(
                 &r.q.cmd,
                 id,
@@ -916,7 +918,7 @@ impl Swarm {
                 "replaced by a manual target",
             );
         }
-        self.start(
+        self.start_steering(
             idx,
             Queued {
                 cmd: c,
@@ -924,6 +926,7 @@ impl Swarm {
                 anim: None,
             },
             now,
+            steering,
         );
     }
 
@@ -1264,7 +1267,7 @@ impl Swarm {
             let Some(q) = self.drones[idx].queue.pop_front() else {
                 break;
             };
-            self.start(idx, q, now);
+            self.start_steering(idx, q, now, false);
         }
     }
 
@@ -1274,7 +1277,17 @@ impl Swarm {
     }
 
     /// Makes `q` drone `idx`'s current command (or answers it at once).
-    fn start(&mut self, idx: usize, q: Queued, now: u64) {
+    ///
+    /// A command that moves the vehicle asks for GUIDED first, also when the last
+    /// status says GUIDED: that status repeats a heartbeat up to a second old, and
+    /// someone (the pilot, a ground station) may have switched to LOITER since. A
+    /// position target sent in LOITER is ignored, and the command would wait out its
+    /// deadline. ArduCopter accepts a request for the mode it is in and changes
+    /// nothing. The exception is `steering`: a manual target that replaces a running
+    /// position command, as a dragged target does many times a second. That one asks
+    /// only when the status shows another mode (the command it replaces asked), so a
+    /// fast stream is not held up by an acknowledgement per target.
+    fn start_steering(&mut self, idx: usize, q: Queued, now: u64, steering: bool) {
         let token = self.token();
         let id = self.drones[idx].id;
         let cfg = &self.cfg;
@@ -1283,9 +1296,9 @@ impl Swarm {
         let tracking = d.tracking();
         let armed = d.armed();
         let flying = armed == Some(true) && pose.is_some_and(|p| !p.landed(cfg.landed_alt_m));
-        let not_guided = d
-            .status
-            .is_some_and(|s| s.flight_mode() != FlightMode::Guided);
+        let ask_guided = !steering
+            || d.status
+                .is_some_and(|s| s.flight_mode() != FlightMode::Guided);
         let refuse_motion = || -> Option<&'static str> {
             if pose.is_none() {
                 Some("no position from the vehicle")
@@ -1336,7 +1349,7 @@ impl Swarm {
                             + ns_of_s(cfg.timeouts.waypoint_factor * d / speed),
                     );
                 }
-                guided_first = not_guided;
+                guided_first = ask_guided;
                 Exec::Waypoint {
                     target,
                     yaw: c.int1 as f32 / 100.0,
@@ -1362,7 +1375,7 @@ impl Swarm {
                     now + secs(cfg.timeouts.waypoint_base)
                         + ns_of_s(cfg.timeouts.waypoint_factor * dh / cfg.default_speed_mps),
                 );
-                guided_first = not_guided;
+                guided_first = ask_guided;
                 Exec::GoHome {
                     target,
                     sent: false,
@@ -1415,7 +1428,7 @@ impl Swarm {
                 };
                 let t0 = anim.frames()[first].time_s;
                 let t1 = anim.frames()[last].time_s;
-                guided_first = use_pos && not_guided;
+                guided_first = use_pos && ask_guided;
                 Exec::Anim(AnimRun {
                     point: anim.frames()[first],
                     anim,

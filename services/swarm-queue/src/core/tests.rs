@@ -306,6 +306,46 @@ fn waypoints_are_queued_and_flown_in_order() {
     );
 }
 
+/// Someone (the pilot, a ground station) switches the vehicle to LOITER, and a
+/// waypoint comes before a heartbeat has shown it: the last status still says
+/// GUIDED. The waypoint asks for GUIDED anyway and flies; trusting the status, its
+/// position target went to a vehicle in LOITER, which ignores it, and it timed out.
+#[test]
+fn a_waypoint_asks_for_guided_even_when_the_last_status_says_guided() {
+    let mut h = H::new(1);
+    h.take_off(1);
+    assert_eq!(
+        h.swarm.drone(0).status.unwrap().flight_mode(),
+        FlightMode::Guided
+    );
+    h.fleet.vehicles[0].mode = FlightMode::Loiter;
+    let r = h.waypoint(1, [3.0, 3.0, 3.0]);
+    assert!(h.run_until(30.0, |h| h.answered(r, 1)));
+    assert_eq!(h.reply(r, 1).unwrap().0, SwarmResult::Success);
+    assert_eq!(h.fleet.vehicles[0].mode, FlightMode::Guided);
+    assert_eq!(
+        h.sent_kinds(11)[3..],
+        [CommandKind::SetMode, CommandKind::GoTo],
+        "after the takeoff's three"
+    );
+
+    // A dragged manual target (each replacing the last before it is reached) asks
+    // once, not once per target.
+    let before = h.sent_kinds(11).len();
+    for i in 0..5 {
+        let p = [10.0 + i as f32, 3.0, 3.0];
+        h.send(1, K::SetManualTarget, |c| c.f[..3].copy_from_slice(&p));
+        h.step();
+    }
+    let kinds = &h.sent_kinds(11)[before..];
+    assert_eq!(kinds[0], CommandKind::SetMode, "{kinds:?}");
+    assert!(
+        kinds[1..].iter().all(|k| *k == CommandKind::GoTo),
+        "{kinds:?}"
+    );
+    assert_eq!(kinds.len(), 6, "{kinds:?}");
+}
+
 #[test]
 fn a_waypoint_on_the_ground_is_refused_and_yaw_is_converted() {
     let mut h = H::new(1);
