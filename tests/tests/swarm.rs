@@ -19,8 +19,11 @@ use std::time::Duration;
 
 use gc_proto::{NetCmdType as T, Record, RECORD_LEN};
 use skymesh_e2e::{Mesh, MeshOptions, HOME};
-use skymesh_ipc_types::{drone_flags, topics, SwarmState, VehicleState};
-use skymesh_runtime::Subscriber;
+use skymesh_ipc_types::{
+    drone_flags, topics, AckResult, Command, CommandAck, CommandSource, FlightMode, SwarmState,
+    VehicleCommand, VehicleState,
+};
+use skymesh_runtime::{Bus, Subscriber};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::OwnedWriteHalf;
 use tokio::net::{TcpSocket, UdpSocket};
@@ -337,6 +340,29 @@ fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
+/// An operator command to vehicle `vehicle` (above the swarm queue in the arbiter),
+/// answered Accepted.
+async fn operator(bus: &Bus, vehicle: u8, command_id: u32, cmd: Command) {
+    let mut acks = bus
+        .subscriber::<CommandAck>(&topics::vehicle_command_ack(vehicle))
+        .unwrap();
+    let mut cmds = bus
+        .publisher::<VehicleCommand>(&topics::vehicle_command(vehicle))
+        .unwrap();
+    cmds.publish(VehicleCommand::new(vehicle, CommandSource::Operator, command_id, &cmd).unwrap())
+        .unwrap();
+    let deadline = Instant::now() + WAIT;
+    while Instant::now() < deadline {
+        if let Some(a) = acks.recv_timeout(Duration::from_secs(1)).await.unwrap() {
+            if a.command_id == command_id && a.source == CommandSource::Operator.to_wire() {
+                assert_eq!(a.result(), Some(AckResult::Accepted), "{cmd:?} → {a:?}");
+                return;
+            }
+        }
+    }
+    panic!("no ack for {cmd:?}");
+}
+
 /// `VehicleState` → site frame (x east, y north, z up around vehicle 1's home),
 /// flat earth: centimetres of error over these few metres.
 fn site_of(s: &VehicleState) -> [f32; 3] {
@@ -599,6 +625,23 @@ fn five_drones_on_the_groundcontrol_protocol() {
             let p = drone(poses, 1);
             p.idle() && dist(p.tracking, wp2) < 0.6
         })
+        .await;
+
+        // --- The operator switches drone 1 to LOITER and hands authority back; a
+        // waypoint follows at once, most likely before a heartbeat has shown LOITER
+        // (the status repeats the last heartbeat's GUIDED for up to a second). The
+        // queue asks for GUIDED all the same, or the vehicle would ignore the target
+        // in LOITER and the waypoint would time out.
+        operator(&bus, 1, 9001, Command::SetMode(FlightMode::Loiter)).await;
+        operator(&bus, 1, 9002, Command::ReleaseFlightAuthority).await;
+        let wp3 = [-3.0, 0.0, TAKEOFF_ALT];
+        ext.send(&[waypoint(T::CmdExtWaypoint, 1, wp3)]).await;
+        ext.ack(1, T::CmdExtWaypoint, WAIT).await;
+        rx.until(
+            WAIT,
+            "drone 1 at wp3 after the operator's LOITER",
+            |poses| dist(drone(poses, 1).tracking, wp3) < 0.6,
+        )
         .await;
 
         // --- WAYPOINT_FOLLOW replaced by a newer one (drone 2): the older is answered
