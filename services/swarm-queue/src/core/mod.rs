@@ -918,7 +918,7 @@ impl Swarm {
                 "replaced by a manual target",
             );
         }
-        self.start_steering(
+        self.start(
             idx,
             Queued {
                 cmd: c,
@@ -1267,7 +1267,7 @@ impl Swarm {
             let Some(q) = self.drones[idx].queue.pop_front() else {
                 break;
             };
-            self.start_steering(idx, q, now, false);
+            self.start(idx, q, now, false);
         }
     }
 
@@ -1283,11 +1283,11 @@ impl Swarm {
     /// someone (the pilot, a ground station) may have switched to LOITER since. A
     /// position target sent in LOITER is ignored, and the command would wait out its
     /// deadline. ArduCopter accepts a request for the mode it is in and changes
-    /// nothing. The exception is `steering`: a manual target that replaces a running
-    /// position command, as a dragged target does many times a second. That one asks
+    /// nothing. The exception is `steering`, true for a manual target that replaces a
+    /// running position command, as a dragged target does many times a second: it asks
     /// only when the status shows another mode (the command it replaces asked), so a
     /// fast stream is not held up by an acknowledgement per target.
-    fn start_steering(&mut self, idx: usize, q: Queued, now: u64, steering: bool) {
+    fn start(&mut self, idx: usize, q: Queued, now: u64, steering: bool) {
         let token = self.token();
         let id = self.drones[idx].id;
         let cfg = &self.cfg;
