@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs what CI's later steps use and a fresh machine lacks, each only if missing:
+# promtool and mosquitto (apt-get, one call), pymavlink and paho-mqtt 2 (pip), and
+# for the fuzz step the nightly toolchain and cargo-fuzz. .ci/run starts it in the
+# background during the test build: the downloads then overlap the compile instead of
+# holding it up (they ran before it, mostly waiting on the network). The scripts
+# that use a tool still install it themselves when run alone.
+# cargo-fuzz is built unoptimised (`--debug`): it only drives cargo, and that halves
+# its install (32 s against 59 s wall here).
+set -uo pipefail
+status=0
+
+packages=()
+command -v promtool >/dev/null 2>&1 || packages+=(prometheus)
+if ! command -v mosquitto >/dev/null 2>&1 && [ ! -x /usr/sbin/mosquitto ]; then
+  packages+=(mosquitto)
+fi
+if [ ${#packages[@]} -gt 0 ]; then
+  apt-get update -qq &&
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+      "${packages[@]}" >/dev/null || status=1
+fi
+
+# A pip that refuses the system python is not an error here: interop-dji.sh then
+# makes its own venv, and the pymavlink scripts report their own failure.
+python3 -c 'import pymavlink' 2>/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check pymavlink || true
+python3 -c 'import paho.mqtt.client as m; m.CallbackAPIVersion.VERSION2' 2>/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check 'paho-mqtt>=2,<3' || true
+
+if ! rustup toolchain list | grep -q '^nightly'; then
+  rustup toolchain install nightly --profile minimal || true
+fi
+if ! command -v cargo-fuzz >/dev/null 2>&1; then
+  cargo install cargo-fuzz --debug --locked --quiet || true
+fi
+exit "$status"
