@@ -136,6 +136,9 @@ pub struct StreamRates {
     pub ekf_status_hz: f32,
     /// GIMBAL_DEVICE_ATTITUDE_STATUS → `PayloadState`; `None` = not requested.
     pub gimbal_attitude_hz: Option<f32>,
+    /// The autopilot's HEARTBEAT (flight mode, armed) → `VehicleStatus`; `None` = not
+    /// requested (the autopilot's own rate, 1 Hz on ArduPilot).
+    pub heartbeat_hz: Option<f32>,
 }
 
 /// The validated configuration.
@@ -202,6 +205,8 @@ pub struct RawConfig {
     pub ekf_status_hz: f64,
     /// 0 = not requested.
     pub gimbal_attitude_hz: f64,
+    /// 0 = not requested.
+    pub heartbeat_hz: f64,
     /// `[arbiter]`: authority, freshness, geofence envelope, limits.
     pub arbiter: RawArbiter,
     /// `[vision]`: the virtual cameras as MAVLink gimbals.
@@ -233,6 +238,7 @@ impl Default for RawConfig {
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.0,
             gimbal_attitude_hz: 10.0,
+            heartbeat_hz: 5.0,
             arbiter: RawArbiter::default(),
             vision: RawVision::default(),
             signing: RawSigning::default(),
@@ -352,6 +358,14 @@ impl ServiceConfig for RawConfig {
                     None
                 } else {
                     Some(rate("gimbal_attitude_hz", self.gimbal_attitude_hz)?)
+                },
+                heartbeat_hz: if self.heartbeat_hz == 0.0 {
+                    None
+                } else {
+                    // Slower than ArduPilot's own 1 Hz would only make the link
+                    // look lost (link_timeout); faster than 50 Hz buys nothing.
+                    let hz = rate("heartbeat_hz", self.heartbeat_hz)?;
+                    Some(in_range("heartbeat_hz", hz, 1.0, 50.0)?)
                 },
             },
             request_data_streams: self.request_data_streams,
@@ -676,6 +690,7 @@ mod tests {
         assert_eq!(shipped.command_timeout, Duration::from_millis(1500));
         assert_eq!(shipped.rates.attitude_hz, 50.0);
         assert_eq!(shipped.rates.gimbal_attitude_hz, Some(10.0));
+        assert_eq!(shipped.rates.heartbeat_hz, Some(5.0));
     }
 
     #[test]
@@ -892,6 +907,9 @@ mod tests {
             ("gps_raw_hz = inf", "gps_raw_hz"),
             ("gimbal_attitude_hz = 0.05", "gimbal_attitude_hz"),
             ("gimbal_attitude_hz = -1", "gimbal_attitude_hz"),
+            ("heartbeat_hz = 0.5", "heartbeat_hz"),
+            ("heartbeat_hz = 60", "heartbeat_hz"),
+            ("heartbeat_hz = nan", "heartbeat_hz"),
             (
                 "[arbiter]\nsetpoint_max_age_ms = 5",
                 "arbiter.setpoint_max_age_ms",
@@ -940,6 +958,11 @@ mod tests {
                 .gimbal_attitude_hz,
             None,
             "0 = not requested"
+        );
+        assert_eq!(
+            parse_str("heartbeat_hz = 0").unwrap().rates.heartbeat_hz,
+            None,
+            "0 = the autopilot's own rate"
         );
         assert!(parse_str("")
             .unwrap()

@@ -54,8 +54,12 @@ pub fn request_home(t: Target) -> MavMessage {
 }
 
 /// The messages that ask for every telemetry stream at `rates`. The gimbal attitude
-/// (GIMBAL_DEVICE_ATTITUDE_STATUS, which ArduPilot sends for the mount it drives) is
-/// asked for only with SET_MESSAGE_INTERVAL, and only when a rate is configured.
+/// (GIMBAL_DEVICE_ATTITUDE_STATUS, which ArduPilot sends for the mount it drives) and
+/// the HEARTBEAT are asked for only with SET_MESSAGE_INTERVAL, and only when a rate is
+/// configured. ArduPilot sends its HEARTBEAT once a second unless asked, and that
+/// heartbeat is how the mesh learns the flight mode: a pilot's switch to LOITER or RTL
+/// would stay unknown to the shot engine, the gateways and the swarm queue for up
+/// to a second. The interval applies to the link it was asked on only.
 pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavMessage> {
     let mut out = Vec::with_capacity(13);
     if legacy {
@@ -64,6 +68,7 @@ pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavM
     let gimbal = rates
         .gimbal_attitude_hz
         .map(|hz| (GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID, hz));
+    let heartbeat = rates.heartbeat_hz.map(|hz| (HEARTBEAT_DATA::ID, hz));
     for (id, hz) in [
         (ATTITUDE_DATA::ID, rates.attitude_hz),
         (GLOBAL_POSITION_INT_DATA::ID, rates.global_position_hz),
@@ -75,6 +80,7 @@ pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavM
     ]
     .into_iter()
     .chain(gimbal)
+    .chain(heartbeat)
     {
         let interval_us = (1e6 / f64::from(hz)).round() as f32;
         out.push(command_long(
@@ -146,13 +152,14 @@ mod tests {
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.5,
             gimbal_attitude_hz: Some(10.0),
+            heartbeat_hz: Some(5.0),
         }
     }
 
     #[test]
     fn every_stream_gets_a_message_interval() {
         let msgs = stream_requests(&rates(), T, false);
-        assert_eq!(msgs.len(), 8);
+        assert_eq!(msgs.len(), 9);
         let intervals: Vec<(f32, f32)> = msgs
             .iter()
             .map(|m| match m {
@@ -185,8 +192,10 @@ mod tests {
             (285.0, 100_000.0),
             "GIMBAL_DEVICE_ATTITUDE_STATUS at 10 Hz"
         );
+        assert_eq!(intervals[8], (0.0, 200_000.0), "HEARTBEAT at 5 Hz");
         let none = StreamRates {
             gimbal_attitude_hz: None,
+            heartbeat_hz: None,
             ..rates()
         };
         assert_eq!(stream_requests(&none, T, false).len(), 7, "0 = not asked");
@@ -196,7 +205,7 @@ mod tests {
     #[allow(deprecated)]
     fn legacy_requests_come_first_in_whole_hz() {
         let msgs = stream_requests(&rates(), T, true);
-        assert_eq!(msgs.len(), 12);
+        assert_eq!(msgs.len(), 13);
         let legacy: Vec<(u8, u16)> = msgs[..4]
             .iter()
             .map(|m| match m {

@@ -233,6 +233,18 @@ async fn it_introduces_itself_and_asks_for_telemetry() {
     };
     assert_eq!(c.param2, 20_000.0, "50 Hz");
     assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
+    // The flight mode arrives with the autopilot's HEARTBEAT: asked for at 5 Hz, not
+    // ArduPilot's own 1 Hz, so a pilot's mode switch is known within 200 ms.
+    let (_, m) = fake
+        .expect("HEARTBEAT's SET_MESSAGE_INTERVAL", |_, m| {
+            matches!(m, MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 0.0)
+        })
+        .await;
+    let MavMessage::COMMAND_LONG(c) = m else {
+        unreachable!()
+    };
+    assert_eq!(c.param2, 200_000.0, "5 Hz");
     fake.expect("HOME_POSITION request", |_, m| {
         matches!(m, MavMessage::COMMAND_LONG(c)
             if c.command == MavCmd::MAV_CMD_REQUEST_MESSAGE && c.param1 == 242.0)

@@ -89,6 +89,26 @@ async fn state_flows_at_about_the_requested_attitude_rate() {
             "msg=HEARTBEAT"
         ) >= 1.0
     );
+
+    // The autopilot's HEARTBEAT (the flight mode) is asked for at 5 Hz, a tenth of
+    // ATTITUDE's 50: counted against ATTITUDE over the same stretch, so a stalled
+    // machine that delays both does not change the answer. ArduPilot's own 1 Hz
+    // would be a fiftieth (the sim's gimbal sends no HEARTBEAT of its own).
+    let ratio = {
+        let count = |m: &Mesh, msg: &str| m.metric(rx, &format!("msg={msg}"));
+        let (hb0, att0) = (count(&mesh, "HEARTBEAT"), count(&mesh, "ATTITUDE"));
+        let deadline = Instant::now() + PATIENCE;
+        while count(&mesh, "ATTITUDE") - att0 < 300.0 {
+            assert!(Instant::now() < deadline, "ATTITUDE stopped");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        (count(&mesh, "HEARTBEAT") - hb0) / (count(&mesh, "ATTITUDE") - att0)
+    };
+    eprintln!("heartbeats per ATTITUDE: {ratio:.3}");
+    assert!(
+        (0.06..=0.16).contains(&ratio),
+        "heartbeats per ATTITUDE {ratio:.3}: expected about 0.1 (5 Hz against 50 Hz)"
+    );
     mesh.stop().await;
     sim.stop().await;
 }
