@@ -87,6 +87,21 @@ impl Fake {
         }
     }
 
+    /// The next SET_MESSAGE_INTERVAL for message id `id` (`name` for the failure).
+    async fn expect_interval(&mut self, name: &str, id: u32) -> COMMAND_LONG_DATA {
+        let what = format!("{name}'s SET_MESSAGE_INTERVAL");
+        let (_, m) = self
+            .expect(&what, |_, m| {
+                matches!(m, MavMessage::COMMAND_LONG(c)
+                    if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == id as f32)
+            })
+            .await;
+        let MavMessage::COMMAND_LONG(c) = m else {
+            unreachable!()
+        };
+        c
+    }
+
     /// Every COMMAND_LONG with `command` received so far (without waiting).
     fn drain_commands(&mut self, command: MavCmd) -> Vec<COMMAND_LONG_DATA> {
         let mut out = Vec::new();
@@ -222,28 +237,12 @@ async fn it_introduces_itself_and_asks_for_telemetry() {
     assert_eq!(hb.mavtype, MavType::MAV_TYPE_ONBOARD_CONTROLLER);
     assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_INVALID);
 
-    let (_, m) = fake
-        .expect("ATTITUDE's SET_MESSAGE_INTERVAL", |_, m| {
-            matches!(m, MavMessage::COMMAND_LONG(c)
-                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 30.0)
-        })
-        .await;
-    let MavMessage::COMMAND_LONG(c) = m else {
-        unreachable!()
-    };
+    let c = fake.expect_interval("ATTITUDE", 30).await;
     assert_eq!(c.param2, 20_000.0, "50 Hz");
     assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
     // The flight mode arrives with the autopilot's HEARTBEAT: asked for at 5 Hz, not
     // ArduPilot's own 1 Hz, so a pilot's mode switch is known within 200 ms.
-    let (_, m) = fake
-        .expect("HEARTBEAT's SET_MESSAGE_INTERVAL", |_, m| {
-            matches!(m, MavMessage::COMMAND_LONG(c)
-                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 0.0)
-        })
-        .await;
-    let MavMessage::COMMAND_LONG(c) = m else {
-        unreachable!()
-    };
+    let c = fake.expect_interval("HEARTBEAT", 0).await;
     assert_eq!(c.param2, 200_000.0, "5 Hz");
     fake.expect("HOME_POSITION request", |_, m| {
         matches!(m, MavMessage::COMMAND_LONG(c)
@@ -596,15 +595,9 @@ async fn gimbal_attitude_and_gopro_heartbeat_become_payload_state_until_they_sto
         }),
     );
     let mut mesh = Mesh::start_with(settings(fake.port)).await;
-    let (_, m) = fake
-        .expect("the gimbal stream request", |_, m| {
-            matches!(m, MavMessage::COMMAND_LONG(c)
-                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param1 == 285.0)
-        })
+    let c = fake
+        .expect_interval("GIMBAL_DEVICE_ATTITUDE_STATUS", 285)
         .await;
-    let MavMessage::COMMAND_LONG(c) = m else {
-        unreachable!()
-    };
     assert_eq!(c.param2, 100_000.0, "10 Hz by default");
     assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
 
