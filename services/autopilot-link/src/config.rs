@@ -254,11 +254,9 @@ fn seconds(field: &str, value: f64, min: f64, max: f64) -> Result<Duration, Conf
     Ok(Duration::from_secs_f64(in_range(field, value, min, max)?))
 }
 
+/// A telemetry rate, Hz.
 fn rate(field: &str, value: f64) -> Result<f32, ConfigError> {
-    if !value.is_finite() {
-        return Err(ConfigError::invalid(field, "must be a finite number"));
-    }
-    Ok(in_range(field, value, 0.1, 400.0)? as f32)
+    number(field, value, 0.1, 400.0)
 }
 
 /// The `endpoints` list: valid strings, no serial ports, no duplicates, not the
@@ -364,8 +362,7 @@ impl ServiceConfig for RawConfig {
                 } else {
                     // Slower than ArduPilot's own 1 Hz would only make the link
                     // look lost (link_timeout); faster than 50 Hz buys nothing.
-                    let hz = rate("heartbeat_hz", self.heartbeat_hz)?;
-                    Some(in_range("heartbeat_hz", hz, 1.0, 50.0)?)
+                    Some(number("heartbeat_hz", self.heartbeat_hz, 1.0, 50.0)?)
                 },
             },
             request_data_streams: self.request_data_streams,
