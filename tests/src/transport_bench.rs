@@ -163,28 +163,34 @@ pub fn finish_child(mut child: Child, mut out: BufReader<ChildStdout>) -> Result
 /// What a receiving child accumulates, whatever the transport.
 #[derive(Debug)]
 pub struct Tally {
+    n: usize,
     warmup: usize,
     got: usize,
     lat: Vec<(usize, u64)>,
     cpu0: Option<u64>,
-    cpu1: u64,
+    /// Read once, after the last message (or, if it was lost, at [`Tally::report`]):
+    /// reading the process CPU clock is a system call, which per message would add
+    /// to what is measured.
+    cpu1: Option<u64>,
 }
 
 impl Tally {
     /// A tally for up to `n` messages whose first `warmup` are not counted.
     pub fn new(n: usize, warmup: usize) -> Tally {
         Tally {
+            n,
             warmup,
             got: 0,
             lat: Vec::with_capacity(n),
             cpu0: None,
-            cpu1: 0,
+            cpu1: None,
         }
     }
 
     /// Records message `k` sent at `t0`, received at `t1` (both `CLOCK_MONOTONIC` ns),
     /// after the receiver has handled it. CPU is counted from the end of the handling
-    /// of the last warm-up message to the end of the last message's.
+    /// of the last warm-up message to the end of the last message's (`k` = `n` - 1;
+    /// if that one is lost, to the report).
     pub fn add(&mut self, k: usize, t0: u64, t1: u64) {
         self.got += 1;
         if k >= self.warmup && self.cpu0.is_some() {
@@ -193,12 +199,15 @@ impl Tally {
         if k + 1 >= self.warmup && self.cpu0.is_none() {
             self.cpu0 = Some(process_cpu_ns());
         }
-        self.cpu1 = process_cpu_ns();
+        if k + 1 >= self.n && self.cpu1.is_none() {
+            self.cpu1 = Some(process_cpu_ns());
+        }
     }
 
     /// Writes the report to stdout (see the module doc).
     pub fn report(self) -> Result<()> {
-        let cpu = self.cpu1.saturating_sub(self.cpu0.unwrap_or(self.cpu1));
+        let cpu1 = self.cpu1.unwrap_or_else(process_cpu_ns);
+        let cpu = cpu1.saturating_sub(self.cpu0.unwrap_or(cpu1));
         let mut out = std::io::stdout().lock();
         writeln!(out, "got {} {} {}", self.got, cpu, self.lat.len())?;
         for (k, l) in self.lat {
@@ -352,5 +361,21 @@ mod tests {
         }
         assert_eq!(t.got, 5);
         assert_eq!(t.lat, vec![(2, 52), (3, 53), (4, 54)]);
+    }
+
+    #[test]
+    fn tally_reads_the_cpu_clock_at_the_warmup_end_and_the_last_message_only() {
+        let mut t = Tally::new(4, 2);
+        t.add(0, 100, 150);
+        assert!(t.cpu0.is_none() && t.cpu1.is_none());
+        t.add(1, 100, 150);
+        assert!(t.cpu0.is_some(), "the counted CPU starts after the warm-up");
+        t.add(2, 100, 150);
+        assert!(
+            t.cpu1.is_none(),
+            "a system call per message would be measured"
+        );
+        t.add(3, 100, 150);
+        assert!(t.cpu1.is_some(), "the last message ends the counted CPU");
     }
 }

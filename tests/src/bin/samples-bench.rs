@@ -41,14 +41,15 @@
 //! of this machine); `spin`: `Subscriber::set_spin(SPIN)` then block; `block`: block
 //! at once; `udp`: blocking sockets. CPU is per round trip on each side.
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::net::UdpSocket;
 use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
 use skymesh_e2e::transport_bench::{
-    bench_state, datagram_fields, percentiles, process_cpu_ns, read_line, recv_until_idle,
-    send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, DATAGRAM_LEN,
+    bench_state, datagram_fields, finish_child, percentiles, process_cpu_ns, read_line,
+    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, Tally,
+    DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -307,74 +308,49 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads the receiver's report: `got <n> <cpu_ns> <counted>`, then one latency per line.
+/// Reads the receiver's report (`transport_bench::Tally`'s).
 fn finish(
-    mut child: Child,
-    mut out: BufReader<ChildStdout>,
+    child: Child,
+    out: BufReader<ChildStdout>,
     sent: usize,
     tx_cpu: f64,
 ) -> anyhow::Result<Phase> {
-    let head = read_line(&mut out)?;
-    let f: Vec<&str> = head.split_whitespace().collect();
-    anyhow::ensure!(
-        f.len() == 4 && f[0] == "got",
-        "receiver said `{head}` instead of its report"
-    );
-    let (got, cpu, counted): (usize, u64, usize) = (f[1].parse()?, f[2].parse()?, f[3].parse()?);
-    let mut lat = Vec::with_capacity(counted);
-    for line in out.lines() {
-        lat.push(line?.trim().parse()?);
-    }
-    let status = child.wait()?;
-    anyhow::ensure!(status.success(), "receiver failed: {status}");
+    let rx = finish_child(child, out)?;
     Ok(Phase {
-        lat,
-        got,
+        lat: rx.latencies(),
+        got: rx.got,
         sent,
-        rx_cpu: cpu as f64 / counted.max(1) as f64,
+        rx_cpu: rx.cpu_per_msg(),
         tx_cpu,
     })
 }
 
-/// What the receiver accumulates, the same for every transport.
-struct Tally {
-    got: usize,
-    lat: Vec<u64>,
-    cpu0: Option<u64>,
-    cpu1: u64,
+/// What the receiver accumulates, the same for every transport: the shared
+/// [`Tally`], and every message's stamps when `SAMPLES_BENCH_STAMPS` names a file.
+struct Received {
+    tally: Tally,
+    n: usize,
     /// `(k, send stamp, receive time)` of every message, kept when
     /// `SAMPLES_BENCH_STAMPS` names a file (to join with a kernel trace).
     stamps: Option<Vec<(usize, u64, u64)>>,
 }
 
-impl Tally {
-    fn new(n: usize) -> Tally {
-        Tally {
-            got: 0,
-            lat: Vec::with_capacity(n),
-            cpu0: None,
-            cpu1: 0,
+impl Received {
+    fn new(n: usize) -> Received {
+        Received {
+            tally: Tally::new(n, WARMUP),
+            n,
             stamps: std::env::var_os("SAMPLES_BENCH_STAMPS").map(|_| Vec::with_capacity(n)),
         }
     }
 
     /// Records message `k` sent at `t0`, received at `t1`; true after the last one.
-    fn add(&mut self, k: usize, t0: u64, t1: u64, n: usize) -> bool {
-        self.got += 1;
+    fn add(&mut self, k: usize, t0: u64, t1: u64) -> bool {
         if let Some(stamps) = &mut self.stamps {
             stamps.push((k, t0, t1));
         }
-        if k >= WARMUP {
-            // CPU is counted from the end of the last warm-up message's handling.
-            if self.cpu0.is_some() {
-                self.lat.push(t1.saturating_sub(t0));
-            }
-        }
-        if k + 1 >= WARMUP && self.cpu0.is_none() {
-            self.cpu0 = Some(process_cpu_ns());
-        }
-        self.cpu1 = process_cpu_ns();
-        k + 1 >= n
+        self.tally.add(k, t0, t1);
+        k + 1 >= self.n
     }
 
     fn report(self) -> anyhow::Result<()> {
@@ -390,13 +366,7 @@ impl Tally {
                 writeln!(f, "{pid} {k} {t0} {t1}")?;
             }
         }
-        let cpu = self.cpu1.saturating_sub(self.cpu0.unwrap_or(self.cpu1));
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "got {} {} {}", self.got, cpu, self.lat.len())?;
-        for l in self.lat {
-            writeln!(out, "{l}")?;
-        }
-        Ok(())
+        self.tally.report()
     }
 }
 
@@ -445,8 +415,8 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
 }
 
 fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
-    let mut tally = Tally::new(n);
-    let iox_sample = |tally: &mut Tally, s: VehicleState| -> anyhow::Result<bool> {
+    let mut tally = Received::new(n);
+    let iox_sample = |tally: &mut Received, s: VehicleState| -> anyhow::Result<bool> {
         let t1 = monotonic_ns();
         anyhow::ensure!(
             s.vehicle_id == VEHICLE,
@@ -454,12 +424,12 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             s.vehicle_id
         );
         let k = s.header.seq.saturating_sub(1) as usize;
-        Ok(tally.add(k, s.header.stamp_ns, t1, n))
+        Ok(tally.add(k, s.header.stamp_ns, t1))
     };
-    let udp_sample = |tally: &mut Tally, buf: &[u8], len: usize| -> anyhow::Result<bool> {
+    let udp_sample = |tally: &mut Received, buf: &[u8], len: usize| -> anyhow::Result<bool> {
         let t1 = monotonic_ns();
         let (seq, t0) = datagram_fields(buf, len, VEHICLE)?;
-        Ok(tally.add(seq.saturating_sub(1) as usize, t0, t1, n))
+        Ok(tally.add(seq.saturating_sub(1) as usize, t0, t1))
     };
     let rt = || {
         tokio::runtime::Builder::new_current_thread()
