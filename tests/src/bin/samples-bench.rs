@@ -8,12 +8,16 @@
 //! ```
 //!
 //! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
-//! `SCALE` multiplying the counts, five receivers per rate, in this order:
+//! `SCALE` multiplying the counts, seven receivers per rate, in this order:
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
 //! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
 //!   on the topic's futex event (one system call per wake-up, against the socket
 //!   event's two);
+//! - `iox raw`: raw iceoryx2 ports, none of skymesh's code, on the flavours `iox fx`
+//!   uses (thread-safe publish-subscribe, the semaphore event): `send_copy` +
+//!   `notify`, the receiver blocked in the listener's wait — what iceoryx2 alone
+//!   costs, to read `iox fx` against;
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
@@ -46,6 +50,7 @@ use std::net::UdpSocket;
 use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
+use iceoryx2::prelude::*;
 use skymesh_e2e::transport_bench::{
     bench_state, datagram_fields, finish_child, percentiles, process_cpu_ns, read_line,
     recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, Tally,
@@ -53,7 +58,7 @@ use skymesh_e2e::transport_bench::{
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{Bus, Domain, Stats};
+use skymesh_runtime::{Bus, Domain, Stats, WakeSvc};
 
 /// Messages at the start of each phase not counted (first wake-ups, page faults).
 const WARMUP: usize = 50;
@@ -77,15 +82,21 @@ enum Via {
     UdpTokio,
     /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
     IoxAnticipating,
+    /// Raw iceoryx2, none of skymesh's code: the flavours `iox-fx` uses (the
+    /// thread-safe publish-subscribe service, the semaphore event), `send_copy` +
+    /// `notify`, the receiver blocked in the event listener's wait: what iceoryx2
+    /// alone costs, for `iox-fx` to be read against.
+    IoxRaw,
 }
 
 /// The anticipating receiver's longest poll per sample.
 const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
 
 impl Via {
-    const ALL: [Via; 6] = [
+    const ALL: [Via; 7] = [
         Via::IoxBlocking,
         Via::IoxFutex,
+        Via::IoxRaw,
         Via::UdpBlocking,
         Via::IoxTokio,
         Via::UdpTokio,
@@ -100,6 +111,7 @@ impl Via {
             Via::IoxTokio => "iox-tok",
             Via::UdpTokio => "udp-tok",
             Via::IoxAnticipating => "iox-ant",
+            Via::IoxRaw => "iox-raw",
         }
     }
 
@@ -214,6 +226,7 @@ fn bench_topic(name: &str, n: usize) -> Topic {
 fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
     let name = format!("sb{}", std::process::id());
     let domain = DomainGuard(Domain::load(&name, None)?);
+    let _raw = DomainGuard(raw_domain(&name)?);
     let plan = [
         (Rate::Hz(100.0), 500 * scale),
         (Rate::Hz(1000.0), 2000 * scale),
@@ -251,6 +264,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
         for (label, udp, iox) in [
             ("blk", Via::UdpBlocking, Via::IoxBlocking),
             ("fx", Via::UdpBlocking, Via::IoxFutex),
+            ("raw", Via::UdpBlocking, Via::IoxRaw),
             ("tok", Via::UdpTokio, Via::IoxTokio),
             ("ant", Via::UdpBlocking, Via::IoxAnticipating),
         ] {
@@ -370,7 +384,92 @@ impl Received {
     }
 }
 
+fn raw_err(e: impl std::fmt::Debug) -> anyhow::Error {
+    anyhow::anyhow!("iceoryx2: {e:?}")
+}
+
+/// The domain of `iox-raw`'s services: their own, so that neither they nor the
+/// bus ever list or open the other's files.
+fn raw_domain(domain: &str) -> anyhow::Result<Domain> {
+    Ok(Domain::load(&format!("{domain}raw"), None)?)
+}
+
+/// `iox-raw`'s services: publish-subscribe on the thread-safe flavour and the
+/// semaphore event ([`WakeSvc`]), laid out as the bus lays out a topic's (the event
+/// under the domain's wake-up prefix).
+struct RawPorts {
+    pubsub: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc_threadsafe::Service,
+        VehicleState,
+        (),
+    >,
+    event: iceoryx2::service::port_factory::event::PortFactory<WakeSvc>,
+    _nodes: (Node<ipc_threadsafe::Service>, Node<WakeSvc>),
+}
+
+impl RawPorts {
+    fn open(domain: &str, n: usize) -> anyhow::Result<RawPorts> {
+        let domain = raw_domain(domain)?;
+        let name: ServiceName = "bench/raw".try_into().map_err(raw_err)?;
+        let node = NodeBuilder::new()
+            .config(&domain.config)
+            .create::<ipc_threadsafe::Service>()
+            .map_err(raw_err)?;
+        let pubsub = node
+            .service_builder(&name)
+            .publish_subscribe::<VehicleState>()
+            .max_publishers(1)
+            .max_subscribers(1)
+            .history_size(0)
+            .subscriber_max_buffer_size(n.max(1))
+            .open_or_create()
+            .map_err(raw_err)?;
+        let wake_node = NodeBuilder::new()
+            .config(&domain.wake_config())
+            .create::<WakeSvc>()
+            .map_err(raw_err)?;
+        let event = wake_node
+            .service_builder(&name)
+            .event()
+            .event_id_max_value(0)
+            .open_or_create()
+            .map_err(raw_err)?;
+        Ok(RawPorts {
+            pubsub,
+            event,
+            _nodes: (node, wake_node),
+        })
+    }
+}
+
 fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
+    if via == Via::IoxRaw {
+        let raw = RawPorts::open(&domain.name, n)?;
+        let publ = raw.pubsub.publisher_builder().create().map_err(raw_err)?;
+        let notifier = raw.event.notifier_builder().create().map_err(raw_err)?;
+        let (child, mut out) = spawn_child(&[
+            "--sub".into(),
+            via.arg().into(),
+            domain.name.clone(),
+            n.to_string(),
+        ])?;
+        let ready = read_line(&mut out)?;
+        anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
+        std::thread::sleep(Duration::from_millis(100));
+        let mut state = bench_state(VEHICLE);
+        let mut send = |k: usize, seq: u64| -> anyhow::Result<()> {
+            state.time_boot_ms = k as u32;
+            state.header.seq = seq;
+            state.header.stamp_ns = monotonic_ns();
+            publ.send_copy(state).map_err(raw_err)?;
+            notifier.notify().map_err(raw_err)?;
+            Ok(())
+        };
+        let tx_cpu = send_loop(rate, n, WARMUP, |k| send(k, k as u64 + 1))?;
+        // Sequence 0 ends a receiver still waiting for a lost sample.
+        send(n, 0)?;
+        return finish(child, out, n, tx_cpu);
+    }
     if via.is_iox() {
         // A fresh bus and publisher per phase, so no phase inherits another's samples.
         let bus = Bus::open(domain, "bench-state-pub", ServiceId::Tool, 0, Stats::new())?;
@@ -481,6 +580,23 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                     }
                     anyhow::Ok(())
                 })?;
+            }
+        }
+        Via::IoxRaw => {
+            let raw = RawPorts::open(domain, n)?;
+            let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
+            let listener = raw.event.listener_builder().create().map_err(raw_err)?;
+            println!("ready");
+            // As `recv_blocking`: look, and block only when nothing is pending.
+            'phase: loop {
+                while let Some(smp) = sub.receive().map_err(raw_err)? {
+                    let s: VehicleState = *smp.payload();
+                    drop(smp);
+                    if s.header.seq == 0 || iox_sample(&mut tally, s)? {
+                        break 'phase;
+                    }
+                }
+                listener.blocking_wait(|_| {}).map_err(raw_err)?;
             }
         }
         Via::UdpBlocking => {
