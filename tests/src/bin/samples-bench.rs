@@ -442,20 +442,30 @@ impl RawPorts {
     }
 }
 
+/// Starts a shared-memory receiver child and waits until it is subscribed.
+fn start_shm_receiver(
+    domain: &Domain,
+    via: Via,
+    n: usize,
+) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
+    let (child, mut out) = spawn_child(&[
+        "--sub".into(),
+        via.arg().into(),
+        domain.name.clone(),
+        n.to_string(),
+    ])?;
+    let ready = read_line(&mut out)?;
+    anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
+    std::thread::sleep(Duration::from_millis(100));
+    Ok((child, out))
+}
+
 fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
     if via == Via::IoxRaw {
         let raw = RawPorts::open(&domain.name, n)?;
         let publ = raw.pubsub.publisher_builder().create().map_err(raw_err)?;
         let notifier = raw.event.notifier_builder().create().map_err(raw_err)?;
-        let (child, mut out) = spawn_child(&[
-            "--sub".into(),
-            via.arg().into(),
-            domain.name.clone(),
-            n.to_string(),
-        ])?;
-        let ready = read_line(&mut out)?;
-        anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
-        std::thread::sleep(Duration::from_millis(100));
+        let (child, out) = start_shm_receiver(domain, via, n)?;
         let mut state = bench_state(VEHICLE);
         let mut send = |k: usize, seq: u64| -> anyhow::Result<()> {
             state.time_boot_ms = k as u32;
@@ -474,15 +484,7 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
         // A fresh bus and publisher per phase, so no phase inherits another's samples.
         let bus = Bus::open(domain, "bench-state-pub", ServiceId::Tool, 0, Stats::new())?;
         let mut publ = bus.publisher::<VehicleState>(&bench_topic("one_way", n))?;
-        let (child, mut out) = spawn_child(&[
-            "--sub".into(),
-            via.arg().into(),
-            domain.name.clone(),
-            n.to_string(),
-        ])?;
-        let ready = read_line(&mut out)?;
-        anyhow::ensure!(ready == "ready", "receiver said `{ready}`");
-        std::thread::sleep(Duration::from_millis(100));
+        let (child, out) = start_shm_receiver(domain, via, n)?;
         let mut state = bench_state(VEHICLE);
         let tx_cpu = send_loop(rate, n, WARMUP, |k| {
             state.time_boot_ms = k as u32;
