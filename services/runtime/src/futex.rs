@@ -174,9 +174,17 @@ impl FutexWait {
     }
 
     fn watchdog(&self) -> Result<&Watchdog, IpcError> {
-        if let Some(w) = self.watchdog.get() {
-            return Ok(w);
+        match self.watchdog.get() {
+            Some(w) => Ok(w),
+            None => self.start_watchdog(),
         }
+    }
+
+    /// The first timed wait's: out of line, so that every later wait (the one that
+    /// wakes after a long sleep) does not carry a thread start's code and stack.
+    #[cold]
+    #[inline(never)]
+    fn start_watchdog(&self) -> Result<&Watchdog, IpcError> {
         let notifier = self
             .event
             .notifier_builder()

@@ -70,6 +70,8 @@ impl IpcError {
     }
 }
 
+#[cold]
+#[inline(never)]
 pub(crate) fn ipc_err(op: &'static str, what: &str, e: impl core::fmt::Debug) -> IpcError {
     IpcError::Iceoryx {
         op,
@@ -1461,15 +1463,32 @@ impl<T: Sample> Subscriber<T> {
     /// does), after the optional spin (see [`Subscriber::set_spin`]). `None` after
     /// `timeout` without a sample; `timeout = None` waits indefinitely.
     pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
-        let deadline = timeout.map(|t| Instant::now() + t);
         if let (Some(futex), None) = (&self.futex, self.anticipation.get()) {
-            // Its drain is user space (a semaphore decrement), so unlike the socket
-            // path's it happens inside the wait; a sample taken without waiting
-            // leaves at most one notification, which makes the next wait return
-            // once for nothing.
-            let deadline_ns = crate::futex::deadline_ns(timeout);
-            return self.blocking_loop(deadline, || futex.drain(), |_| futex.wait(deadline_ns));
+            return self.recv_futex(futex, timeout);
         }
+        self.recv_socket(timeout)
+    }
+
+    /// [`Subscriber::recv_blocking`] on the futex event: its own small function,
+    /// apart from the socket and anticipation paths, so that a receive waking after
+    /// a long sleep runs through few cold code lines and a small stack frame.
+    fn recv_futex(
+        &self,
+        futex: &FutexWait,
+        timeout: Option<Duration>,
+    ) -> Result<Option<T>, IpcError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
+        // Its drain is user space (a semaphore decrement), so unlike the socket
+        // path's it happens inside the wait; a sample taken without waiting
+        // leaves at most one notification, which makes the next wait return
+        // once for nothing.
+        let deadline_ns = crate::futex::deadline_ns(timeout);
+        self.blocking_loop(deadline, || futex.drain(), |_| futex.wait(deadline_ns))
+    }
+
+    #[inline(never)]
+    fn recv_socket(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
         self.socket.settle(&self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(&self.socket, a, deadline, &self.topic, || self.try_recv());
