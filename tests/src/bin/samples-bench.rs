@@ -168,18 +168,23 @@ fn main() -> anyhow::Result<()> {
             // [SCALE] [--only NAME,NAME...] (receiver / ping-pong mode names; for profiling)
             let mut scale = 1;
             let mut only: Option<Vec<String>> = None;
+            let mut interleave = false;
             let mut it = args.iter().skip(1);
             while let Some(a) = it.next() {
                 if a == "-h" || a == "--help" {
                     println!(
-                        "usage: samples-bench [SCALE] [--only NAME,...]\n\
+                        "usage: samples-bench [SCALE] [--only NAME,...] [--interleave]\n\
                          iceoryx2 (skymesh bus) vs loopback UDP, one way at 100 Hz, 1 kHz and\n\
                          back to back, then ping-pong; SCALE multiplies the message counts;\n\
-                         --only runs the named receivers / ping-pong modes (e.g. iox-blk,udp-blk)"
+                         --only runs the named receivers / ping-pong modes (e.g. iox-blk,udp-blk);\n\
+                         --interleave runs a rate's receivers at once, their messages taking\n\
+                         turns (the host's noise falls on all alike; back to back stays apart)"
                     );
                     return Ok(());
                 }
-                if a == "--only" {
+                if a == "--interleave" {
+                    interleave = true;
+                } else if a == "--only" {
                     let list = it
                         .next()
                         .ok_or_else(|| anyhow::anyhow!("--only needs names"))?;
@@ -191,7 +196,7 @@ fn main() -> anyhow::Result<()> {
             anyhow::ensure!(scale >= 1, "SCALE must be at least 1");
             let wanted =
                 move |name: &str| only.as_ref().is_none_or(|o| o.iter().any(|n| n == name));
-            driver(scale, &wanted)
+            driver(scale, &wanted, interleave)
         }
     }
 }
@@ -223,7 +228,7 @@ fn bench_topic(name: &str, n: usize) -> Topic {
     }
 }
 
-fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
+fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyhow::Result<()> {
     let name = format!("sb{}", std::process::id());
     let domain = DomainGuard(Domain::load(&name, None)?);
     let _raw = DomainGuard(raw_domain(&name)?);
@@ -241,12 +246,19 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool) -> anyhow::Result<()> {
         "rate", "via", "got", "p50", "p99", "p999", "rx cpu", "tx cpu"
     );
     for (rate, n) in plan {
-        let mut phases = Vec::new();
-        for via in Via::ALL {
-            if !wanted(via.arg()) {
-                continue;
+        let vias: Vec<Via> = Via::ALL.into_iter().filter(|v| wanted(v.arg())).collect();
+        let measured = match rate {
+            Rate::Hz(hz) if interleave => one_way_interleaved(&domain.0, &vias, hz, n)?,
+            _ => {
+                let mut all = Vec::with_capacity(vias.len());
+                for via in &vias {
+                    all.push(one_way(&domain.0, *via, rate, n)?);
+                }
+                all
             }
-            let ph = one_way(&domain.0, via, rate, n)?;
+        };
+        let mut phases = Vec::new();
+        for (via, ph) in vias.into_iter().zip(measured) {
             let p = percentiles(&ph.lat);
             println!(
                 "{:>7} | {:>7} {:>11} {:>8.1} {:>8.1} {:>8.1} {:>8.2} {:>8.2}",
@@ -460,40 +472,65 @@ fn start_shm_receiver(
     Ok((child, out))
 }
 
-fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
-    if via == Via::IoxRaw {
-        let raw = RawPorts::open(&domain.name, n)?;
-        let publ = raw.pubsub.publisher_builder().create().map_err(raw_err)?;
-        let notifier = raw.event.notifier_builder().create().map_err(raw_err)?;
-        let (child, out) = start_shm_receiver(domain, via, n)?;
-        let mut state = bench_state(VEHICLE);
-        let mut send = |k: usize, seq: u64| -> anyhow::Result<()> {
-            state.time_boot_ms = k as u32;
-            state.header.seq = seq;
-            state.header.stamp_ns = monotonic_ns();
-            publ.send_copy(state).map_err(raw_err)?;
-            notifier.notify().map_err(raw_err)?;
-            Ok(())
-        };
-        let tx_cpu = send_loop(rate, n, WARMUP, |k| send(k, k as u64 + 1))?;
-        // Sequence 0 ends a receiver still waiting for a lost sample.
-        send(n, 0)?;
-        return finish(child, out, n, tx_cpu);
-    }
-    if via.is_iox() {
-        // A fresh bus and publisher per phase, so no phase inherits another's samples.
-        let bus = Bus::open(domain, "bench-state-pub", ServiceId::Tool, 0, Stats::new())?;
-        let mut publ = bus.publisher::<VehicleState>(&bench_topic("one_way", n))?;
-        let (child, out) = start_shm_receiver(domain, via, n)?;
-        let mut state = bench_state(VEHICLE);
-        let tx_cpu = send_loop(rate, n, WARMUP, |k| {
-            state.time_boot_ms = k as u32;
-            // The bus stamps `header.seq` (k + 1) and `header.stamp_ns` as it sends.
-            publ.publish(state)?;
-            Ok(())
-        })?;
-        finish(child, out, n, tx_cpu)
-    } else {
+/// The sending end of one receiver child's phase.
+enum Sender {
+    /// The skymesh bus: a fresh bus and publisher per phase, so no phase inherits
+    /// another's samples.
+    Bus {
+        publ: Box<skymesh_runtime::Publisher<VehicleState>>,
+        state: VehicleState,
+        _bus: Bus,
+    },
+    /// Raw iceoryx2 (`iox-raw`).
+    Raw(Box<RawSender>),
+    Udp {
+        sock: UdpSocket,
+        buf: [u8; LEN],
+    },
+}
+
+/// `iox-raw`'s sending end.
+struct RawSender {
+    publ: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, VehicleState, ()>,
+    notifier: iceoryx2::port::notifier::Notifier<WakeSvc>,
+    state: VehicleState,
+    _ports: RawPorts,
+}
+
+/// One receiver child and the sender that feeds it.
+struct Link {
+    child: Child,
+    out: BufReader<ChildStdout>,
+    sender: Sender,
+}
+
+impl Link {
+    /// Starts `via`'s receiver child for `n` messages and opens its sender.
+    fn start(domain: &Domain, via: Via, n: usize) -> anyhow::Result<Link> {
+        if via == Via::IoxRaw {
+            let ports = RawPorts::open(&domain.name, n)?;
+            let publ = ports.pubsub.publisher_builder().create().map_err(raw_err)?;
+            let notifier = ports.event.notifier_builder().create().map_err(raw_err)?;
+            let (child, out) = start_shm_receiver(domain, via, n)?;
+            let sender = Sender::Raw(Box::new(RawSender {
+                publ,
+                notifier,
+                state: bench_state(VEHICLE),
+                _ports: ports,
+            }));
+            return Ok(Link { child, out, sender });
+        }
+        if via.is_iox() {
+            let bus = Bus::open(domain, "bench-state-pub", ServiceId::Tool, 0, Stats::new())?;
+            let publ = Box::new(bus.publisher::<VehicleState>(&one_way_topic(via, n))?);
+            let (child, out) = start_shm_receiver(domain, via, n)?;
+            let sender = Sender::Bus {
+                publ,
+                state: bench_state(VEHICLE),
+                _bus: bus,
+            };
+            return Ok(Link { child, out, sender });
+        }
         let (child, mut out) =
             spawn_child(&["--sub".into(), via.arg().into(), "-".into(), n.to_string()])?;
         let ready = read_line(&mut out)?;
@@ -504,15 +541,85 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
         let sock = UdpSocket::bind("127.0.0.1:0")?;
         sock.connect(("127.0.0.1", port))?;
         std::thread::sleep(Duration::from_millis(100));
-        let mut buf = [0u8; LEN];
-        let tx_cpu = send_loop(rate, n, WARMUP, |k| {
-            stamp_datagram(&mut buf, VEHICLE, k);
-            let sent = sock.send(&buf)?;
-            anyhow::ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
-            Ok(())
-        })?;
-        finish(child, out, n, tx_cpu)
+        let sender = Sender::Udp {
+            sock,
+            buf: [0u8; LEN],
+        };
+        Ok(Link { child, out, sender })
     }
+
+    /// Sends message `k` (0-based; sequence `k + 1`).
+    fn send(&mut self, k: usize) -> anyhow::Result<()> {
+        match &mut self.sender {
+            Sender::Bus { publ, state, .. } => {
+                state.time_boot_ms = k as u32;
+                // The bus stamps `header.seq` (k + 1) and `header.stamp_ns` as it sends.
+                publ.publish(*state)?;
+            }
+            Sender::Raw(_) => self.send_raw(k, k as u64 + 1)?,
+            Sender::Udp { sock, buf } => {
+                stamp_datagram(buf, VEHICLE, k);
+                let sent = sock.send(buf)?;
+                anyhow::ensure!(sent == LEN, "sent {sent} of {LEN} bytes");
+            }
+        }
+        Ok(())
+    }
+
+    fn send_raw(&mut self, k: usize, seq: u64) -> anyhow::Result<()> {
+        if let Sender::Raw(raw) = &mut self.sender {
+            raw.state.time_boot_ms = k as u32;
+            raw.state.header.seq = seq;
+            raw.state.header.stamp_ns = monotonic_ns();
+            raw.publ.send_copy(raw.state).map_err(raw_err)?;
+            raw.notifier.notify().map_err(raw_err)?;
+        }
+        Ok(())
+    }
+
+    /// Ends the phase after `n` messages and reads the receiver's report.
+    fn finish(mut self, n: usize, tx_cpu: f64) -> anyhow::Result<Phase> {
+        // Sequence 0 ends an `iox-raw` receiver still waiting for a lost sample (it
+        // has no idle timeout).
+        self.send_raw(n, 0)?;
+        finish(self.child, self.out, n, tx_cpu)
+    }
+}
+
+/// `via`'s one-way topic: one per receiver kind, so interleaved phases do not share.
+fn one_way_topic(via: Via, n: usize) -> Topic {
+    bench_topic(&format!("one_way_{}", via.arg().replace('-', "_")), n)
+}
+
+/// One receiver alone for a phase.
+fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Phase> {
+    let mut link = Link::start(domain, via, n)?;
+    let tx_cpu = send_loop(rate, n, WARMUP, |k| link.send(k))?;
+    link.finish(n, tx_cpu)
+}
+
+/// All of `vias` in one phase, message by message: each receiver gets `n` messages
+/// at `hz`, the senders take turns (receiver `i` of `m` at offsets `i / (m · hz)`),
+/// so whatever the host does during the phase falls on every receiver alike. The
+/// sender's CPU is not told apart per receiver (NaN).
+fn one_way_interleaved(
+    domain: &Domain,
+    vias: &[Via],
+    hz: f64,
+    n: usize,
+) -> anyhow::Result<Vec<Phase>> {
+    let mut links = Vec::with_capacity(vias.len());
+    for via in vias {
+        links.push(Link::start(domain, *via, n)?);
+    }
+    let m = links.len();
+    send_loop(Rate::Hz(hz * m as f64), n * m, WARMUP * m, |k| {
+        links[k % m].send(k / m)
+    })?;
+    links
+        .into_iter()
+        .map(|link| link.finish(n, f64::NAN))
+        .collect()
 }
 
 fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
@@ -541,7 +648,7 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
         Via::IoxBlocking | Via::IoxFutex | Via::IoxTokio | Via::IoxAnticipating => {
             let domain = Domain::load(domain, None)?;
             let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
-            let mut sub = bus.subscriber::<VehicleState>(&bench_topic("one_way", n))?;
+            let mut sub = bus.subscriber::<VehicleState>(&one_way_topic(via, n))?;
             if via == Via::IoxAnticipating {
                 sub.set_anticipate(ANT_MAX_SPIN);
             }
