@@ -87,16 +87,24 @@ enum Via {
     /// `notify`, the receiver blocked in the event listener's wait: what iceoryx2
     /// alone costs, for `iox-fx` to be read against.
     IoxRaw,
+    /// Raw iceoryx2 publish-subscribe woken through a futex word of our own in
+    /// iceoryx2 shared memory instead of an iceoryx2 event: the sender bumps the
+    /// word and wakes its waiters, the receiver waits while the word is unchanged
+    /// and no sample is pending. A measurement of what an event-count wake-up
+    /// would cost (iceoryx2's listener wraps its semaphore in a mutex, a
+    /// notification state and a drain), not a bus feature.
+    IoxWord,
 }
 
 /// The anticipating receiver's longest poll per sample.
 const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
 
 impl Via {
-    const ALL: [Via; 7] = [
+    const ALL: [Via; 8] = [
         Via::IoxBlocking,
         Via::IoxFutex,
         Via::IoxRaw,
+        Via::IoxWord,
         Via::UdpBlocking,
         Via::IoxTokio,
         Via::UdpTokio,
@@ -112,6 +120,7 @@ impl Via {
             Via::UdpTokio => "udp-tok",
             Via::IoxAnticipating => "iox-ant",
             Via::IoxRaw => "iox-raw",
+            Via::IoxWord => "iox-word",
         }
     }
 
@@ -277,6 +286,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
             ("blk", Via::UdpBlocking, Via::IoxBlocking),
             ("fx", Via::UdpBlocking, Via::IoxFutex),
             ("raw", Via::UdpBlocking, Via::IoxRaw),
+            ("word", Via::UdpBlocking, Via::IoxWord),
             ("tok", Via::UdpTokio, Via::IoxTokio),
             ("ant", Via::UdpBlocking, Via::IoxAnticipating),
         ] {
@@ -420,9 +430,13 @@ struct RawPorts {
 }
 
 impl RawPorts {
-    fn open(domain: &str, n: usize) -> anyhow::Result<RawPorts> {
+    /// `via`'s services (`iox-raw`, `iox-word`: one each).
+    fn open(domain: &str, via: Via, n: usize) -> anyhow::Result<RawPorts> {
         let domain = raw_domain(domain)?;
-        let name: ServiceName = "bench/raw".try_into().map_err(raw_err)?;
+        let name: ServiceName = format!("bench/{}", via.arg())
+            .as_str()
+            .try_into()
+            .map_err(raw_err)?;
         let node = NodeBuilder::new()
             .config(&domain.config)
             .create::<ipc_threadsafe::Service>()
@@ -452,6 +466,41 @@ impl RawPorts {
             _nodes: (node, wake_node),
         })
     }
+}
+
+/// `iox-word`'s futex word, in iceoryx2 shared memory (a dynamic storage).
+#[derive(Debug, ZeroCopySend)]
+#[repr(C)]
+struct WakeWord {
+    /// Bumped by the sender after every sample; the futex the receiver sleeps on.
+    seq: iceoryx2_bb_concurrency::atomic::AtomicU32,
+    /// Receivers that wait on `seq`: the sender makes the wake-up call only if one does.
+    waiters: iceoryx2_bb_concurrency::atomic::AtomicU32,
+}
+
+type WordStorage = iceoryx2_cal::dynamic_storage::posix_shared_memory::Storage<WakeWord>;
+
+/// Opens `iox-word`'s word, creating it (owned: removed when dropped) if absent;
+/// under the raw domain's file prefix, so the bench's clean-up removes a leftover.
+fn open_word(domain: &str) -> anyhow::Result<WordStorage> {
+    use iceoryx2_cal::dynamic_storage::{DynamicStorage, DynamicStorageBuilder};
+    use iceoryx2_cal::named_concept::{
+        NamedConceptBuilder, NamedConceptConfiguration, NamedConceptMgmt,
+    };
+    let prefix = FileName::new(format!("{domain}raw_").as_bytes()).map_err(raw_err)?;
+    let cfg = <WordStorage as NamedConceptMgmt>::Configuration::default().prefix(&prefix);
+    let name = FileName::new(b"bench_word").map_err(raw_err)?;
+    <WordStorage as DynamicStorage<WakeWord>>::Builder::new(&name)
+        .config(&cfg)
+        .initializer(|w, _| {
+            w.write(WakeWord {
+                seq: iceoryx2_bb_concurrency::atomic::AtomicU32::new(0),
+                waiters: iceoryx2_bb_concurrency::atomic::AtomicU32::new(0),
+            });
+            true
+        })
+        .open_or_create()
+        .map_err(raw_err)
 }
 
 /// Starts a shared-memory receiver child and waits until it is subscribed.
@@ -491,6 +540,8 @@ enum Sender {
 
 /// `iox-raw`'s sending end.
 struct RawSender {
+    /// `iox-word`'s; `iox-raw` notifies the event instead.
+    word: Option<WordStorage>,
     publ: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, VehicleState, ()>,
     notifier: iceoryx2::port::notifier::Notifier<WakeSvc>,
     state: VehicleState,
@@ -507,12 +558,17 @@ struct Link {
 impl Link {
     /// Starts `via`'s receiver child for `n` messages and opens its sender.
     fn start(domain: &Domain, via: Via, n: usize) -> anyhow::Result<Link> {
-        if via == Via::IoxRaw {
-            let ports = RawPorts::open(&domain.name, n)?;
+        if matches!(via, Via::IoxRaw | Via::IoxWord) {
+            let word = match via {
+                Via::IoxWord => Some(open_word(&domain.name)?),
+                _ => None,
+            };
+            let ports = RawPorts::open(&domain.name, via, n)?;
             let publ = ports.pubsub.publisher_builder().create().map_err(raw_err)?;
             let notifier = ports.event.notifier_builder().create().map_err(raw_err)?;
             let (child, out) = start_shm_receiver(domain, via, n)?;
             let sender = Sender::Raw(Box::new(RawSender {
+                word,
                 publ,
                 notifier,
                 state: bench_state(VEHICLE),
@@ -572,7 +628,24 @@ impl Link {
             raw.state.header.seq = seq;
             raw.state.header.stamp_ns = monotonic_ns();
             raw.publ.send_copy(raw.state).map_err(raw_err)?;
-            raw.notifier.notify().map_err(raw_err)?;
+            match &raw.word {
+                Some(word) => {
+                    use iceoryx2_cal::dynamic_storage::DynamicStorage;
+                    use std::sync::atomic::Ordering::SeqCst;
+                    let w = word.get();
+                    w.seq.fetch_add(1, SeqCst);
+                    if w.waiters.load(SeqCst) > 0 {
+                        rustix::thread::futex::wake(
+                            &w.seq,
+                            rustix::thread::futex::Flags::empty(),
+                            u32::MAX,
+                        )?;
+                    }
+                }
+                None => {
+                    raw.notifier.notify().map_err(raw_err)?;
+                }
+            }
         }
         Ok(())
     }
@@ -692,7 +765,7 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             }
         }
         Via::IoxRaw => {
-            let raw = RawPorts::open(domain, n)?;
+            let raw = RawPorts::open(domain, via, n)?;
             let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
             let listener = raw.event.listener_builder().create().map_err(raw_err)?;
             println!("ready");
@@ -707,6 +780,38 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                 }
                 listener.blocking_wait(|_| {}).map_err(raw_err)?;
             }
+        }
+        Via::IoxWord => {
+            use iceoryx2_cal::dynamic_storage::DynamicStorage;
+            use std::sync::atomic::Ordering::SeqCst;
+            let raw = RawPorts::open(domain, via, n)?;
+            let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
+            let word = open_word(domain)?;
+            let w = word.get();
+            w.waiters.fetch_add(1, SeqCst);
+            println!("ready");
+            // The event count: read the word, look, and sleep only while the word
+            // still holds what was read (a sample sent since has changed it).
+            'phase: loop {
+                let seen = w.seq.load(SeqCst);
+                while let Some(smp) = sub.receive().map_err(raw_err)? {
+                    let s: VehicleState = *smp.payload();
+                    drop(smp);
+                    if s.header.seq == 0 || iox_sample(&mut tally, s)? {
+                        break 'phase;
+                    }
+                }
+                match rustix::thread::futex::wait(
+                    &w.seq,
+                    rustix::thread::futex::Flags::empty(),
+                    seen,
+                    None,
+                ) {
+                    Ok(()) | Err(rustix::io::Errno::AGAIN) | Err(rustix::io::Errno::INTR) => {}
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            w.waiters.fetch_sub(1, SeqCst);
         }
         Via::UdpBlocking => {
             let sock = UdpSocket::bind("127.0.0.1:0")?;
