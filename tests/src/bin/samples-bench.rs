@@ -8,7 +8,7 @@
 //! ```
 //!
 //! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
-//! `SCALE` multiplying the counts, seven receivers per rate, in this order:
+//! `SCALE` multiplying the counts, eight receivers per rate, in this order:
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
 //! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
@@ -18,6 +18,9 @@
 //!   uses (thread-safe publish-subscribe, the semaphore event): `send_copy` +
 //!   `notify`, the receiver blocked in the listener's wait — what iceoryx2 alone
 //!   costs, to read `iox fx` against;
+//! - `iox word`: raw iceoryx2 publish-subscribe woken through an event count of
+//!   our own (a futex word in iceoryx2 shared memory) instead of iceoryx2's event
+//!   listener: what a futex wake-up without the listener's layers would cost;
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
@@ -26,6 +29,10 @@
 //!   wakes on a timer just before the next sample is due and polls for it (compared
 //!   with `udp blk`; `SAMPLES_BENCH_TRACE=1` prints every sample's latency and the
 //!   anticipation's windows and hits).
+//!
+//! `--interleave` runs a rate's receivers at once, the sender taking turns message by
+//! message, so whatever the host does falls on all of them alike (back to back stays
+//! one receiver at a time).
 //!
 //! `SAMPLES_BENCH_STAMPS=FILE` appends `receiver-pid k send-stamp receive-time` (ns,
 //! `CLOCK_MONOTONIC`) of every message to FILE, to join with a kernel trace taken
