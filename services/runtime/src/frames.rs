@@ -14,11 +14,11 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
-use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic, TopicQos};
+use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 
 use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
-use crate::futex::FutexWait;
+use crate::futex::TopicWord;
 use crate::ipc::{
     ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SeqTable, SocketWait, Svc,
     WaitSource, Wakers,
@@ -135,7 +135,6 @@ impl Bus {
             warn: Mutex::new(WarnLimiter::default()),
             anticipation: Anticipating::default(),
             futex: None,
-            qos: topic.qos,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -247,8 +246,7 @@ pub struct FrameSubscriber {
     /// Set by [`FrameSubscriber::set_anticipate`].
     anticipation: Anticipating,
     /// Set by [`FrameSubscriber::set_futex_wake`].
-    futex: Option<FutexWait>,
-    qos: TopicQos,
+    futex: Option<TopicWord>,
     topic: String,
     _bus: Bus,
 }
@@ -391,11 +389,10 @@ impl FrameSubscriber {
         self.anticipation.stats()
     }
 
-    /// [`FrameSubscriber::recv_blocking_with`] sleeps on the stream's futex event:
+    /// [`FrameSubscriber::recv_blocking_with`] sleeps on the stream's event count:
     /// see [`crate::Subscriber::set_futex_wake`]. `set_anticipate` takes precedence.
     pub fn set_futex_wake(&mut self) -> Result<(), FrameError> {
-        self._bus
-            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?;
+        self._bus.futex_wait_into(&mut self.futex, &self.topic)?;
         self.socket.release();
         Ok(())
     }
@@ -410,14 +407,20 @@ impl FrameSubscriber {
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
-        let futex = self
-            .futex
-            .as_ref()
-            .filter(|_| self.anticipation.get().is_none());
-        let deadline_ns = futex.and_then(|_| crate::futex::deadline_ns(timeout));
-        if futex.is_none() {
-            self.socket.settle(&self.topic)?;
+        if let (Some(word), None) = (&self.futex, self.anticipation.get()) {
+            // The event count: announce and read it, look, sleep while unchanged.
+            loop {
+                let armed = word.arm();
+                if let Some(r) = self.try_recv_with(&mut read)? {
+                    return Ok(Some(r));
+                }
+                let Some(left) = time_left(deadline) else {
+                    return Ok(None);
+                };
+                armed.wait(left)?;
+            }
         }
+        self.socket.settle(&self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(&self.socket, a, deadline, &self.topic, || {
                 self.try_recv_with(&mut read)
@@ -430,10 +433,7 @@ impl FrameSubscriber {
             let Some(left) = time_left(deadline) else {
                 return Ok(None);
             };
-            match futex {
-                Some(futex) => futex.wait(deadline_ns)?,
-                None => self.socket.wait_blocking(left, &self.topic)?,
-            }
+            self.socket.wait_blocking(left, &self.topic)?;
         }
     }
 

@@ -1,6 +1,6 @@
 //! The futex wake-up for blocking receivers ([`crate::Subscriber::set_futex_wake`]).
 //!
-//! Every topic has two iceoryx2 event services, and every publisher notifies both:
+//! Every topic has two ways to wake a receiver, and every publisher uses both:
 //!
 //! - the **socket** event (iceoryx2's default: a Unix datagram per wake-up). It has a
 //!   file descriptor, so tokio and epoll can wait on it: every async receiver uses it.
@@ -8,257 +8,245 @@
 //!   the notifier), against one `recv` for a UDP socket: on this project's VM the
 //!   mechanism alone costs the receiver 1.3× UDP's CPU per message
 //!   (`scripts/wake-floor.c`).
-//! - the **futex** event (iceoryx2's semaphore event, a process-shared POSIX
-//!   semaphore in shared memory): the waiter sleeps in one `futex` call, the notifier
-//!   wakes it with one, and re-arming is a user-space decrement. It has no file
-//!   descriptor, so only a thread that blocks can use it.
+//! - the topic's **event count**: a 32-bit word in shared memory ([`WakeWord`], one
+//!   per topic and domain) that every publish increments after its sample is in
+//!   place. A futex receiver reads the word, looks for a sample, and sleeps in one
+//!   `futex` call only while the word still holds what it read — so a sample
+//!   published between the look and the sleep ends the sleep at once. A publish
+//!   makes the `FUTEX_WAKE` call only while a receiver is announced as waiting
+//!   (the word's second half), so the second mechanism costs publishers two atomic
+//!   operations until a blocking receiver waits. It has no file descriptor: only a
+//!   thread that blocks can use it.
 //!
-//! A notify with nobody listening on an event is a few atomic loads (no system
-//! call), so the second event costs publishers nothing until a blocking receiver
-//! asks for it.
+//! **Why not iceoryx2's semaphore event**, which this replaced (2026-11-28): its
+//! listener wraps the semaphore in a mutex, a notification state and a drain of the
+//! semaphore and the event ids after every wake. After 10 ms asleep that cost a
+//! 100 Hz receiver 3–4 µs of cold user-space work per message over the event count
+//! (`samples-bench` receivers `iox-raw` and `iox-word`, docs/benchmarks.md), and its
+//! timed wait polls, so timeouts took a watchdog thread per subscriber. `FUTEX_WAIT`
+//! takes a timeout itself.
 //!
-//! The futex services live under their own file prefix (`<domain>.fx_`, see
-//! [`crate::Domain::wake_config`]): their shared-memory layout differs from the socket
-//! event's, and the two service kinds must never open each other's files.
-//!
-//! **Timeouts.** iceoryx2's timed wait on a semaphore polls (10,000 `sched_yield`s,
-//! then sleeps of 100 µs and 10 ms), so a timed futex wait here is an untimed
-//! `sem_wait` plus a *watchdog*: one thread per subscriber, started by its first
-//! timed wait, that sleeps until the waiting receive's deadline and, if the receive
-//! is still waiting then, notifies the topic's futex event. The receive publishes its
-//! deadline in an atomic (no system call); the watchdog wakes at most once per
-//! deadline, and is woken early only when a deadline comes before the one it sleeps
-//! towards (a shorter timeout than the last, or any while it sleeps with nothing to
-//! watch: then it never wakes by itself). Its notify wakes every futex receiver
-//! of the topic, in every process: those find no sample and wait again. That happens
-//! only when a timeout expires, i.e. when the topic has gone quiet.
+//! **The word's life.** It is created by the first publisher or futex receiver of
+//! the topic that opens it and is owned by nobody, so a service restarted alone
+//! finds the same word as the processes still running (a fresh word per opener
+//! would leave a publisher and a receiver on different words: a receive that only
+//! a timeout ends). Its file (`/dev/shm/<domain>.fx_…_w<hash>.dyn`, 4 KiB) lives
+//! under the domain's wake-up prefix and goes with the domain's other files when the
+//! supervisor stops the mesh ([`crate::Domain::leftover_files`]). Two topics whose
+//! names hash alike would share a word: their receivers would wake for each other's
+//! samples, look, and sleep again — a cost, never a lost wake-up. A receiver killed
+//! while announced leaves the announcement behind: publishers of that topic then
+//! make the wake-up call on every publish (~1 µs each) until the domain is removed.
 
-use core::fmt::Debug;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
-use std::thread::JoinHandle;
+use std::sync::atomic::Ordering::SeqCst;
 use std::time::Duration;
 
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::ZeroCopySend;
-use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
-use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
-use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
-use iceoryx2_cal::{
-    arc_sync_policy, bag, dynamic_storage, event, hash, monitoring, reactor,
-    resizable_shared_memory, serialize, shared_memory, static_storage, zero_copy_connection,
+use iceoryx2::prelude::*;
+use iceoryx2_bb_concurrency::atomic::AtomicU32;
+use iceoryx2_cal::dynamic_storage::{DynamicStorage, DynamicStorageBuilder};
+use iceoryx2_cal::named_concept::{
+    NamedConceptBuilder, NamedConceptConfiguration, NamedConceptMgmt,
 };
+use rustix::thread::futex;
 
-use crate::clock::monotonic_ns;
 use crate::ipc::{ipc_err, IpcError};
 
-/// `ipc_threadsafe::Service` with iceoryx2's semaphore event in place of its socket
-/// event: the iceoryx2 service flavour of the futex wake-up. Only its event services
-/// are used.
-#[derive(Debug, Clone)]
-pub struct WakeSvc {}
-
-impl iceoryx2::service::Service for WakeSvc {
-    type StaticStorage = static_storage::recommended::Ipc;
-    type ConfigSerializer = serialize::recommended::Recommended;
-    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::PersistentIpc<T>;
-    type Bag = bag::recommended::Recommended;
-    type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<T>;
-    type ServiceNameHasher = hash::recommended::Recommended;
-    type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
-    type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
-    type Connection = zero_copy_connection::recommended::Ipc;
-    type Event = event::SemaphoreShmCountingBitSet;
-    type Monitoring = monitoring::recommended::Ipc;
-    type Reactor = reactor::recommended::Ipc;
-    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> =
-        arc_sync_policy::mutex_protected::MutexProtected<T>;
-    type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<KeyType>;
-    type BlackboardPayload = shared_memory::recommended::Ipc<BumpAllocator>;
-    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+/// A topic's event count, in shared memory.
+#[derive(Debug, ZeroCopySend)]
+#[repr(C)]
+pub(crate) struct WakeWord {
+    /// Incremented by every publish, after the sample is in place: the futex word.
+    seq: AtomicU32,
+    /// Receives announced as waiting (between [`TopicWord::arm`] and the end of the
+    /// wait): a publish makes the wake-up call only while this is not zero.
+    waiters: AtomicU32,
 }
 
-impl iceoryx2::service::internal::ServiceInternal<WakeSvc> for WakeSvc {}
+type WordStorage = iceoryx2_cal::dynamic_storage::posix_shared_memory::Storage<WakeWord>;
 
-/// The event service port factory of a topic's futex event.
-pub(crate) type WakeEvent = iceoryx2::service::port_factory::event::PortFactory<WakeSvc>;
+/// How long an open waits for a word that another process is creating.
+const OPEN_TIMEOUT: Duration = Duration::from_millis(500);
 
-/// The `CLOCK_MONOTONIC` deadline (ns) of a receive with `timeout`, for
-/// [`FutexWait::wait`]: computed once per receive, not per wait.
-pub(crate) fn deadline_ns(timeout: Option<Duration>) -> Option<u64> {
-    timeout.map(|t| monotonic_ns().saturating_add(u64::try_from(t.as_nanos()).unwrap_or(u64::MAX)))
+/// FNV-1a, 64 bits: the word's file name from the topic's name. Stable across
+/// builds and toolchains (every service of a mesh must derive the same name).
+fn name_hash(topic: &str) -> u64 {
+    topic.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }
 
-/// `deadline_ns` when no receive is waiting.
-const NOT_WAITING: u64 = 0;
-
-/// What a receive and its watchdog share.
+/// One process's handle on a topic's event count. The bus opens it for every
+/// publisher and futex receiver; public for tools that measure the mechanism alone
+/// (`samples-bench` receiver `iox-word`).
 #[derive(Debug)]
-struct Watch {
-    /// `CLOCK_MONOTONIC` ns at which the waiting receive times out; [`NOT_WAITING`].
-    deadline_ns: AtomicU64,
-    /// When the watchdog will next look by itself (ns), so a receive with an earlier
-    /// deadline knows to wake it.
-    looks_at_ns: AtomicU64,
-    stop: AtomicBool,
-}
-
-#[derive(Debug)]
-struct Watchdog {
-    watch: Arc<Watch>,
-    thread: JoinHandle<()>,
-}
-
-/// A subscriber's futex listener, and the watchdog behind its timeouts.
-#[derive(Debug)]
-pub(crate) struct FutexWait {
-    listener: Listener<WakeSvc>,
-    event: WakeEvent,
-    watchdog: std::sync::OnceLock<Watchdog>,
+pub struct TopicWord {
+    storage: WordStorage,
     topic: String,
 }
 
-impl FutexWait {
-    pub(crate) fn new(event: WakeEvent, topic: &str) -> Result<FutexWait, IpcError> {
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| ipc_err("create futex listener", topic, e))?;
-        Ok(FutexWait {
-            listener,
-            event,
-            watchdog: std::sync::OnceLock::new(),
+impl TopicWord {
+    /// Opens `topic`'s word under the domain's wake-up prefix (`wake_prefix`, see
+    /// [`crate::Domain::wake_prefix`]), creating it if no process has.
+    pub fn open(wake_prefix: &str, topic: &str) -> Result<TopicWord, IpcError> {
+        let prefix = FileName::new(wake_prefix.as_bytes())
+            .map_err(|e| ipc_err("futex word prefix", topic, e))?;
+        let name = FileName::new(format!("w{:016x}", name_hash(topic)).as_bytes())
+            .map_err(|e| ipc_err("futex word name", topic, e))?;
+        let config = <WordStorage as NamedConceptMgmt>::Configuration::default().prefix(&prefix);
+        let storage = <WordStorage as DynamicStorage<WakeWord>>::Builder::new(&name)
+            .config(&config)
+            .has_ownership(false)
+            .timeout(OPEN_TIMEOUT)
+            .initializer(|word, _| {
+                word.write(WakeWord {
+                    seq: AtomicU32::new(0),
+                    waiters: AtomicU32::new(0),
+                });
+                true
+            })
+            .open_or_create()
+            .map_err(|e| ipc_err("open futex word", topic, e))?;
+        Ok(TopicWord {
+            storage,
             topic: topic.to_string(),
         })
     }
 
-    /// Consumes notifications already pending (user space: semaphore decrements),
-    /// so the next wait blocks until a new one.
-    pub(crate) fn drain(&self) -> Result<(), IpcError> {
-        self.listener
-            .try_wait(|_| {})
-            .map_err(|e| ipc_err("futex listener wait", &self.topic, e))?;
+    fn word(&self) -> &WakeWord {
+        self.storage.get()
+    }
+
+    /// A publish's part, after its sample is in place: counts it, and wakes every
+    /// receiver of the topic that waits (in every process).
+    pub fn wake(&self) -> Result<(), IpcError> {
+        let w = self.word();
+        w.seq.fetch_add(1, SeqCst);
+        if w.waiters.load(SeqCst) != 0 {
+            futex::wake(&w.seq, futex::Flags::empty(), u32::MAX)
+                .map_err(|e| ipc_err("futex wake", &self.topic, e))?;
+        }
         Ok(())
     }
 
-    /// Blocks until the topic's futex event is notified (a sample was published,
-    /// a notification was pending, or this receive's watchdog fired at
-    /// `deadline_ns`, see [`deadline_ns`]; `None` waits indefinitely), or a signal
-    /// arrives. Callers look for samples and at the clock whichever it was.
-    pub(crate) fn wait(&self, deadline_ns: Option<u64>) -> Result<(), IpcError> {
-        let watch = match deadline_ns {
-            Some(d) => {
-                let dog = self.watchdog()?;
-                dog.watch.deadline_ns.store(d.max(1), Ordering::SeqCst);
-                if d < dog.watch.looks_at_ns.load(Ordering::SeqCst) {
-                    dog.thread.thread().unpark();
-                }
-                Some(&dog.watch)
-            }
-            None => None,
-        };
-        let res = self.listener.blocking_wait(|_| {});
-        if let Some(w) = watch {
-            w.deadline_ns.store(NOT_WAITING, Ordering::SeqCst);
-        }
-        match res {
-            Ok(_) => Ok(()),
-            // A signal: the caller looks and waits again, as after a socket wait.
-            Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
-            Err(e) => Err(ipc_err("futex listener wait", &self.topic, e)),
+    /// A receive's first step: announces a wait and reads the count. Look for a
+    /// sample after this, then [`Armed::wait`] if there was none; a sample
+    /// published after this call ends that wait at once.
+    pub fn arm(&self) -> Armed<'_> {
+        let w = self.word();
+        w.waiters.fetch_add(1, SeqCst);
+        Armed {
+            seen: w.seq.load(SeqCst),
+            word: w,
+            topic: &self.topic,
         }
     }
 
-    fn watchdog(&self) -> Result<&Watchdog, IpcError> {
-        match self.watchdog.get() {
-            Some(w) => Ok(w),
-            None => self.start_watchdog(),
-        }
+    /// How many receives are announced as waiting on the topic, in every process
+    /// (diagnostics and tests: zero whenever no futex receive is in progress).
+    pub fn waiters(&self) -> u32 {
+        self.word().waiters.load(SeqCst)
     }
+}
 
-    /// The first timed wait's: out of line, so that every later wait (the one that
-    /// wakes after a long sleep) does not carry a thread start's code and stack.
-    #[cold]
-    #[inline(never)]
-    fn start_watchdog(&self) -> Result<&Watchdog, IpcError> {
-        let notifier = self
-            .event
-            .notifier_builder()
-            .create()
-            .map_err(|e| ipc_err("create futex watchdog notifier", &self.topic, e))?;
-        let watch = Arc::new(Watch {
-            deadline_ns: AtomicU64::new(NOT_WAITING),
-            looks_at_ns: AtomicU64::new(0),
-            stop: AtomicBool::new(false),
+/// An announced wait ([`TopicWord::arm`]); dropping it withdraws the announcement.
+#[derive(Debug)]
+pub struct Armed<'a> {
+    word: &'a WakeWord,
+    seen: u32,
+    topic: &'a str,
+}
+
+impl Armed<'_> {
+    /// Sleeps until a publish after the arming (returns at once if one came
+    /// already), `timeout` (`None`: no limit), or a signal. Callers look for samples
+    /// and at the clock whichever it was.
+    pub fn wait(self, timeout: Option<Duration>) -> Result<(), IpcError> {
+        let limit = timeout.map(|t| futex::Timespec {
+            tv_sec: i64::try_from(t.as_secs()).unwrap_or(i64::MAX),
+            tv_nsec: i64::from(t.subsec_nanos()),
         });
-        let w = Arc::clone(&watch);
-        let topic = self.topic.clone();
-        let thread = std::thread::Builder::new()
-            .name("futex-watchdog".into())
-            .spawn(move || watchdog_loop(&w, &notifier, &topic))
-            .map_err(|e| ipc_err("start futex watchdog", &self.topic, e))?;
-        // Only the subscriber's own receives get here, one at a time in practice; a
-        // racing second watchdog would stop at once when dropped below.
-        match self.watchdog.set(Watchdog { watch, thread }) {
-            Ok(()) => {}
-            Err(extra) => stop(extra),
+        match futex::wait(
+            &self.word.seq,
+            futex::Flags::empty(),
+            self.seen,
+            limit.as_ref(),
+        ) {
+            Ok(())
+            | Err(rustix::io::Errno::AGAIN)
+            | Err(rustix::io::Errno::INTR)
+            | Err(rustix::io::Errno::TIMEDOUT) => Ok(()),
+            Err(e) => Err(ipc_err("futex wait", self.topic, e)),
         }
-        Ok(self.watchdog.get().expect("set above"))
     }
 }
 
-impl Drop for FutexWait {
+impl Drop for Armed<'_> {
     fn drop(&mut self) {
-        if let Some(dog) = self.watchdog.take() {
-            stop(dog);
-        }
+        self.word.waiters.fetch_sub(1, SeqCst);
     }
 }
 
-fn stop(dog: Watchdog) {
-    dog.watch.stop.store(true, Ordering::SeqCst);
-    dog.thread.thread().unpark();
-    let _ = dog.thread.join();
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// `looks_at_ns` while no receive is waiting: the watchdog sleeps until the next
-/// timed wait wakes it (any deadline is earlier).
-const NEVER: u64 = u64::MAX;
+    fn prefix(tag: &str) -> String {
+        format!("fxw{}{tag}.fx_", std::process::id())
+    }
 
-fn watchdog_loop(watch: &Watch, notifier: &Notifier<WakeSvc>, topic: &str) {
-    // The deadline this watchdog has already fired for: a receive that is slow to
-    // clear it after its wake-up is not notified twice.
-    let mut fired = NOT_WAITING;
-    while !watch.stop.load(Ordering::SeqCst) {
-        let now = monotonic_ns();
-        let deadline = watch.deadline_ns.load(Ordering::SeqCst);
-        let look_at = if deadline == NOT_WAITING || deadline == fired {
-            NEVER
-        } else if now >= deadline {
-            if let Err(e) = notifier.notify() {
-                tracing::warn!(topic, error = ?e, "futex watchdog could not wake a timed-out receive");
+    fn remove(prefix: &str) {
+        for e in std::fs::read_dir("/dev/shm").unwrap().flatten() {
+            if e.file_name().to_string_lossy().starts_with(prefix) {
+                let _ = std::fs::remove_file(e.path());
             }
-            fired = deadline;
-            continue;
-        } else {
-            deadline
-        };
-        watch.looks_at_ns.store(look_at, Ordering::SeqCst);
-        // A deadline set after the load above and before this store, earlier than
-        // `look_at`, unparks this thread (the receive reads `looks_at_ns` after it
-        // stores its deadline): the park below then returns at once.
-        let now = monotonic_ns();
-        if watch.deadline_ns.load(Ordering::SeqCst) != deadline {
-            continue;
         }
-        if look_at == NEVER {
-            std::thread::park();
-        } else if look_at > now {
-            std::thread::park_timeout(Duration::from_nanos(look_at - now));
-        }
+    }
+
+    #[test]
+    fn the_name_hash_is_fnv1a() {
+        // Published FNV-1a 64 test vectors: every build must derive the same file.
+        assert_eq!(name_hash(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(name_hash("a"), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!(name_hash("foobar"), 0x8594_4171_f739_67e8);
+    }
+
+    /// Two openers share one word: what one publishes wakes the other's wait, and
+    /// the word outlives both (a service restarted alone must find it).
+    #[test]
+    fn openers_share_the_word_and_it_outlives_them() {
+        let p = prefix("a");
+        let publ = TopicWord::open(&p, "skymesh/test/a").unwrap();
+        let recv = TopicWord::open(&p, "skymesh/test/a").unwrap();
+        let armed = recv.arm();
+        assert_eq!(publ.word().waiters.load(SeqCst), 1);
+        publ.wake().unwrap();
+        // The publish came after the arming: the wait returns at once, not in 10 s.
+        let t0 = std::time::Instant::now();
+        armed.wait(Some(Duration::from_secs(10))).unwrap();
+        assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
+        assert_eq!(recv.waiters(), 0, "the announcement outlived the wait");
+        drop((publ, recv));
+        let again = TopicWord::open(&p, "skymesh/test/a").unwrap();
+        assert_eq!(
+            again.word().seq.load(SeqCst),
+            1,
+            "a fresh word, not the same"
+        );
+        drop(again);
+        remove(&p);
+    }
+
+    /// Without a publish the wait ends at its timeout (no watchdog thread).
+    #[test]
+    fn a_wait_ends_at_its_timeout() {
+        let p = prefix("b");
+        let recv = TopicWord::open(&p, "skymesh/test/b").unwrap();
+        let t0 = std::time::Instant::now();
+        recv.arm().wait(Some(Duration::from_millis(30))).unwrap();
+        let waited = t0.elapsed();
+        assert!(waited >= Duration::from_millis(30), "{waited:?}");
+        assert_eq!(recv.waiters(), 0);
+        drop(recv);
+        remove(&p);
     }
 }

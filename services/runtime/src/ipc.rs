@@ -21,14 +21,14 @@ use iceoryx2::service::ipc_threadsafe;
 use nix::sys::epoll::{Epoll, EpollCreateFlags, EpollEvent, EpollFlags, EpollTimeout};
 use nix::sys::time::TimeSpec;
 use nix::sys::timerfd::{ClockId, Expiration, TimerFd, TimerFlags, TimerSetTimeFlags};
-use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic, TopicQos};
+use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
 use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
-use crate::futex::{FutexWait, WakeSvc};
+use crate::futex::TopicWord;
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
 
 /// The iceoryx2 service flavour every skymesh process uses.
@@ -231,20 +231,11 @@ impl Domain {
         format!("{}_", self.name)
     }
 
-    /// The prefix of this domain's futex wake-up files (see [`crate::futex`]): not
-    /// an extension of [`Domain::prefix`] (a domain name has no `.`), so neither
-    /// kind of service ever lists or opens the other's files.
+    /// The prefix of this domain's futex wake-up files (the topics' event counts, see
+    /// [`crate::futex`]): not an extension of [`Domain::prefix`] (a domain name has no
+    /// `.`), so iceoryx2 never lists or opens them as its own.
     pub fn wake_prefix(&self) -> String {
         format!("{}.fx_", self.name)
-    }
-
-    /// The iceoryx2 config of this domain's futex wake-up services: [`Domain::config`]
-    /// under [`Domain::wake_prefix`].
-    pub fn wake_config(&self) -> Config {
-        let mut config = self.config.clone();
-        config.global.prefix = FileName::new(self.wake_prefix().as_bytes())
-            .expect("a valid domain name makes a valid file name");
-        config
     }
 
     /// Removes the stale resources of every dead node of this domain. Returns the
@@ -253,11 +244,7 @@ impl Domain {
     /// A dead node is only recognisable once its process has been reaped, so the
     /// supervisor calls this after `waitpid`.
     pub fn cleanup_dead_nodes(&self) -> (Vec<String>, usize) {
-        let (cleaned, failed) = cleanup_dead::<Svc>(&self.config);
-        // The same processes' futex wake-up nodes (see `crate::futex`), not reported
-        // by name a second time.
-        let (_, wake_failed) = cleanup_dead::<WakeSvc>(&self.wake_config());
-        (cleaned, failed + wake_failed)
+        cleanup_dead::<Svc>(&self.config)
     }
 
     /// Names and pids of the live nodes of this domain.
@@ -322,12 +309,13 @@ impl Domain {
     }
 }
 
-/// A publisher's two notifiers: the topic's socket event (async and epoll waiters)
-/// and its futex event (blocking receivers that asked for it; see [`crate::futex`]).
-/// With nobody listening on one, its notify is a few atomic loads.
+/// A publisher's two ways to wake receivers: the topic's socket event (async and
+/// epoll waiters) and its event count (blocking receivers that asked for the futex
+/// wake-up; see [`crate::futex`]). With nobody waiting, each is a few atomic
+/// operations.
 pub(crate) struct Wakers {
     socket: Notifier<Svc>,
-    futex: Notifier<WakeSvc>,
+    futex: TopicWord,
 }
 
 impl Wakers {
@@ -336,10 +324,7 @@ impl Wakers {
         self.socket
             .notify()
             .map_err(|e| ipc_err("notify", topic, e))?;
-        self.futex
-            .notify()
-            .map_err(|e| ipc_err("notify futex receivers", topic, e))?;
-        Ok(())
+        self.futex.wake()
     }
 }
 
@@ -395,8 +380,8 @@ fn open_event_of<S: iceoryx2::service::Service>(
 
 struct BusInner {
     node: Node<Svc>,
-    /// The same node's twin for the futex wake-up events (see [`crate::futex`]).
-    wake_node: Node<WakeSvc>,
+    /// [`Domain::wake_prefix`]: where the topics' event counts live.
+    wake_prefix: String,
     name: String,
     service: ServiceId,
     instance: u16,
@@ -460,16 +445,10 @@ impl Bus {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Svc>()
             .map_err(|e| ipc_err("create node", name, e))?;
-        let wake_node = NodeBuilder::new()
-            .name(&node_name)
-            .config(&domain.wake_config())
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<WakeSvc>()
-            .map_err(|e| ipc_err("create futex wake-up node", name, e))?;
         Ok(Bus {
             inner: Arc::new(BusInner {
                 node,
-                wake_node,
+                wake_prefix: domain.wake_prefix(),
                 name: name.to_string(),
                 service,
                 instance,
@@ -509,35 +488,26 @@ impl Bus {
         open_event_of(&self.inner.node, topic, "open event")
     }
 
-    /// A publisher's notifiers of both of `topic`'s events.
+    /// A publisher's notifier of `topic`'s socket event and handle on its event count.
     pub(crate) fn wakers(&self, topic: &Topic) -> Result<Wakers, IpcError> {
         let socket = self
             .open_event(topic)?
             .notifier_builder()
             .create()
             .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
-        let futex = open_event_of(&self.inner.wake_node, topic, "open futex event")?
-            .notifier_builder()
-            .create()
-            .map_err(|e| ipc_err("create futex notifier", &topic.name, e))?;
+        let futex = TopicWord::open(&self.inner.wake_prefix, &topic.name)?;
         Ok(Wakers { socket, futex })
     }
 
-    /// A subscriber's `set_futex_wake`: puts a listener on the topic's futex event
-    /// in `slot`, unless one is there.
+    /// A subscriber's `set_futex_wake`: opens the topic's event count into `slot`,
+    /// unless it is there.
     pub(crate) fn futex_wait_into(
         &self,
-        slot: &mut Option<FutexWait>,
+        slot: &mut Option<TopicWord>,
         name: &str,
-        qos: TopicQos,
     ) -> Result<(), IpcError> {
         if slot.is_none() {
-            let topic = Topic {
-                name: name.to_string(),
-                qos,
-            };
-            let event = open_event_of(&self.inner.wake_node, &topic, "open futex event")?;
-            *slot = Some(FutexWait::new(event, name)?);
+            *slot = Some(TopicWord::open(&self.inner.wake_prefix, name)?);
         }
         Ok(())
     }
@@ -643,7 +613,6 @@ impl Bus {
             newest_only: false,
             anticipation: Anticipating::default(),
             futex: None,
-            qos: topic.qos,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -688,7 +657,7 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
 /// (blocking receives) and its tokio registration (async receives).
 ///
 /// The listener is created with the subscriber. `set_futex_wake` releases it
-/// ([`SocketWait::release`]): a receiver that sleeps on the futex event would
+/// ([`SocketWait::release`]): a receiver that sleeps on the event count would
 /// otherwise keep a listener nobody drains — a port, a socket holding one unread
 /// datagram (iceoryx2 writes no more until a drain), and a connection every
 /// publish looks at. A later wait on the socket event (an async receive, an
@@ -1324,8 +1293,7 @@ pub struct Subscriber<T: Sample> {
     /// Set by [`Subscriber::set_anticipate`].
     anticipation: Anticipating,
     /// Set by [`Subscriber::set_futex_wake`].
-    futex: Option<FutexWait>,
-    qos: TopicQos,
+    futex: Option<TopicWord>,
     topic: String,
     _bus: Bus,
 }
@@ -1422,21 +1390,18 @@ impl<T: Sample> Subscriber<T> {
         self.anticipation.stats()
     }
 
-    /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's futex
-    /// event instead of its socket event: one system call per wake-up instead of
-    /// two, for a thread that blocks on one topic (a control loop at hundreds of Hz
-    /// to kHz). At 1 kHz it wakes faster than a blocking UDP `recv` (every run
-    /// measured) at about the same receiver CPU per message (less in seven runs of
-    /// eleven; `samples-bench`, docs/benchmarks.md). A timed receive starts a
-    /// watchdog thread for this subscriber (see the `futex` module). Async receives
-    /// still wait on the socket event (they need its file descriptor): this call
-    /// releases the subscriber's socket listener, which the first socket wait
-    /// creates again. [`Subscriber::set_anticipate`], which waits on a timer beside
-    /// the socket event, takes precedence. Publishers of every topic notify both
-    /// events.
+    /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's event
+    /// count (a futex word in shared memory, see the `futex` module) instead of its
+    /// socket event: one system call per wake-up instead of two, for a thread that
+    /// blocks on one topic (a control loop at hundreds of Hz to kHz). Measured
+    /// against a blocking UDP `recv` in `samples-bench` (docs/benchmarks.md).
+    /// Async receives still wait on the socket event (they need its file
+    /// descriptor): this call releases the subscriber's socket listener, which the
+    /// first socket wait creates again. [`Subscriber::set_anticipate`], which waits
+    /// on a timer beside the socket event, takes precedence. Publishers of every
+    /// topic wake both.
     pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
-        self._bus
-            .futex_wait_into(&mut self.futex, &self.topic, self.qos)?;
+        self._bus.futex_wait_into(&mut self.futex, &self.topic)?;
         self.socket.release();
         Ok(())
     }
@@ -1469,21 +1434,30 @@ impl<T: Sample> Subscriber<T> {
         self.recv_socket(timeout)
     }
 
-    /// [`Subscriber::recv_blocking`] on the futex event: its own small function,
-    /// apart from the socket and anticipation paths, so that a receive waking after
-    /// a long sleep runs through few cold code lines and a small stack frame.
+    /// [`Subscriber::recv_blocking`] on the topic's event count: its own small
+    /// function, apart from the socket and anticipation paths, so that a receive
+    /// waking after a long sleep runs through few cold code lines and a small stack
+    /// frame. Announce the wait and read the count, look, sleep while the count is
+    /// unchanged; a sample published after the announcement ends the sleep at once.
     fn recv_futex(
         &self,
-        futex: &FutexWait,
+        word: &TopicWord,
         timeout: Option<Duration>,
     ) -> Result<Option<T>, IpcError> {
         let deadline = timeout.map(|t| Instant::now() + t);
-        // Its drain is user space (a semaphore decrement), so unlike the socket
-        // path's it happens inside the wait; a sample taken without waiting
-        // leaves at most one notification, which makes the next wait return
-        // once for nothing.
-        let deadline_ns = crate::futex::deadline_ns(timeout);
-        self.blocking_loop(deadline, || futex.drain(), |_| futex.wait(deadline_ns))
+        if let Some(v) = self.spin_recv()? {
+            return Ok(Some(v));
+        }
+        loop {
+            let armed = word.arm();
+            if let Some(v) = self.try_recv()? {
+                return Ok(Some(v));
+            }
+            let Some(left) = time_left(deadline) else {
+                return Ok(None);
+            };
+            armed.wait(left)?;
+        }
     }
 
     #[inline(never)]

@@ -37,9 +37,9 @@ pub mod warn_limit;
 pub use anticipate::AnticipationStats;
 pub use config::{ConfigError, ServiceConfig};
 pub use frames::{FrameError, FramePublisher, FrameSubscriber};
+pub use futex::{Armed, TopicWord};
 /// The iceoryx2 service flavour of the futex wake-up's event (for benchmarks that
 /// measure raw iceoryx2 beside the bus).
-pub use futex::WakeSvc;
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
 pub use rate::TokenBucket;
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};

@@ -101,18 +101,28 @@ async fn domains_are_isolated_and_leave_no_files_behind() {
         assert!(!d1.leftover_files().is_empty());
         assert_eq!(d1.live_nodes().len(), 1);
     }
-    // After every node is gone, only iceoryx2's global management file of each
-    // prefix (the socket and the futex services) may remain; the supervisor removes
-    // them.
+    // After every node is gone, only iceoryx2's global management file and the
+    // topic's event count (owned by nobody, so a service restarted alone finds the
+    // one the others use) may remain; the supervisor removes them with the domain.
     let left = d1.leftover_files();
+    let count_file = |p: &std::path::PathBuf| {
+        let name = p
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        name.starts_with(&d1.wake_prefix()) && name.ends_with(".dyn")
+    };
     assert!(
         left.len() <= 2
             && left
                 .iter()
-                .all(|p| p.to_string_lossy().ends_with(".global_mgmt")),
+                .all(|p| p.to_string_lossy().ends_with(".global_mgmt") || count_file(p)),
         "{left:?}"
     );
+    assert!(left.iter().any(count_file), "no event count: {left:?}");
     d1.remove_leftover_files();
+    assert!(d1.leftover_files().is_empty(), "{:?}", d1.leftover_files());
     d2.remove_leftover_files();
     assert!(d1.leftover_files().is_empty());
 }
@@ -592,7 +602,7 @@ async fn a_receive_that_found_nothing_waits_for_a_notification_without_looking_a
 }
 
 /// Publishes one sample on `topic` after `after` unless `cancel` is set first: a
-/// receive that should time out but instead hangs (a watchdog that never fires)
+/// receive that should time out but instead hangs (a timeout that never fires)
 /// gets this sample and fails its assertion instead of hanging the test.
 fn rescue(
     bus: &Bus,
@@ -622,14 +632,15 @@ fn rescue(
     (cancel, t)
 }
 
-/// `set_futex_wake`: blocking receives sleep on the topic's futex event. With and
-/// without a spin: a receive with nothing pending times out (its watchdog wakes it),
-/// a stream published while the receiver blocks arrives whole and in order (a
-/// publisher that did not notify the futex event would leave every receive to time
-/// out), and after it the receiver blocks rather than polls (thread CPU over the
-/// wait).
+/// `set_futex_wake`: blocking receives sleep on the topic's event count. With and
+/// without a spin: a receive with nothing pending times out (the futex wait's own
+/// timeout), a stream published while the receiver blocks arrives whole and in
+/// order (a publisher that did not wake the count would leave every receive to time
+/// out), after it the receiver blocks rather than polls (thread CPU over the wait),
+/// and no receive leaves its announcement behind (publishers would make the wake-up
+/// call on every publish).
 #[test]
-fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
+fn futex_wake_receives_a_stream_whole_and_times_out() {
     for (tag, spin) in [("fx0", Duration::ZERO), ("fx1", Duration::from_micros(300))] {
         let d = domain(tag);
         let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
@@ -654,7 +665,7 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
         let waited = t0.elapsed();
         cancel.store(true, Ordering::SeqCst);
         rescuer.join().unwrap();
-        assert!(got.is_none(), "{spin:?}: the watchdog never ended the wait");
+        assert!(got.is_none(), "{spin:?}: the timeout never ended the wait");
         assert!(waited >= Duration::from_millis(30), "{spin:?}: {waited:?}");
 
         let t0 = std::time::Instant::now();
@@ -678,7 +689,7 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
             }
             p.join().unwrap();
         });
-        // Woken by each sample, not by the 5 s watchdog: the stream takes ~45 ms.
+        // Woken by each sample, not by the 5 s timeout: the stream takes ~45 ms.
         let took = t0.elapsed();
         assert!(
             took < Duration::from_secs(4),
@@ -688,13 +699,16 @@ fn futex_wake_receives_a_stream_whole_and_times_out_by_its_watchdog() {
         assert_blocks(idle, &format!("{spin:?}: blocking wait"), || {
             assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())
         });
+        let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
+        assert_eq!(count.waiters(), 0, "{spin:?}: an announcement left behind");
     }
 }
 
-/// The watchdog sleeps towards the last deadline it saw; a receive whose deadline
-/// comes earlier (a shorter timeout than the last) must wake it, or that receive
-/// would wait out the longer timeout. A second futex receiver on the topic, woken
-/// by the first one's watchdog, keeps waiting until its own deadline.
+/// Timeouts of two futex receivers on one topic are their own: after a long timeout
+/// ended by a sample, a shorter one ends on time (not at the old deadline), and one
+/// receiver's timeout neither ends nor shortens the other's wait. (Until 2026-11-28
+/// a watchdog thread per subscriber ended timed waits by waking the whole topic;
+/// this test kept its early wake-up honest and stays for the same properties.)
 #[test]
 fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
     let d = domain("fxt");
@@ -707,7 +721,7 @@ fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
     other.set_futex_wake().unwrap();
     let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
 
-    // A long timeout, ended by a sample: the watchdog now sleeps towards ~8 s.
+    // A long timeout, ended by a sample.
     std::thread::scope(|s| {
         s.spawn(|| {
             std::thread::sleep(Duration::from_millis(20));
@@ -732,7 +746,7 @@ fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
     );
     assert!(waited >= Duration::from_millis(40), "{waited:?}");
 
-    // The other receiver, woken by this one's watchdog, waits on.
+    // The other receiver waits on through this one's timeout.
     let other_wait = Duration::from_millis(600);
     std::thread::scope(|s| {
         let o = s.spawn(|| {
@@ -748,7 +762,7 @@ fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
         assert!(got.is_none());
         assert!(
             waited >= other_wait,
-            "woken by the other receiver's watchdog, returned after {waited:?}"
+            "ended by the other receiver's timeout, returned after {waited:?}"
         );
     });
     cancel.store(true, Ordering::SeqCst);

@@ -13,7 +13,7 @@
 //! receive + copy + release. skymesh: `publish` (header stamp, send, both events'
 //! notify, counter) and `try_recv` (receive, copy, release, then the subscriber's
 //! accounting: received counter, age histogram, gap table). `--futex`: the
-//! subscriber calls `set_futex_wake` first (publishers then notify its futex event,
+//! subscriber calls `set_futex_wake` first (publishers then wake its event count,
 //! and no socket listener). Prints p50 / p99 per operation and the p50 of the
 //! per-round difference skymesh − raw (thread-safe), in ns. One thread, no wake-ups:
 //! the cost of touching memory, not of the kernel.

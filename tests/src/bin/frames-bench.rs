@@ -29,7 +29,7 @@
 //!   (`FrameSubscriber::set_anticipate`, [`ANT_MAX_SPIN`]); compared with a fresh
 //!   socket `xfer` phase. The receiver prints its learnt period, windows and hits.
 //!
-//! - `fx`: `xfer` with the iceoryx2 receiver blocking on the stream's futex event
+//! - `fx`: `xfer` with the iceoryx2 receiver blocking on the stream's event count
 //!   (`FrameSubscriber::set_futex_wake`) instead of its socket event; compared with a
 //!   fresh socket `xfer` phase.
 //!
@@ -74,7 +74,7 @@ enum Mode {
     /// Transfer only, the iceoryx2 receiver anticipating the next frame
     /// (`FrameSubscriber::set_anticipate`); its socket phase is `xfer`'s.
     Ant,
-    /// Transfer only, the iceoryx2 receiver woken through the futex event
+    /// Transfer only, the iceoryx2 receiver woken through the event count
     /// (`FrameSubscriber::set_futex_wake`); its socket phase is `xfer`'s.
     Fx,
 }

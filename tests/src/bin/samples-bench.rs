@@ -12,15 +12,15 @@
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
 //! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
-//!   on the topic's futex event (one system call per wake-up, against the socket
-//!   event's two);
-//! - `iox raw`: raw iceoryx2 ports, none of skymesh's code, on the flavours `iox fx`
-//!   uses (thread-safe publish-subscribe, the semaphore event): `send_copy` +
-//!   `notify`, the receiver blocked in the listener's wait — what iceoryx2 alone
-//!   costs, to read `iox fx` against;
-//! - `iox word`: raw iceoryx2 publish-subscribe woken through an event count of
-//!   our own (a futex word in iceoryx2 shared memory) instead of iceoryx2's event
-//!   listener: what a futex wake-up without the listener's layers would cost;
+//!   on the topic's event count, a futex word (one system call per wake-up, against
+//!   the socket event's two);
+//! - `iox raw`: raw iceoryx2 ports, none of skymesh's code: thread-safe
+//!   publish-subscribe and iceoryx2's semaphore event (what `iox fx` used until
+//!   2026-11-28), `send_copy` + `notify`, the receiver blocked in the listener's
+//!   wait — what iceoryx2's own blocking wake-up costs;
+//! - `iox word`: the same publish-subscribe woken through the bus's event count
+//!   (`skymesh_runtime::TopicWord`) without the rest of the bus: `iox fx` minus
+//!   skymesh's publisher and subscriber;
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
@@ -58,6 +58,13 @@ use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
+use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
+use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
+use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
+use iceoryx2_cal::{
+    arc_sync_policy, bag, dynamic_storage, event, hash, monitoring, reactor,
+    resizable_shared_memory, serialize, shared_memory, static_storage, zero_copy_connection,
+};
 use skymesh_e2e::transport_bench::{
     bench_state, datagram_fields, finish_child, percentiles, process_cpu_ns, read_line,
     recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, Tally,
@@ -65,7 +72,7 @@ use skymesh_e2e::transport_bench::{
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{Bus, Domain, Stats, WakeSvc};
+use skymesh_runtime::{Bus, Domain, Stats, TopicWord};
 
 /// Messages at the start of each phase not counted (first wake-ups, page faults).
 const WARMUP: usize = 50;
@@ -89,17 +96,15 @@ enum Via {
     UdpTokio,
     /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
     IoxAnticipating,
-    /// Raw iceoryx2, none of skymesh's code: the flavours `iox-fx` uses (the
-    /// thread-safe publish-subscribe service, the semaphore event), `send_copy` +
-    /// `notify`, the receiver blocked in the event listener's wait: what iceoryx2
-    /// alone costs, for `iox-fx` to be read against.
+    /// Raw iceoryx2, none of skymesh's code: the thread-safe publish-subscribe
+    /// service and iceoryx2's semaphore event (the futex wake-up's mechanism until
+    /// 2026-11-28), `send_copy` + `notify`, the receiver blocked in the event
+    /// listener's wait: what iceoryx2's own blocking wake-up costs.
     IoxRaw,
-    /// Raw iceoryx2 publish-subscribe woken through a futex word of our own in
-    /// iceoryx2 shared memory instead of an iceoryx2 event: the sender bumps the
-    /// word and wakes its waiters, the receiver waits while the word is unchanged
-    /// and no sample is pending. A measurement of what an event-count wake-up
-    /// would cost (iceoryx2's listener wraps its semaphore in a mutex, a
-    /// notification state and a drain), not a bus feature.
+    /// The same publish-subscribe woken through the bus's event count
+    /// (`TopicWord`: the sender bumps the word and wakes its waiters, the receiver
+    /// sleeps while the word is unchanged and nothing is pending), without the rest
+    /// of the bus: `iox-fx` minus skymesh's publisher and subscriber.
     IoxWord,
 }
 
@@ -423,6 +428,44 @@ fn raw_domain(domain: &str) -> anyhow::Result<Domain> {
     Ok(Domain::load(&format!("{domain}raw"), None)?)
 }
 
+/// `ipc_threadsafe::Service` with iceoryx2's semaphore event in place of its socket
+/// event: what the bus's futex wake-up used until 2026-11-28 (an iceoryx2 event
+/// listener on a semaphore), kept for `iox-raw`. Only its event services are used.
+#[derive(Debug, Clone)]
+struct WakeSvc {}
+
+impl iceoryx2::service::Service for WakeSvc {
+    type StaticStorage = static_storage::recommended::Ipc;
+    type ConfigSerializer = serialize::recommended::Recommended;
+    type PersistentDynamicStorage<T: std::fmt::Debug + Send + Sync + ZeroCopySend + 'static> =
+        dynamic_storage::recommended::PersistentIpc<T>;
+    type Bag = bag::recommended::Recommended;
+    type DynamicStorage<T: std::fmt::Debug + Send + Sync + ZeroCopySend + 'static> =
+        dynamic_storage::recommended::Ipc<T>;
+    type ServiceNameHasher = hash::recommended::Recommended;
+    type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
+    type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
+    type Connection = zero_copy_connection::recommended::Ipc;
+    type Event = event::SemaphoreShmCountingBitSet;
+    type Monitoring = monitoring::recommended::Ipc;
+    type Reactor = reactor::recommended::Ipc;
+    type ArcThreadSafetyPolicy<T: Send + std::fmt::Debug + Abandonable> =
+        arc_sync_policy::mutex_protected::MutexProtected<T>;
+    type BlackboardMgmt<KeyType: Send + Sync + std::fmt::Debug + ZeroCopySend + 'static> =
+        dynamic_storage::recommended::Ipc<KeyType>;
+    type BlackboardPayload = shared_memory::recommended::Ipc<BumpAllocator>;
+    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+}
+
+impl iceoryx2::service::internal::ServiceInternal<WakeSvc> for WakeSvc {}
+
+/// The raw domain's config under its wake-up prefix, for `iox-raw`'s event.
+fn raw_wake_config(domain: &Domain) -> anyhow::Result<Config> {
+    let mut config = domain.config.clone();
+    config.global.prefix = FileName::new(domain.wake_prefix().as_bytes()).map_err(raw_err)?;
+    Ok(config)
+}
+
 /// `iox-raw`'s services: publish-subscribe on the thread-safe flavour and the
 /// semaphore event ([`WakeSvc`]), laid out as the bus lays out a topic's (the event
 /// under the domain's wake-up prefix).
@@ -458,7 +501,7 @@ impl RawPorts {
             .open_or_create()
             .map_err(raw_err)?;
         let wake_node = NodeBuilder::new()
-            .config(&domain.wake_config())
+            .config(&raw_wake_config(&domain)?)
             .create::<WakeSvc>()
             .map_err(raw_err)?;
         let event = wake_node
@@ -475,39 +518,13 @@ impl RawPorts {
     }
 }
 
-/// `iox-word`'s futex word, in iceoryx2 shared memory (a dynamic storage).
-#[derive(Debug, ZeroCopySend)]
-#[repr(C)]
-struct WakeWord {
-    /// Bumped by the sender after every sample; the futex the receiver sleeps on.
-    seq: iceoryx2_bb_concurrency::atomic::AtomicU32,
-    /// Receivers that wait on `seq`: the sender makes the wake-up call only if one does.
-    waiters: iceoryx2_bb_concurrency::atomic::AtomicU32,
-}
-
-type WordStorage = iceoryx2_cal::dynamic_storage::posix_shared_memory::Storage<WakeWord>;
-
-/// Opens `iox-word`'s word, creating it (owned: removed when dropped) if absent;
-/// under the raw domain's file prefix, so the bench's clean-up removes a leftover.
-fn open_word(domain: &str) -> anyhow::Result<WordStorage> {
-    use iceoryx2_cal::dynamic_storage::{DynamicStorage, DynamicStorageBuilder};
-    use iceoryx2_cal::named_concept::{
-        NamedConceptBuilder, NamedConceptConfiguration, NamedConceptMgmt,
-    };
-    let prefix = FileName::new(format!("{domain}raw_").as_bytes()).map_err(raw_err)?;
-    let cfg = <WordStorage as NamedConceptMgmt>::Configuration::default().prefix(&prefix);
-    let name = FileName::new(b"bench_word").map_err(raw_err)?;
-    <WordStorage as DynamicStorage<WakeWord>>::Builder::new(&name)
-        .config(&cfg)
-        .initializer(|w, _| {
-            w.write(WakeWord {
-                seq: iceoryx2_bb_concurrency::atomic::AtomicU32::new(0),
-                waiters: iceoryx2_bb_concurrency::atomic::AtomicU32::new(0),
-            });
-            true
-        })
-        .open_or_create()
-        .map_err(raw_err)
+/// `iox-word`'s event count: the bus's own mechanism (`TopicWord`), in the raw
+/// domain, without the bus around it.
+fn open_word(domain: &str) -> anyhow::Result<TopicWord> {
+    Ok(TopicWord::open(
+        &raw_domain(domain)?.wake_prefix(),
+        "bench/iox-word",
+    )?)
 }
 
 /// Starts a shared-memory receiver child and waits until it is subscribed.
@@ -548,7 +565,7 @@ enum Sender {
 /// `iox-raw`'s sending end.
 struct RawSender {
     /// `iox-word`'s; `iox-raw` notifies the event instead.
-    word: Option<WordStorage>,
+    word: Option<TopicWord>,
     publ: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, VehicleState, ()>,
     notifier: iceoryx2::port::notifier::Notifier<WakeSvc>,
     state: VehicleState,
@@ -636,19 +653,7 @@ impl Link {
             raw.state.header.stamp_ns = monotonic_ns();
             raw.publ.send_copy(raw.state).map_err(raw_err)?;
             match &raw.word {
-                Some(word) => {
-                    use iceoryx2_cal::dynamic_storage::DynamicStorage;
-                    use std::sync::atomic::Ordering::SeqCst;
-                    let w = word.get();
-                    w.seq.fetch_add(1, SeqCst);
-                    if w.waiters.load(SeqCst) > 0 {
-                        rustix::thread::futex::wake(
-                            &w.seq,
-                            rustix::thread::futex::Flags::empty(),
-                            u32::MAX,
-                        )?;
-                    }
-                }
+                Some(word) => word.wake()?,
                 None => {
                     raw.notifier.notify().map_err(raw_err)?;
                 }
@@ -789,18 +794,14 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             }
         }
         Via::IoxWord => {
-            use iceoryx2_cal::dynamic_storage::DynamicStorage;
-            use std::sync::atomic::Ordering::SeqCst;
             let raw = RawPorts::open(domain, via, n)?;
             let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
             let word = open_word(domain)?;
-            let w = word.get();
-            w.waiters.fetch_add(1, SeqCst);
             println!("ready");
-            // The event count: read the word, look, and sleep only while the word
-            // still holds what was read (a sample sent since has changed it).
+            // As the bus's futex receive: announce the wait and read the count, look,
+            // and sleep only while the count is unchanged.
             'phase: loop {
-                let seen = w.seq.load(SeqCst);
+                let armed = word.arm();
                 while let Some(smp) = sub.receive().map_err(raw_err)? {
                     let s: VehicleState = *smp.payload();
                     drop(smp);
@@ -808,17 +809,8 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                         break 'phase;
                     }
                 }
-                match rustix::thread::futex::wait(
-                    &w.seq,
-                    rustix::thread::futex::Flags::empty(),
-                    seen,
-                    None,
-                ) {
-                    Ok(()) | Err(rustix::io::Errno::AGAIN) | Err(rustix::io::Errno::INTR) => {}
-                    Err(e) => return Err(e.into()),
-                }
+                armed.wait(None)?;
             }
-            w.waiters.fetch_sub(1, SeqCst);
         }
         Via::UdpBlocking => {
             let sock = UdpSocket::bind("127.0.0.1:0")?;
