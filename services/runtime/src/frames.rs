@@ -408,17 +408,7 @@ impl FrameSubscriber {
     ) -> Result<Option<R>, FrameError> {
         let deadline = timeout.map(|t| Instant::now() + t);
         if let (Some(word), None) = (&self.futex, self.anticipation.get()) {
-            // The event count: announce and read it, look, sleep while unchanged.
-            loop {
-                let armed = word.arm();
-                if let Some(r) = self.try_recv_with(&mut read)? {
-                    return Ok(Some(r));
-                }
-                let Some(left) = time_left(deadline) else {
-                    return Ok(None);
-                };
-                armed.wait(left)?;
-            }
+            return word.recv(deadline, || self.try_recv_with(&mut read));
         }
         self.socket.settle(&self.topic)?;
         if let Some(a) = self.anticipation.get() {

@@ -39,7 +39,7 @@
 //! make the wake-up call on every publish (~1 µs each) until the domain is removed.
 
 use std::sync::atomic::Ordering::SeqCst;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 use iceoryx2_bb_concurrency::atomic::AtomicU32;
@@ -138,6 +138,28 @@ impl TopicWord {
             seen: w.seq.load(SeqCst),
             word: w,
             topic: &self.topic,
+        }
+    }
+
+    /// A blocking receive on the count, for [`crate::Subscriber`] and
+    /// [`crate::FrameSubscriber`]: announce the wait and read the count, `look`,
+    /// sleep while the count is unchanged (a sample published after the announcement
+    /// ends the sleep at once), until `look` finds something or `deadline` passes
+    /// (`None`: no limit).
+    pub(crate) fn recv<R, E: From<IpcError>>(
+        &self,
+        deadline: Option<Instant>,
+        mut look: impl FnMut() -> Result<Option<R>, E>,
+    ) -> Result<Option<R>, E> {
+        loop {
+            let armed = self.arm();
+            if let Some(r) = look()? {
+                return Ok(Some(r));
+            }
+            let Some(left) = crate::ipc::time_left(deadline) else {
+                return Ok(None);
+            };
+            armed.wait(left)?;
         }
     }
 

@@ -1448,16 +1448,7 @@ impl<T: Sample> Subscriber<T> {
         if let Some(v) = self.spin_recv()? {
             return Ok(Some(v));
         }
-        loop {
-            let armed = word.arm();
-            if let Some(v) = self.try_recv()? {
-                return Ok(Some(v));
-            }
-            let Some(left) = time_left(deadline) else {
-                return Ok(None);
-            };
-            armed.wait(left)?;
-        }
+        word.recv(deadline, || self.try_recv())
     }
 
     #[inline(never)]
