@@ -996,4 +996,48 @@ mod tests {
         assert_eq!(find_metric(text, "x_total{a=\"1\"}"), Some(3.0));
         assert_eq!(find_metric(text, "x_total"), None);
     }
+
+    /// Binaries built without a test harness (`test = false`, to spare `cargo test`
+    /// one compile and link each: 27 of them) must not hold tests, or those tests
+    /// would silently never run. Their code lives in libraries, tested there.
+    #[test]
+    fn binaries_without_a_test_harness_hold_no_tests() {
+        let root = repo_root();
+        let manifest: toml::Table =
+            toml::from_str(&std::fs::read_to_string(root.join("Cargo.toml")).unwrap()).unwrap();
+        let members = manifest["workspace"]["members"].as_array().unwrap();
+        let mut untested = 0;
+        for member in members {
+            let dir = root.join(member.as_str().unwrap());
+            let text = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+            let crate_manifest: toml::Table = toml::from_str(&text).unwrap();
+            let Some(bins) = crate_manifest.get("bin").and_then(|b| b.as_array()) else {
+                continue;
+            };
+            for bin in bins {
+                if bin.get("test").and_then(|t| t.as_bool()) != Some(false) {
+                    continue;
+                }
+                untested += 1;
+                let path = dir.join(bin["path"].as_str().unwrap());
+                let source = std::fs::read_to_string(&path).unwrap();
+                for (n, line) in source.lines().enumerate() {
+                    let code = line.trim_start();
+                    let file_module = code.starts_with("mod ") && code.ends_with(';');
+                    assert!(
+                        !(code.starts_with("#[test]") || code.contains("cfg(test)") || file_module),
+                        "{}:{}: `{code}` in a binary built with `test = false`: its tests \
+                         would never run (move the code into the library, or drop \
+                         `test = false`)",
+                        path.display(),
+                        n + 1
+                    );
+                }
+            }
+        }
+        assert!(
+            untested > 0,
+            "no `test = false` binary found: is the manifest walk broken?"
+        );
+    }
 }
