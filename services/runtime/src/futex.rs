@@ -160,6 +160,14 @@ impl TopicWord {
                 return Ok(None);
             };
             armed.wait(left)?;
+            // Woken (or timed out): look before announcing again. After a publish's
+            // wake-up this finds the sample, and the receive ends without two more
+            // atomic operations on the word, which the publisher has just written.
+            // Finding nothing, the loop announces and looks again before it sleeps,
+            // so a sample published in between is not missed.
+            if let Some(r) = look()? {
+                return Ok(Some(r));
+            }
         }
     }
 
