@@ -18,7 +18,7 @@ use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 
 use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
-use crate::futex::TopicWord;
+use crate::futex::{Deadline, TopicWord};
 use crate::ipc::{
     ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SeqTable, SocketWait, Svc,
     WaitSource, Wakers,
@@ -406,10 +406,11 @@ impl FrameSubscriber {
         timeout: Option<Duration>,
         mut read: impl FnMut(&FrameHeader, &[u8]) -> R,
     ) -> Result<Option<R>, FrameError> {
-        let deadline = timeout.map(|t| Instant::now() + t);
         if let (Some(word), None) = (&self.futex, self.anticipation.get()) {
+            let deadline = timeout.map(Deadline::after);
             return word.recv(deadline, || self.try_recv_with(&mut read));
         }
+        let deadline = timeout.map(|t| Instant::now() + t);
         self.socket.settle(&self.topic)?;
         if let Some(a) = self.anticipation.get() {
             return recv_anticipating(&self.socket, a, deadline, &self.topic, || {

@@ -38,8 +38,9 @@
 //! while announced leaves the announcement behind: publishers of that topic then
 //! make the wake-up call on every publish (~1 µs each) until the domain is removed.
 
+use std::num::NonZeroU32;
 use std::sync::atomic::Ordering::SeqCst;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use iceoryx2::prelude::*;
 use iceoryx2_bb_concurrency::atomic::AtomicU32;
@@ -49,7 +50,32 @@ use iceoryx2_cal::named_concept::{
 };
 use rustix::thread::futex;
 
+use crate::clock::monotonic_ns;
 use crate::ipc::{ipc_err, IpcError};
+
+/// When a futex receive gives up: a point on `CLOCK_MONOTONIC`, which the wait
+/// hands to the kernel as it is (`FUTEX_WAIT_BITSET`'s absolute timeout). Taking it
+/// is the receive's one clock read, where a deadline kept as an `Instant` took two
+/// (one to set it, one to turn it into the relative timeout `FUTEX_WAIT` takes).
+/// Without either read a 100 Hz receiver spent ~1 µs less of its ~20 per message
+/// (`samples-bench`, docs/benchmarks.md); this keeps one of them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Deadline(u64);
+
+impl Deadline {
+    /// `timeout` from now.
+    pub fn after(timeout: Duration) -> Deadline {
+        let ns = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+        Deadline(monotonic_ns().saturating_add(ns))
+    }
+
+    fn timespec(self) -> futex::Timespec {
+        futex::Timespec {
+            tv_sec: i64::try_from(self.0 / 1_000_000_000).unwrap_or(i64::MAX),
+            tv_nsec: (self.0 % 1_000_000_000) as i64,
+        }
+    }
+}
 
 /// A topic's event count, in shared memory.
 #[derive(Debug, ZeroCopySend)]
@@ -148,7 +174,7 @@ impl TopicWord {
     /// (`None`: no limit).
     pub(crate) fn recv<R, E: From<IpcError>>(
         &self,
-        deadline: Option<Instant>,
+        deadline: Option<Deadline>,
         mut look: impl FnMut() -> Result<Option<R>, E>,
     ) -> Result<Option<R>, E> {
         loop {
@@ -156,10 +182,7 @@ impl TopicWord {
             if let Some(r) = look()? {
                 return Ok(Some(r));
             }
-            let Some(left) = crate::ipc::time_left(deadline) else {
-                return Ok(None);
-            };
-            armed.wait(left)?;
+            let timed_out = armed.wait_until(deadline)?;
             // Woken (or timed out): look before announcing again. After a publish's
             // wake-up this finds the sample, and the receive ends without two more
             // atomic operations on the word, which the publisher has just written.
@@ -167,6 +190,9 @@ impl TopicWord {
             // so a sample published in between is not missed.
             if let Some(r) = look()? {
                 return Ok(Some(r));
+            }
+            if timed_out {
+                return Ok(None);
             }
         }
     }
@@ -187,6 +213,23 @@ pub struct Armed<'a> {
 }
 
 impl Armed<'_> {
+    /// Sleeps as [`Armed::wait`] does, until `deadline` at the latest (`None`: no
+    /// limit); `true` if it passed (then or before the call).
+    pub fn wait_until(self, deadline: Option<Deadline>) -> Result<bool, IpcError> {
+        let limit = deadline.map(Deadline::timespec);
+        match futex::wait_bitset(
+            &self.word.seq,
+            futex::Flags::empty(),
+            self.seen,
+            limit.as_ref(),
+            NonZeroU32::MAX,
+        ) {
+            Ok(()) | Err(rustix::io::Errno::AGAIN) | Err(rustix::io::Errno::INTR) => Ok(false),
+            Err(rustix::io::Errno::TIMEDOUT) => Ok(true),
+            Err(e) => Err(ipc_err("futex wait", self.topic, e)),
+        }
+    }
+
     /// Sleeps until a publish after the arming (returns at once if one came
     /// already), `timeout` (`None`: no limit), or a signal. Callers look for samples
     /// and at the clock whichever it was.

@@ -28,7 +28,7 @@ use tokio_util::sync::CancellationToken;
 use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
-use crate::futex::TopicWord;
+use crate::futex::{Deadline, TopicWord};
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
 
 /// The iceoryx2 service flavour every skymesh process uses.
@@ -429,6 +429,29 @@ pub(crate) fn with_retry<S: iceoryx2::service::Service, T, E: core::fmt::Debug>(
     }
 }
 
+/// `topic`'s publish-subscribe service, opened (or created) through `node`: the
+/// thread-safe flavour of every port, or the single-thread one of a
+/// [`BlockingSubscriber`]; both lay out the service's shared memory alike.
+pub(crate) fn open_pubsub_on<S: iceoryx2::service::Service, T: Sample>(
+    node: &Node<S>,
+    topic: &Topic,
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>, IpcError> {
+    let service_name =
+        ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
+    let q = topic.qos;
+    with_retry(node, &topic.name, "open publish-subscribe", || {
+        node.service_builder(&service_name)
+            .publish_subscribe::<T>()
+            .max_publishers(q.max_publishers)
+            .max_subscribers(q.max_subscribers)
+            .max_nodes(q.max_nodes)
+            .history_size(q.history)
+            .subscriber_max_buffer_size(q.buffer)
+            .enable_safe_overflow(true)
+            .open_or_create()
+    })
+}
+
 impl Bus {
     /// Creates the node `name` in `domain`. Signal handling stays with the caller.
     pub fn open(
@@ -517,27 +540,17 @@ impl Bus {
         topic: &Topic,
     ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, IpcError>
     {
-        let service_name =
-            ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
-        let q = topic.qos;
-        with_retry(
-            &self.inner.node,
-            &topic.name,
-            "open publish-subscribe",
-            || {
-                self.inner
-                    .node
-                    .service_builder(&service_name)
-                    .publish_subscribe::<T>()
-                    .max_publishers(q.max_publishers)
-                    .max_subscribers(q.max_subscribers)
-                    .max_nodes(q.max_nodes)
-                    .history_size(q.history)
-                    .subscriber_max_buffer_size(q.buffer)
-                    .enable_safe_overflow(true)
-                    .open_or_create()
-            },
-        )
+        open_pubsub_on(&self.inner.node, topic)
+    }
+
+    /// The domain's iceoryx2 configuration (for [`BlockingSubscriber`]'s own node).
+    pub(crate) fn config(&self) -> &Config {
+        self.inner.node.config()
+    }
+
+    /// The topic's event count (see [`crate::futex`]).
+    pub(crate) fn topic_word(&self, topic: &str) -> Result<TopicWord, IpcError> {
+        TopicWord::open(&self.inner.wake_prefix, topic)
     }
 
     /// A publisher on `topic` that stamps headers, sends and wakes subscribers.
@@ -596,21 +609,11 @@ impl Bus {
             .create()
             .map_err(|e| ipc_err("create subscriber", &topic.name, e))?;
         let socket = SocketWait::new(event, &topic.name)?;
-        let labels = [("topic", family)];
-        let stats = &self.inner.stats;
         Ok(Subscriber {
             socket,
             port,
-            received: stats.counter("skymesh_topic_samples_received_total", &labels),
-            lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
-            age: stats.histogram(
-                "skymesh_topic_sample_age_seconds",
-                &labels,
-                &LATENCY_BOUNDS_S,
-            ),
-            last_seq: Mutex::default(),
+            counts: ReceiveCounts::new(&self.inner.stats, family),
             spin: Duration::ZERO,
-            newest_only: false,
             anticipation: Anticipating::default(),
             futex: None,
             topic: topic.name.clone(),
@@ -1180,6 +1183,89 @@ impl SeqTable {
     }
 }
 
+/// A subscriber's per-topic series and gap counting, for [`Subscriber`] and
+/// [`BlockingSubscriber`].
+pub(crate) struct ReceiveCounts {
+    received: Counter,
+    lost: Counter,
+    age: Histogram,
+    /// Last sequence seen per publisher, for gap counting. Behind a mutex so reads
+    /// work through `&self` (the blocking wait loop holds shared references while the
+    /// callback receives); never contended in practice.
+    last_seq: Mutex<SeqTable>,
+    /// Overwritten samples are expected, not lost (see `set_newest_only`).
+    newest_only: bool,
+}
+
+impl ReceiveCounts {
+    /// The series `topic="<family>"` in `stats`.
+    pub(crate) fn new(stats: &Stats, family: &str) -> ReceiveCounts {
+        let labels = [("topic", family)];
+        ReceiveCounts {
+            received: stats.counter("skymesh_topic_samples_received_total", &labels),
+            lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
+            age: stats.histogram(
+                "skymesh_topic_sample_age_seconds",
+                &labels,
+                &LATENCY_BOUNDS_S,
+            ),
+            last_seq: Mutex::default(),
+            newest_only: false,
+        }
+    }
+
+    /// Counts a received sample: its age, and the samples its publisher sent
+    /// before it that this subscriber never saw.
+    pub(crate) fn count(&self, h: &SampleHeader) {
+        self.received.inc();
+        self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
+        let prev = self
+            .last_seq
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .replace((h.service, h.instance), h.seq);
+        if let Some(prev) = prev {
+            // A lower sequence means the publisher restarted; not a loss.
+            if h.seq > prev + 1 && !self.newest_only {
+                self.lost.add(h.seq - prev - 1);
+            }
+        }
+    }
+}
+
+/// Takes one pending sample from `port` (either iceoryx2 flavour) as a copy.
+pub(crate) fn take<S: iceoryx2::service::Service, T: Sample>(
+    port: &iceoryx2::port::subscriber::Subscriber<S, T, ()>,
+    topic: &str,
+) -> Result<Option<T>, IpcError> {
+    let Some(sample) = port.receive().map_err(|e| ipc_err("receive", topic, e))? else {
+        return Ok(None);
+    };
+    let value: T = *sample.payload();
+    drop(sample);
+    Ok(Some(value))
+}
+
+/// Polls `take` for up to `spin` (zero: not at all); `Some` if a sample came.
+pub(crate) fn spin_for<R>(
+    spin: Duration,
+    mut take: impl FnMut() -> Result<Option<R>, IpcError>,
+) -> Result<Option<R>, IpcError> {
+    if spin.is_zero() {
+        return Ok(None);
+    }
+    let start = Instant::now();
+    loop {
+        if let Some(v) = take()? {
+            return Ok(Some(v));
+        }
+        if start.elapsed() >= spin {
+            return Ok(None);
+        }
+        std::hint::spin_loop();
+    }
+}
+
 /// Sends samples of one type on one topic.
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
@@ -1278,18 +1364,10 @@ pub struct Subscriber<T: Sample> {
     /// futex wake-up.
     socket: SocketWait,
     port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
-    received: Counter,
-    lost: Counter,
-    age: Histogram,
-    /// Last sequence seen per publisher, for gap counting. Behind a mutex so reads
-    /// work through `&self` (the blocking wait loop holds shared references while the
-    /// callback receives); never contended in practice.
-    last_seq: Mutex<SeqTable>,
+    counts: ReceiveCounts,
     /// How long a receive polls shared memory before it blocks (see
     /// [`Subscriber::set_spin`]); zero = block at once.
     spin: Duration,
-    /// Overwritten samples are expected, not lost (see `set_newest_only`).
-    newest_only: bool,
     /// Set by [`Subscriber::set_anticipate`].
     anticipation: Anticipating,
     /// Set by [`Subscriber::set_futex_wake`].
@@ -1309,17 +1387,11 @@ impl<T: Sample> core::fmt::Debug for Subscriber<T> {
 impl<T: Sample> Subscriber<T> {
     /// Takes one pending sample without waiting.
     pub fn try_recv(&self) -> Result<Option<T>, IpcError> {
-        let Some(sample) = self
-            .port
-            .receive()
-            .map_err(|e| ipc_err("receive", &self.topic, e))?
-        else {
-            return Ok(None);
-        };
-        let value: T = *sample.payload();
-        drop(sample);
-        self.account(&value);
-        Ok(Some(value))
+        let value = take(&self.port, &self.topic)?;
+        if let Some(v) = &value {
+            self.account(v);
+        }
+        Ok(value)
     }
 
     /// Takes one pending sample without waiting and hands it to `read` where it lies
@@ -1338,20 +1410,8 @@ impl<T: Sample> Subscriber<T> {
 
     fn account(&self, value: &T) {
         let h = value.header();
-        self.received.inc();
         self.anticipation.observe(h.stamp_ns);
-        self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
-        let prev = self
-            .last_seq
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .replace((h.service, h.instance), h.seq);
-        if let Some(prev) = prev {
-            // A lower sequence means the publisher restarted; not a loss.
-            if h.seq > prev + 1 && !self.newest_only {
-                self.lost.add(h.seq - prev - 1);
-            }
-        }
+        self.counts.count(h);
     }
 
     /// Declares that this subscriber wants only the newest value (it reads with
@@ -1359,7 +1419,7 @@ impl<T: Sample> Subscriber<T> {
     /// samples overwritten in its buffer before it looked are by design and are not
     /// counted in `skymesh_topic_samples_lost_total`.
     pub fn set_newest_only(&mut self) {
-        self.newest_only = true;
+        self.counts.newest_only = true;
     }
 
     /// Low-latency receive for the consumers that need it: before blocking, every
@@ -1408,19 +1468,7 @@ impl<T: Sample> Subscriber<T> {
 
     /// Polls for up to the configured spin time; `Some` if a sample came.
     fn spin_recv(&self) -> Result<Option<T>, IpcError> {
-        if self.spin.is_zero() {
-            return Ok(None);
-        }
-        let start = Instant::now();
-        loop {
-            if let Some(v) = self.try_recv()? {
-                return Ok(Some(v));
-            }
-            if start.elapsed() >= self.spin {
-                return Ok(None);
-            }
-            std::hint::spin_loop();
-        }
+        spin_for(self.spin, || self.try_recv())
     }
 
     /// Waits for the next sample on the calling thread, without an async runtime:
@@ -1444,7 +1492,7 @@ impl<T: Sample> Subscriber<T> {
         word: &TopicWord,
         timeout: Option<Duration>,
     ) -> Result<Option<T>, IpcError> {
-        let deadline = timeout.map(|t| Instant::now() + t);
+        let deadline = timeout.map(Deadline::after);
         if let Some(v) = self.spin_recv()? {
             return Ok(Some(v));
         }

@@ -17,6 +17,7 @@
 
 pub mod addresses;
 mod anticipate;
+mod blocking;
 pub mod clock;
 pub mod config;
 pub mod exit;
@@ -35,9 +36,10 @@ pub mod timer;
 pub mod warn_limit;
 
 pub use anticipate::AnticipationStats;
+pub use blocking::BlockingSubscriber;
 pub use config::{ConfigError, ServiceConfig};
 pub use frames::{FrameError, FramePublisher, FrameSubscriber};
-pub use futex::{Armed, TopicWord};
+pub use futex::{Armed, Deadline, TopicWord};
 /// The iceoryx2 service flavour of the futex wake-up's event (for benchmarks that
 /// measure raw iceoryx2 beside the bus).
 pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};

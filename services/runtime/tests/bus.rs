@@ -632,6 +632,31 @@ fn rescue(
     (cancel, t)
 }
 
+/// A receiver that blocks on the topic's event count: a [`skymesh_runtime::Subscriber`]
+/// after `set_futex_wake`, or a [`skymesh_runtime::BlockingSubscriber`].
+trait FutexReceiver {
+    fn recv_for(&self, timeout: Duration) -> Option<VehicleState>;
+    fn set_spin(&mut self, spin: Duration);
+}
+
+impl FutexReceiver for skymesh_runtime::Subscriber<VehicleState> {
+    fn recv_for(&self, timeout: Duration) -> Option<VehicleState> {
+        self.recv_blocking(Some(timeout)).unwrap()
+    }
+    fn set_spin(&mut self, spin: Duration) {
+        skymesh_runtime::Subscriber::set_spin(self, spin);
+    }
+}
+
+impl FutexReceiver for skymesh_runtime::BlockingSubscriber<VehicleState> {
+    fn recv_for(&self, timeout: Duration) -> Option<VehicleState> {
+        self.recv_blocking(Some(timeout)).unwrap()
+    }
+    fn set_spin(&mut self, spin: Duration) {
+        skymesh_runtime::BlockingSubscriber::set_spin(self, spin);
+    }
+}
+
 /// `set_futex_wake`: blocking receives sleep on the topic's event count. With and
 /// without a spin: a receive with nothing pending times out (the futex wait's own
 /// timeout), a stream published while the receiver blocks arrives whole and in
@@ -642,66 +667,101 @@ fn rescue(
 #[test]
 fn futex_wake_receives_a_stream_whole_and_times_out() {
     for (tag, spin) in [("fx0", Duration::ZERO), ("fx1", Duration::from_micros(300))] {
-        let d = domain(tag);
-        let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-        let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-        // Room for the whole stream: a receiver stalled by a loaded machine must not
-        // lose samples to overwriting (that is not what this test is about).
-        let topic = skymesh_ipc_types::Topic {
-            qos: skymesh_ipc_types::TopicQos {
-                buffer: 64,
-                ..skymesh_ipc_types::TopicQos::STATE
-            },
-            ..topics::vehicle_state(5)
-        };
-        let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
-        sub.set_futex_wake().unwrap();
-        sub.set_spin(spin);
-        let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-
-        let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(10));
-        let t0 = std::time::Instant::now();
-        let got = sub.recv_blocking(Some(Duration::from_millis(30))).unwrap();
-        let waited = t0.elapsed();
-        cancel.store(true, Ordering::SeqCst);
-        rescuer.join().unwrap();
-        assert!(got.is_none(), "{spin:?}: the timeout never ended the wait");
-        assert!(waited >= Duration::from_millis(30), "{spin:?}: {waited:?}");
-
-        let t0 = std::time::Instant::now();
-        std::thread::scope(|s| {
-            let p = s.spawn(|| {
-                for i in 1..=50 {
-                    std::thread::sleep(Duration::from_micros(if i % 2 == 0 { 200 } else { 1500 }));
-                    publ.publish(VehicleState {
-                        lat_deg: f64::from(i),
-                        ..Default::default()
-                    })
-                    .unwrap();
-                }
-            });
-            for i in 1..=50 {
-                let v = sub
-                    .recv_blocking(Some(Duration::from_secs(5)))
-                    .unwrap()
-                    .expect("every sample wakes the receiver");
-                assert_eq!(v.lat_deg, f64::from(i), "{spin:?}");
-            }
-            p.join().unwrap();
+        futex_receiver_takes_a_stream(tag, spin, |bus, topic| {
+            let mut sub = bus.subscriber::<VehicleState>(topic).unwrap();
+            sub.set_futex_wake().unwrap();
+            sub
         });
-        // Woken by each sample, not by the 5 s timeout: the stream takes ~45 ms.
-        let took = t0.elapsed();
-        assert!(
-            took < Duration::from_secs(4),
-            "{spin:?}: stream took {took:?}"
-        );
-        let idle = Duration::from_millis(300);
-        assert_blocks(idle, &format!("{spin:?}: blocking wait"), || {
-            assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())
-        });
-        let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
-        assert_eq!(count.waiters(), 0, "{spin:?}: an announcement left behind");
     }
+}
+
+/// The same for a [`skymesh_runtime::BlockingSubscriber`] (iceoryx2's single-thread
+/// flavour on a node of its own, beside thread-safe publishers), which also counts
+/// what it received in the bus's series.
+#[test]
+fn a_blocking_subscriber_receives_a_stream_whole_and_times_out() {
+    for (tag, spin) in [("bs0", Duration::ZERO), ("bs1", Duration::from_micros(300))] {
+        futex_receiver_takes_a_stream(tag, spin, |bus, topic| {
+            bus.blocking_subscriber::<VehicleState>(topic).unwrap()
+        });
+    }
+}
+
+fn futex_receiver_takes_a_stream<R: FutexReceiver>(
+    tag: &str,
+    spin: Duration,
+    make: impl FnOnce(&Bus, &skymesh_ipc_types::Topic) -> R,
+) {
+    let d = domain(tag);
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    // Room for the whole stream: a receiver stalled by a loaded machine must not
+    // lose samples to overwriting (that is not what this test is about).
+    let topic = skymesh_ipc_types::Topic {
+        qos: skymesh_ipc_types::TopicQos {
+            buffer: 64,
+            ..skymesh_ipc_types::TopicQos::STATE
+        },
+        ..topics::vehicle_state(5)
+    };
+    let mut sub = make(&b, &topic);
+    sub.set_spin(spin);
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+
+    let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(10));
+    let t0 = std::time::Instant::now();
+    let got = sub.recv_for(Duration::from_millis(30));
+    let waited = t0.elapsed();
+    cancel.store(true, Ordering::SeqCst);
+    rescuer.join().unwrap();
+    assert!(got.is_none(), "{tag}: the timeout never ended the wait");
+    assert!(waited >= Duration::from_millis(30), "{tag}: {waited:?}");
+
+    let t0 = std::time::Instant::now();
+    std::thread::scope(|s| {
+        let p = s.spawn(|| {
+            for i in 1..=50 {
+                std::thread::sleep(Duration::from_micros(if i % 2 == 0 { 200 } else { 1500 }));
+                publ.publish(VehicleState {
+                    lat_deg: f64::from(i),
+                    ..Default::default()
+                })
+                .unwrap();
+            }
+        });
+        for i in 1..=50 {
+            let v = sub
+                .recv_for(Duration::from_secs(5))
+                .expect("every sample wakes the receiver");
+            assert_eq!(v.lat_deg, f64::from(i), "{tag}");
+        }
+        p.join().unwrap();
+    });
+    // Woken by each sample, not by the 5 s timeout: the stream takes ~45 ms.
+    let took = t0.elapsed();
+    assert!(took < Duration::from_secs(4), "{tag}: stream took {took:?}");
+    let idle = Duration::from_millis(300);
+    assert_blocks(idle, &format!("{tag}: blocking wait"), || {
+        assert!(sub.recv_for(idle).is_none())
+    });
+    let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
+    assert_eq!(count.waiters(), 0, "{tag}: an announcement left behind");
+    let series = [("topic", topic.name.as_str())];
+    let stats = b.stats();
+    assert_eq!(
+        stats
+            .counter("skymesh_topic_samples_received_total", &series)
+            .get(),
+        50,
+        "{tag}"
+    );
+    assert_eq!(
+        stats
+            .counter("skymesh_topic_samples_lost_total", &series)
+            .get(),
+        0,
+        "{tag}"
+    );
 }
 
 /// Timeouts of two futex receivers on one topic are their own: after a long timeout

@@ -8,12 +8,15 @@
 //! ```
 //!
 //! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
-//! `SCALE` multiplying the counts, eight receivers per rate, in this order:
+//! `SCALE` multiplying the counts, nine receivers per rate, in this order:
 //! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
 //!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
 //! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
 //!   on the topic's event count, a futex word (one system call per wake-up, against
 //!   the socket event's two);
+//! - `iox bs`: `BlockingSubscriber::recv_blocking`: the bus's subscriber for one
+//!   thread (iceoryx2's single-thread flavour, without the thread-safe port's mutex)
+//!   on the same event count;
 //! - `iox raw`: raw iceoryx2 ports, none of skymesh's code: thread-safe
 //!   publish-subscribe and iceoryx2's semaphore event (what `iox fx` used until
 //!   2026-11-28), `send_copy` + `notify`, the receiver blocked in the listener's
@@ -106,15 +109,19 @@ enum Via {
     /// sleeps while the word is unchanged and nothing is pending), without the rest
     /// of the bus: `iox-fx` minus skymesh's publisher and subscriber.
     IoxWord,
+    /// `recv_blocking` of a `BlockingSubscriber`: the bus's subscriber for one
+    /// thread (iceoryx2's single-thread flavour, no port mutex), on the event count.
+    IoxBlockingSub,
 }
 
 /// The anticipating receiver's longest poll per sample.
 const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
 
 impl Via {
-    const ALL: [Via; 8] = [
+    const ALL: [Via; 9] = [
         Via::IoxBlocking,
         Via::IoxFutex,
+        Via::IoxBlockingSub,
         Via::IoxRaw,
         Via::IoxWord,
         Via::UdpBlocking,
@@ -133,6 +140,7 @@ impl Via {
             Via::IoxAnticipating => "iox-ant",
             Via::IoxRaw => "iox-raw",
             Via::IoxWord => "iox-word",
+            Via::IoxBlockingSub => "iox-bs",
         }
     }
 
@@ -146,7 +154,11 @@ impl Via {
     fn is_iox(self) -> bool {
         matches!(
             self,
-            Via::IoxBlocking | Via::IoxFutex | Via::IoxTokio | Via::IoxAnticipating
+            Via::IoxBlocking
+                | Via::IoxFutex
+                | Via::IoxTokio
+                | Via::IoxAnticipating
+                | Via::IoxBlockingSub
         )
     }
 }
@@ -297,6 +309,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
         for (label, udp, iox) in [
             ("blk", Via::UdpBlocking, Via::IoxBlocking),
             ("fx", Via::UdpBlocking, Via::IoxFutex),
+            ("bs", Via::UdpBlocking, Via::IoxBlockingSub),
             ("raw", Via::UdpBlocking, Via::IoxRaw),
             ("word", Via::UdpBlocking, Via::IoxWord),
             ("tok", Via::UdpTokio, Via::IoxTokio),
@@ -774,6 +787,17 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                     }
                     anyhow::Ok(())
                 })?;
+            }
+        }
+        Via::IoxBlockingSub => {
+            let domain = Domain::load(domain, None)?;
+            let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
+            let sub = bus.blocking_subscriber::<VehicleState>(&one_way_topic(via, n))?;
+            println!("ready");
+            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+                if iox_sample(&mut tally, s)? {
+                    break;
+                }
             }
         }
         Via::IoxRaw => {
