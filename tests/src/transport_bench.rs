@@ -14,7 +14,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, ensure, Result};
 use skymesh_ipc_types::VehicleState;
-use skymesh_runtime::Domain;
 
 /// p50, p99 and p999 (nearest rank) of `v` in ns; NaN when `v` is empty.
 pub fn percentiles(v: &[u64]) -> [f64; 3] {
@@ -333,14 +332,7 @@ pub fn recv_until_idle(sock: &std::net::UdpSocket, buf: &mut [u8]) -> Result<Opt
 }
 
 /// An iceoryx2 domain whose shared-memory files are removed however the run ends.
-#[derive(Debug)]
-pub struct DomainGuard(pub Domain);
-
-impl Drop for DomainGuard {
-    fn drop(&mut self) {
-        self.0.remove_leftover_files();
-    }
-}
+pub use skymesh_runtime::ipc::DomainGuard;
 
 #[cfg(test)]
 mod tests {

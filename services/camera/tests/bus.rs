@@ -8,19 +8,20 @@ use skymesh_camera::{run, RawConfig};
 use skymesh_ipc_types::{
     topics, FrameHeader, LensModel, PixelFormat, SceneTruth, ServiceId, VehicleState,
 };
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, ServiceConfig, Stats};
 
 /// Generous bound for anything that should take a moment.
 const PATIENCE: Duration = Duration::from_secs(30);
 
-fn unique_domain() -> Domain {
+fn unique_domain() -> DomainGuard {
     static N: AtomicU32 = AtomicU32::new(0);
     let name = format!(
         "cam{}x{}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     );
-    Domain::load(&name, None).expect("domain")
+    DomainGuard(Domain::load(&name, None).expect("domain"))
 }
 
 fn settings(edits: &[(&str, &str)]) -> skymesh_camera::Settings {

@@ -10,6 +10,7 @@ use skymesh_camera::render::rgb_to_ycbcr;
 use skymesh_camera::y4m::{Chroma, Y4mHeader};
 use skymesh_camera::{run, RawConfig, Settings};
 use skymesh_ipc_types::{topics, FrameHeader, LensModel, PixelFormat, ServiceId, VehicleState};
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, FrameSubscriber, Stats};
 
 /// Generous bound for anything that should take a moment.
@@ -84,10 +85,12 @@ struct Running {
     stats: Stats,
     shutdown: CancellationToken,
     task: tokio::task::JoinHandle<anyhow::Result<()>>,
+    /// Last: the domain's files go after its ports.
+    _domain: DomainGuard,
 }
 
 fn start(settings: Settings) -> Running {
-    let domain = Domain::load(&unique("camy"), None).expect("domain");
+    let domain = DomainGuard(Domain::load(&unique("camy"), None).expect("domain"));
     let stats = Stats::new();
     let bus = Bus::open(&domain, "camera", ServiceId::Camera, 0, stats.clone()).expect("bus");
     let tool = Bus::open(&domain, "viewer", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
@@ -103,6 +106,7 @@ fn start(settings: Settings) -> Running {
         stats,
         shutdown,
         task,
+        _domain: domain,
     }
 }
 

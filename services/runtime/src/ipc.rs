@@ -309,6 +309,25 @@ impl Domain {
     }
 }
 
+/// A domain whose shared-memory files are removed when this is dropped, however a
+/// test or a benchmark ends (declare it before the buses of the domain: locals drop
+/// in reverse order, so the nodes are gone first).
+#[derive(Debug)]
+pub struct DomainGuard(pub Domain);
+
+impl std::ops::Deref for DomainGuard {
+    type Target = Domain;
+    fn deref(&self) -> &Domain {
+        &self.0
+    }
+}
+
+impl Drop for DomainGuard {
+    fn drop(&mut self) {
+        self.remove_leftover_files();
+    }
+}
+
 /// A publisher's two ways to wake receivers: the topic's socket event (async and
 /// epoll waiters) and its event count (blocking receivers that asked for the futex
 /// wake-up; see [`crate::futex`]). With nobody waiting, each is a few atomic

@@ -5,10 +5,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use skymesh_ipc_types::{topics, ServiceId, VehicleState};
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, Domain, Stats};
 
-fn domain(tag: &str) -> Domain {
-    Domain::load(&format!("rt{}{tag}", std::process::id()), None).unwrap()
+/// A fresh domain per test, its files removed at the end of the test.
+fn domain(tag: &str) -> DomainGuard {
+    DomainGuard(Domain::load(&format!("rt{}{tag}", std::process::id()), None).unwrap())
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

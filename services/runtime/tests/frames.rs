@@ -6,14 +6,16 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use skymesh_ipc_types::{topics, FrameHeader, LensModel, PixelFormat, ServiceId, MAX_FRAME_LEN};
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, Domain, FrameError, Stats};
 
 /// Set in the child process: the domain to publish in.
 const CHILD_DOMAIN_ENV: &str = "SKYMESH_FRAMES_TEST_CHILD_DOMAIN";
 const STREAM: &str = "test";
 
-fn domain(tag: &str) -> Domain {
-    Domain::load(&format!("fr{}{tag}", std::process::id()), None).unwrap()
+/// A fresh domain per test, its files removed at the end of the test.
+fn domain(tag: &str) -> DomainGuard {
+    DomainGuard(Domain::load(&format!("fr{}{tag}", std::process::id()), None).unwrap())
 }
 
 /// The frames the child publishes, in order: (format, width, height, stride).
