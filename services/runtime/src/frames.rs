@@ -20,8 +20,8 @@ use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::futex::{Deadline, TopicWord};
 use crate::ipc::{
-    ipc_err, recv_anticipating, time_left, with_retry, Bus, IpcError, SeqTable, SocketWait, Svc,
-    WaitSource, Wakers,
+    ipc_err, recv_anticipating, time_left, with_qos, with_retry, Bus, IpcError, SeqTable,
+    SocketWait, Svc, WaitSource, Wakers,
 };
 use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
 use crate::warn_limit::WarnLimiter;
@@ -53,19 +53,15 @@ impl Bus {
     fn open_frames(&self, topic: &Topic) -> Result<FramePortFactory, IpcError> {
         let service_name =
             ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
-        let q = topic.qos;
         with_retry(self.node(), &topic.name, "open frame topic", || {
-            self.node()
-                .service_builder(&service_name)
-                .publish_subscribe::<[u8]>()
-                .user_header::<FrameHeader>()
-                .max_publishers(q.max_publishers)
-                .max_subscribers(q.max_subscribers)
-                .max_nodes(q.max_nodes)
-                .history_size(q.history)
-                .subscriber_max_buffer_size(q.buffer)
-                .enable_safe_overflow(true)
-                .open_or_create()
+            with_qos(
+                self.node()
+                    .service_builder(&service_name)
+                    .publish_subscribe::<[u8]>()
+                    .user_header::<FrameHeader>(),
+                topic,
+            )
+            .open_or_create()
         })
     }
 

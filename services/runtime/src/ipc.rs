@@ -457,18 +457,34 @@ pub(crate) fn open_pubsub_on<S: iceoryx2::service::Service, T: Sample>(
 ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>, IpcError> {
     let service_name =
         ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
-    let q = topic.qos;
     with_retry(node, &topic.name, "open publish-subscribe", || {
-        node.service_builder(&service_name)
-            .publish_subscribe::<T>()
-            .max_publishers(q.max_publishers)
-            .max_subscribers(q.max_subscribers)
-            .max_nodes(q.max_nodes)
-            .history_size(q.history)
-            .subscriber_max_buffer_size(q.buffer)
-            .enable_safe_overflow(true)
-            .open_or_create()
+        with_qos(
+            node.service_builder(&service_name).publish_subscribe::<T>(),
+            topic,
+        )
+        .open_or_create()
     })
+}
+
+/// A publish-subscribe service's settings from `topic`'s QoS: every topic's, samples
+/// and frames alike (a newest-first ring: a slow subscriber loses the oldest).
+pub(crate) fn with_qos<P, H, S>(
+    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, H, S>,
+    topic: &Topic,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<P, H, S>
+where
+    P: core::fmt::Debug + IceoryxSend + ?Sized,
+    H: core::fmt::Debug + ZeroCopySend,
+    S: iceoryx2::service::Service,
+{
+    let q = topic.qos;
+    builder
+        .max_publishers(q.max_publishers)
+        .max_subscribers(q.max_subscribers)
+        .max_nodes(q.max_nodes)
+        .history_size(q.history)
+        .subscriber_max_buffer_size(q.buffer)
+        .enable_safe_overflow(true)
 }
 
 impl Bus {
