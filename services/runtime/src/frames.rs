@@ -20,10 +20,10 @@ use crate::anticipate::{Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::futex::{Deadline, TopicWord};
 use crate::ipc::{
-    ipc_err, recv_anticipating, time_left, with_qos, with_retry, Bus, IpcError, SeqTable,
+    ipc_err, recv_anticipating, time_left, with_qos, with_retry, Bus, IpcError, ReceiveCounts,
     SocketWait, Svc, WaitSource, Wakers,
 };
-use crate::stats::{Counter, Histogram, LATENCY_BOUNDS_S};
+use crate::stats::Counter;
 use crate::warn_limit::WarnLimiter;
 
 type FramePortFactory =
@@ -114,20 +114,15 @@ impl Bus {
             .create()
             .map_err(|e| ipc_err("create frame subscriber", &topic.name, e))?;
         let socket = SocketWait::new(event, &topic.name)?;
-        let labels = [("topic", topic.name.as_str())];
         let stats = self.stats();
         Ok(FrameSubscriber {
             socket,
             port,
-            received: stats.counter("skymesh_topic_samples_received_total", &labels),
-            lost: stats.counter("skymesh_topic_samples_lost_total", &labels),
-            invalid: stats.counter("skymesh_topic_samples_invalid_total", &labels),
-            age: stats.histogram(
-                "skymesh_topic_sample_age_seconds",
-                &labels,
-                &LATENCY_BOUNDS_S,
+            counts: ReceiveCounts::new(stats, &topic.name),
+            invalid: stats.counter(
+                "skymesh_topic_samples_invalid_total",
+                &[("topic", topic.name.as_str())],
             ),
-            last_seq: Mutex::default(),
             warn: Mutex::new(WarnLimiter::default()),
             anticipation: Anticipating::default(),
             futex: None,
@@ -233,11 +228,8 @@ pub struct FrameSubscriber {
     /// futex wake-up.
     socket: SocketWait,
     port: iceoryx2::port::subscriber::Subscriber<Svc, [u8], FrameHeader>,
-    received: Counter,
-    lost: Counter,
+    counts: ReceiveCounts,
     invalid: Counter,
-    age: Histogram,
-    last_seq: Mutex<SeqTable>,
     warn: Mutex<WarnLimiter<&'static str>>,
     /// Set by [`FrameSubscriber::set_anticipate`].
     anticipation: Anticipating,
@@ -442,20 +434,8 @@ impl FrameSubscriber {
 
     fn account(&self, h: &FrameHeader) {
         let h = &h.header;
-        self.received.inc();
         self.anticipation.observe(h.stamp_ns);
-        self.age.observe(h.age_ns(monotonic_ns()) as f64 / 1e9);
-        let prev = self
-            .last_seq
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .replace((h.service, h.instance), h.seq);
-        if let Some(prev) = prev {
-            // A lower sequence means the publisher restarted; not a loss.
-            if h.seq > prev + 1 {
-                self.lost.add(h.seq - prev - 1);
-            }
-        }
+        self.counts.count(h);
     }
 
     pub fn topic(&self) -> &str {

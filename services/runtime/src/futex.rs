@@ -234,22 +234,7 @@ impl Armed<'_> {
     /// already), `timeout` (`None`: no limit), or a signal. Callers look for samples
     /// and at the clock whichever it was.
     pub fn wait(self, timeout: Option<Duration>) -> Result<(), IpcError> {
-        let limit = timeout.map(|t| futex::Timespec {
-            tv_sec: i64::try_from(t.as_secs()).unwrap_or(i64::MAX),
-            tv_nsec: i64::from(t.subsec_nanos()),
-        });
-        match futex::wait(
-            &self.word.seq,
-            futex::Flags::empty(),
-            self.seen,
-            limit.as_ref(),
-        ) {
-            Ok(())
-            | Err(rustix::io::Errno::AGAIN)
-            | Err(rustix::io::Errno::INTR)
-            | Err(rustix::io::Errno::TIMEDOUT) => Ok(()),
-            Err(e) => Err(ipc_err("futex wait", self.topic, e)),
-        }
+        self.wait_until(timeout.map(Deadline::after)).map(drop)
     }
 }
 

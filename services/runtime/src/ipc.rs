@@ -450,7 +450,7 @@ pub(crate) fn with_retry<S: iceoryx2::service::Service, T, E: core::fmt::Debug>(
 
 /// `topic`'s publish-subscribe service, opened (or created) through `node`: the
 /// thread-safe flavour of every port, or the single-thread one of a
-/// [`BlockingSubscriber`]; both lay out the service's shared memory alike.
+/// [`crate::BlockingSubscriber`]; both lay out the service's shared memory alike.
 pub(crate) fn open_pubsub_on<S: iceoryx2::service::Service, T: Sample>(
     node: &Node<S>,
     topic: &Topic,
@@ -578,7 +578,7 @@ impl Bus {
         open_pubsub_on(&self.inner.node, topic)
     }
 
-    /// The domain's iceoryx2 configuration (for [`BlockingSubscriber`]'s own node).
+    /// The domain's iceoryx2 configuration (for [`crate::BlockingSubscriber`]'s own node).
     pub(crate) fn config(&self) -> &Config {
         self.inner.node.config()
     }
@@ -1218,8 +1218,8 @@ impl SeqTable {
     }
 }
 
-/// A subscriber's per-topic series and gap counting, for [`Subscriber`] and
-/// [`BlockingSubscriber`].
+/// A subscriber's per-topic series and gap counting, for [`Subscriber`],
+/// [`crate::BlockingSubscriber`] and [`crate::FrameSubscriber`].
 pub(crate) struct ReceiveCounts {
     received: Counter,
     lost: Counter,
