@@ -14,8 +14,10 @@
 //! notify, counter) and `try_recv` (receive, copy, release, then the subscriber's
 //! accounting: received counter, age histogram, gap table). `--futex`: the
 //! subscriber calls `set_futex_wake` first (publishers then wake its event count,
-//! and no socket listener). Prints p50 / p99 per operation and the p50 of the
-//! per-round difference skymesh − raw (thread-safe), in ns. One thread, no wake-ups:
+//! and no socket listener). `skymesh blocking try_recv`: a `BlockingSubscriber` of
+//! the same topic (single-thread flavour), against the raw single-thread receive.
+//! Prints p50 / p99 per operation and the p50 of the per-round difference
+//! skymesh − raw, in ns. One thread, no wake-ups:
 //! the cost of touching memory, not of the kernel.
 
 use std::hint::black_box;
@@ -93,6 +95,7 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
     if futex {
         sub.set_futex_wake()?;
     }
+    let bsub = rx.blocking_subscriber::<VehicleState>(&topic)?;
 
     // Raw iceoryx2 under its own file prefix in the same domain name space.
     let mut cfg = iceoryx2::config::Config::default();
@@ -131,9 +134,10 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
     let st_sub = st.subscriber_builder().create().map_err(|e| err(&e))?;
 
     let mut buf = vec![0u8; FLUSH_BYTES];
-    // skymesh publish, receive; raw ts send, receive; raw st send, receive.
-    let mut t: [Vec<u64>; 6] = Default::default();
-    let mut diff: [Vec<i64>; 2] = Default::default();
+    // skymesh publish, receive; raw ts send, receive; raw st send, receive;
+    // skymesh BlockingSubscriber receive.
+    let mut t: [Vec<u64>; 7] = Default::default();
+    let mut diff: [Vec<i64>; 3] = Default::default();
     let mut seqs = 0u64;
     let s = VehicleState::default();
     for k in 0..rounds {
@@ -165,6 +169,13 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         let (g3, seq) = raw_receive(&st_sub, &mut buf, k)?;
         seqs += seq;
         t[5].push(g3);
+        let (g4, r) = cold(&mut buf, k, || bsub.try_recv());
+        seqs += r?
+            .ok_or_else(|| anyhow!("skymesh blocking: no sample"))?
+            .header
+            .seq;
+        t[6].push(g4);
+        diff[2].push(g4 as i64 - g3 as i64);
     }
     black_box(seqs);
     println!(
@@ -179,6 +190,7 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         "raw ts receive + copy",
         "raw st send",
         "raw st receive + copy",
+        "skymesh blocking try_recv",
     ]
     .iter()
     .enumerate()
@@ -186,10 +198,17 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         let p = percentiles(&t[i]);
         println!("{what:>22}: p50 {:>7.0}  p99 {:>7.0}", p[0], p[1]);
     }
-    for (what, mut d) in ["publish", "receive"].into_iter().zip(diff) {
+    for (what, mut d) in [
+        "publish, skymesh − raw ts",
+        "receive, skymesh − raw ts",
+        "receive, skymesh blocking − raw st",
+    ]
+    .into_iter()
+    .zip(diff)
+    {
         d.sort_unstable();
         println!(
-            "{what:>8} skymesh − raw ts, p50 of the per-round difference: {:>6}",
+            "{what:>34}, p50 of the per-round difference: {:>6}",
             d[d.len() / 2]
         );
     }
