@@ -9,8 +9,10 @@ free_port() { python3 -c "import socket; s=socket.socket(socket.AF_INET, socket.
 sim_port=$(free_port SOCK_STREAM)
 gcs_port=$(free_port SOCK_DGRAM)
 work=$(mktemp -d)
-trap 'kill "${link_pid:-0}" "${sim_pid:-0}" 2>/dev/null || true; wait 2>/dev/null || true; rm -rf "$work"' EXIT
 export SKYMESH_DOMAIN="interopgcs$$"
+# No supervisor here to remove the domain's shared memory after its processes:
+# the trap does (iceoryx2's node files, the topics' event counts).
+trap 'kill "${link_pid:-0}" "${sim_pid:-0}" 2>/dev/null || true; wait 2>/dev/null || true; rm -rf "$work" /dev/shm/"$SKYMESH_DOMAIN"_* /dev/shm/"$SKYMESH_DOMAIN".*' EXIT
 printf 'endpoint = "tcp:127.0.0.1:%s"\n' "$sim_port" > "$work/sim.toml"
 printf 'connection = "tcpout:127.0.0.1:%s"\nendpoints = ["udpin:127.0.0.1:%s"]\n' "$sim_port" "$gcs_port" > "$work/link.toml"
 target/debug/skymesh-vehicle-sim --config "$work/sim.toml" > "$work/sim.log" 2>&1 &

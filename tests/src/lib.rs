@@ -12,7 +12,7 @@ use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context as _, Result};
@@ -244,7 +244,52 @@ pub struct Mesh {
     pub digiview_port: u16,
     supervisor: Option<Child>,
     metrics_addr: Option<SocketAddr>,
+    /// Removes the domain's shared-memory files once the mesh and every
+    /// [`MeshBus`] of it are gone.
+    cleanup: Arc<DomainCleanup>,
     _serial: MutexGuard<'static, ()>,
+}
+
+/// Removes a mesh's shared-memory files (`/dev/shm`: nodes, services, the topics'
+/// event counts) when the last holder drops it: the [`Mesh`], whose drop has killed
+/// every process of the domain by then, or a [`MeshBus`] that outlives it (a test
+/// that moves its mesh into a context declared after its bus).
+#[derive(Debug)]
+struct DomainCleanup {
+    domain: String,
+}
+
+impl Drop for DomainCleanup {
+    fn drop(&mut self) {
+        let Ok(d) = Domain::load(
+            &self.domain,
+            Some(&repo_root().join("deploy/iceoryx2.toml")),
+        ) else {
+            return;
+        };
+        d.cleanup_dead_nodes();
+        // A bus of the test's own still open (a clone kept past its `MeshBus`)
+        // keeps its node alive: leave the files rather than pull them from under it.
+        if d.live_nodes().is_empty() {
+            d.remove_leftover_files();
+        }
+    }
+}
+
+/// A bus node of the test itself in a mesh's domain ([`Mesh::bus`]): a [`Bus`]
+/// (through `Deref`) that keeps the domain's files until it is dropped too.
+#[derive(Debug)]
+pub struct MeshBus {
+    // Fields drop in declaration order: the node before the cleanup.
+    bus: Bus,
+    _cleanup: Arc<DomainCleanup>,
+}
+
+impl std::ops::Deref for MeshBus {
+    type Target = Bus;
+    fn deref(&self) -> &Bus {
+        &self.bus
+    }
 }
 
 impl Mesh {
@@ -635,7 +680,7 @@ grace_period_ms = 3000
         let child = spawn_supervisor(d, &domain)?;
         let mut mesh = Mesh {
             dir,
-            domain,
+            domain: domain.clone(),
             mavlink_port,
             solo_port,
             follow_port,
@@ -650,6 +695,9 @@ grace_period_ms = 3000
             digiview_port,
             supervisor: Some(child),
             metrics_addr: None,
+            cleanup: Arc::new(DomainCleanup {
+                domain: domain.clone(),
+            }),
             _serial: serial,
         };
         mesh.wait_http()?;
@@ -713,15 +761,13 @@ grace_period_ms = 3000
         )?)
     }
 
-    /// A bus node for the test itself, in the mesh's domain. Call inside a tokio runtime.
-    pub fn bus(&self, name: &str) -> Result<Bus> {
-        Ok(Bus::open(
-            &self.ipc_domain()?,
-            name,
-            ServiceId::Tool,
-            0,
-            Stats::new(),
-        )?)
+    /// A bus node for the test itself, in the mesh's domain. Call inside a tokio
+    /// runtime. The domain's files stay until it is dropped, even after the mesh.
+    pub fn bus(&self, name: &str) -> Result<MeshBus> {
+        Ok(MeshBus {
+            bus: Bus::open(&self.ipc_domain()?, name, ServiceId::Tool, 0, Stats::new())?,
+            _cleanup: Arc::clone(&self.cleanup),
+        })
     }
 
     /// Plain HTTP/1.0 GET against the supervisor (test-side client).
@@ -880,13 +926,9 @@ impl Drop for Mesh {
         for pid in self.processes() {
             let _ = signal(pid, Signal::SIGKILL);
         }
-        if let Ok(d) = self.ipc_domain() {
-            std::thread::sleep(Duration::from_millis(100));
-            d.cleanup_dead_nodes();
-            if d.live_nodes().is_empty() {
-                d.remove_leftover_files();
-            }
-        }
+        // Killed, not yet gone: give the kernel a moment before `DomainCleanup` (the
+        // field, dropped after this) looks for live nodes.
+        std::thread::sleep(Duration::from_millis(100));
     }
 }
 

@@ -36,13 +36,13 @@ use gc_proto::{NetCmdType as T, Record, RECORD_LEN};
 use imc_proto::Message;
 use serde_json::json;
 use skymesh_dji_gateway::cloud::Cloud;
-use skymesh_e2e::{Mesh, MeshOptions};
+use skymesh_e2e::{Mesh, MeshBus, MeshOptions};
 use skymesh_imc_gateway::client::ImcClient;
 use skymesh_ipc_types::{
     topics, ArbiterEvent, ArbiterEventKind, CommandSource, SwarmState, VehicleCommand,
     VehicleState, VehicleStatus, VisionState,
 };
-use skymesh_runtime::ipc::{Bus, Subscriber};
+use skymesh_runtime::ipc::Subscriber;
 use skymesh_solo_gateway::client::AppClient;
 use solo_common::{runtime, speed, Vehicle, STARTUP};
 use solo_proto::SoloMessage;
@@ -377,7 +377,7 @@ fn teleop(port: u16, on: Arc<AtomicBool>, stop: Arc<AtomicBool>) -> tokio::task:
 /// Everything the test keeps open on the mesh.
 struct Load {
     /// The test's bus node (its subscribers live as long as it).
-    _bus: Bus,
+    _bus: MeshBus,
     v: Vehicle,
     status: Subscriber<VehicleStatus>,
     events: Subscriber<ArbiterEvent>,

@@ -274,3 +274,28 @@ fn sigterm_leaves_no_process_and_no_shared_memory() {
         "files left in /dev/shm or the iceoryx2 root: {files:?}"
     );
 }
+
+/// A test's own bus that outlives the mesh (the mesh moved into a context declared
+/// after the bus) keeps the domain's files while its node lives, and they go when it
+/// does: test runs leave nothing in `/dev/shm`.
+#[test]
+fn a_test_bus_outliving_its_mesh_takes_the_domain_files_with_it() {
+    let mut mesh = Mesh::start(MeshOptions::default()).unwrap();
+    mesh.wait_running("autopilot-link", STARTUP).unwrap();
+    let domain = mesh.ipc_domain().unwrap();
+    let rt = runtime();
+    let _enter = rt.enter();
+    let bus = mesh.bus("e2e-outliver").unwrap();
+    let sub = bus
+        .subscriber::<VehicleState>(&topics::vehicle_state(1))
+        .unwrap();
+    drop(mesh);
+    assert!(
+        !domain.leftover_files().is_empty(),
+        "the domain's files were removed under a live node"
+    );
+    drop(sub);
+    drop(bus);
+    let files = domain.leftover_files();
+    assert!(files.is_empty(), "files left: {files:?}");
+}

@@ -28,7 +28,7 @@ use skymesh_e2e::{Mesh, MeshOptions, HOME};
 use skymesh_ipc_types::{
     topics, Command, PixelFormat, SceneTruth, TargetTruth, VehicleState, VisionState, ZoomMode,
 };
-use skymesh_runtime::ipc::{Bus, Subscriber};
+use skymesh_runtime::ipc::Subscriber;
 use skymesh_runtime::FrameSubscriber;
 use solo_common::{ne, offset, runtime, Vehicle, STARTUP};
 
@@ -414,7 +414,7 @@ fn vision_end_to_end() {
         ],
         STARTUP,
     );
-    let bus: Bus = mesh.bus("vision-e2e").unwrap();
+    let bus = mesh.bus("vision-e2e").unwrap();
     let rt = runtime();
     let v = Vehicle::new(&bus);
     let vision = bus.subscriber(&topics::vision_state()).unwrap();

@@ -12,6 +12,7 @@ use skymesh_ipc_types::{
     SwarmReply, SwarmResult, SwarmState, VehicleCommand, VehicleState, VehicleStatus, ALL_DRONES,
 };
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, CancellationToken, Domain, Publisher, Stats, Subscriber};
 use skymesh_swarm_queue::fake::FakeVehicle;
 use skymesh_swarm_queue::{RawConfig, Settings};
@@ -19,14 +20,16 @@ use skymesh_swarm_queue::{RawConfig, Settings};
 const PATIENCE: Duration = Duration::from_secs(30);
 const VEHICLES: [u8; 2] = [41, 42];
 
-fn unique_domain() -> Domain {
+/// A fresh domain whose shared-memory files go when the test ends (declared
+/// before the buses, so their nodes are gone first).
+fn unique_domain() -> DomainGuard {
     static N: AtomicU32 = AtomicU32::new(0);
     let name = format!(
         "sq{}x{}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     );
-    Domain::load(&name, None).expect("domain")
+    DomainGuard(Domain::load(&name, None).expect("domain"))
 }
 
 fn settings(extra: &str) -> Settings {

@@ -13,20 +13,23 @@ use skymesh_ipc_types::{
     VisionReply, VisionResult, VisionState, MAX_FRAME_LEN,
 };
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, ServiceConfig, Stats};
 use skymesh_vision_pipeline::geometry::{GeoPosition, YawPitch};
 
 /// Generous bound for anything that should take a moment.
 const PATIENCE: Duration = Duration::from_secs(60);
 
-fn unique_domain() -> Domain {
+/// A fresh domain whose shared-memory files go when the test ends (declared
+/// before the buses, so their nodes are gone first).
+fn unique_domain() -> DomainGuard {
     static N: AtomicU32 = AtomicU32::new(0);
     let name = format!(
         "vis{}x{}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     );
-    Domain::load(&name, None).expect("domain")
+    DomainGuard(Domain::load(&name, None).expect("domain"))
 }
 
 fn edit<C: ServiceConfig>(edits: &[(&str, &str)]) -> C::Settings {
