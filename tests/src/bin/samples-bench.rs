@@ -45,7 +45,9 @@
 //! stamp carried in it (the bus stamps `header.stamp_ns` just before sending; the
 //! UDP sender writes the same clock just before `send`). CPU per message is
 //! `CLOCK_PROCESS_CPUTIME_ID` (user + system) over the counted part of each phase,
-//! on each side. The first [`WARMUP`] messages of each phase are not counted. The bus
+//! on each side; with `--interleave` the sender's is each send's own (the thread's
+//! CPU clock around it, `SendSlot`), without the pacing sleep, and `rx+tx` is the
+//! message's whole cost. The first [`WARMUP`] messages of each phase are not counted. The bus
 //! topic holds a whole phase (nothing overwritten), so back to back both transports
 //! queue; that row measures queueing and the per-message cost, not wake-ups.
 //!
@@ -70,7 +72,7 @@ use iceoryx2_cal::{
 };
 use skymesh_e2e::transport_bench::{
     bench_state, datagram_fields, finish_child, percentiles, process_cpu_ns, read_line,
-    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, Tally,
+    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, SendSlot, Tally,
     DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
@@ -275,8 +277,8 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
          {name}; first {WARMUP} of each phase not counted; latency µs, CPU µs per message"
     );
     println!(
-        "{:>7} | {:>7} {:>11} {:>8} {:>8} {:>8} {:>8} {:>8}",
-        "rate", "via", "got", "p50", "p99", "p999", "rx cpu", "tx cpu"
+        "{:>7} | {:>7} {:>11} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "rate", "via", "got", "p50", "p99", "p999", "rx cpu", "tx cpu", "rx+tx"
     );
     for (rate, n) in plan {
         let vias: Vec<Via> = Via::ALL.into_iter().filter(|v| wanted(v.arg())).collect();
@@ -294,7 +296,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
         for (via, ph) in vias.into_iter().zip(measured) {
             let p = percentiles(&ph.lat);
             println!(
-                "{:>7} | {:>7} {:>11} {:>8.1} {:>8.1} {:>8.1} {:>8.2} {:>8.2}",
+                "{:>7} | {:>7} {:>11} {:>8.1} {:>8.1} {:>8.1} {:>8.2} {:>8.2} {:>8.2}",
                 rate.label(),
                 via.arg(),
                 format!("{}/{}", ph.got, ph.sent),
@@ -303,6 +305,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
                 p[2] / 1e3,
                 ph.rx_cpu / 1e3,
                 ph.tx_cpu / 1e3,
+                (ph.rx_cpu + ph.tx_cpu) / 1e3,
             );
             phases.push((via, p, ph));
         }
@@ -320,7 +323,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
                 continue;
             };
             println!(
-                "{:>7} | {:>7} {:>11} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+                "{:>7} | {:>7} {:>11} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
                 rate.label(),
                 format!("u÷i {label}"),
                 "",
@@ -329,6 +332,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
                 pu[2] / pi[2],
                 u.rx_cpu / i.rx_cpu,
                 u.tx_cpu / i.tx_cpu,
+                (u.rx_cpu + u.tx_cpu) / (i.rx_cpu + i.tx_cpu),
             );
         }
     }
@@ -699,7 +703,8 @@ fn one_way(domain: &Domain, via: Via, rate: Rate, n: usize) -> anyhow::Result<Ph
 /// All of `vias` in one phase, message by message: each receiver gets `n` messages
 /// at `hz`, the senders take turns (receiver `i` of `m` at offsets `i / (m · hz)`),
 /// so whatever the host does during the phase falls on every receiver alike. The
-/// sender's CPU is not told apart per receiver (NaN).
+/// sender's CPU is each send's own ([`SendSlot`]: the thread's CPU clock around it),
+/// without the pacing sleep's wake-up that a whole phase's CPU includes.
 fn one_way_interleaved(
     domain: &Domain,
     vias: &[Via],
@@ -711,12 +716,15 @@ fn one_way_interleaved(
         links.push(Link::start(domain, *via, n)?);
     }
     let m = links.len();
+    let mut slots = vec![SendSlot::default(); m];
     send_loop(Rate::Hz(hz * m as f64), n * m, WARMUP * m, |k| {
-        links[k % m].send(k / m)
+        let (i, j) = (k % m, k / m);
+        slots[i].time(j >= WARMUP, || links[i].send(j))
     })?;
     links
         .into_iter()
-        .map(|link| link.finish(n, f64::NAN))
+        .zip(slots)
+        .map(|(link, slot)| link.finish(n, slot.per_msg()))
         .collect()
 }
 
