@@ -142,6 +142,21 @@ pub fn spawn_child(args: &[String]) -> Result<(Child, BufReader<ChildStdout>)> {
     Ok((child, BufReader::new(out)))
 }
 
+/// For a bench's receiving child, first thing: the kernel kills it when the bench
+/// that spawned it exits, however that happens (a phase that fails, a panic, ^C), so
+/// no receiver is left blocked in a wait without a timeout (`samples-bench`'s
+/// `iox-raw` and `iox-word` have none, on purpose). Spawn children from the main
+/// thread: the signal follows the spawning thread.
+pub fn die_with_parent() -> Result<()> {
+    nix::sys::prctl::set_pdeathsig(Some(nix::sys::signal::Signal::SIGKILL))?;
+    // The parent may have gone before the call: then this process was re-parented.
+    ensure!(
+        nix::unistd::getppid() != nix::unistd::Pid::from_raw(1),
+        "the bench that started this receiver has exited"
+    );
+    Ok(())
+}
+
 /// One line of a child's stdout, trimmed.
 pub fn read_line(out: &mut BufReader<ChildStdout>) -> Result<String> {
     let mut line = String::new();

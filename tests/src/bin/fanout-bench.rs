@@ -29,9 +29,9 @@ use std::time::Duration;
 
 use anyhow::{bail, ensure, Result};
 use skymesh_e2e::transport_bench::{
-    bench_state, datagram_fields, expect_line, finish_child, percentiles, read_line,
-    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, RxReport, Tally,
-    DATAGRAM_LEN,
+    bench_state, datagram_fields, die_with_parent, expect_line, finish_child, percentiles,
+    read_line, recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate,
+    RxReport, Tally, DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -51,8 +51,14 @@ const FANOUT: [usize; 4] = [1, 2, 4, 8];
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some("--iox-sub") => iox_receiver(&args[2], args[3].parse()?),
-        Some("--udp-sub") => udp_receiver(args[2].parse()?),
+        Some("--iox-sub") => {
+            die_with_parent()?;
+            iox_receiver(&args[2], args[3].parse()?)
+        }
+        Some("--udp-sub") => {
+            die_with_parent()?;
+            udp_receiver(args[2].parse()?)
+        }
         other => {
             let scale: usize = other.map(str::parse).transpose()?.unwrap_or(1);
             ensure!(scale >= 1, "SCALE must be at least 1");

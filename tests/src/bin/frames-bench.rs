@@ -49,8 +49,8 @@ use std::time::Duration;
 
 use anyhow::{ensure, Result};
 use skymesh_e2e::transport_bench::{
-    expect_line, finish_child, percentiles, spawn_child, DomainGuard, Pacer, Rate, RxReport,
-    SendCpu, Tally,
+    die_with_parent, expect_line, finish_child, percentiles, spawn_child, DomainGuard, Pacer, Rate,
+    RxReport, SendCpu, Tally,
 };
 use skymesh_ipc_types::{topics, PixelFormat, ServiceId};
 use skymesh_runtime::clock::monotonic_ns;
@@ -114,18 +114,24 @@ impl Mode {
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some("--iox-sub") => iox_receiver(
-            &args[2],
-            args[3].parse()?,
-            args[4].parse()?,
-            Mode::parse(&args[5])?,
-        ),
-        Some("--uds-sub") => uds_receiver(
-            &args[2],
-            args[3].parse()?,
-            args[4].parse()?,
-            Mode::parse(&args[5])?,
-        ),
+        Some("--iox-sub") => {
+            die_with_parent()?;
+            iox_receiver(
+                &args[2],
+                args[3].parse()?,
+                args[4].parse()?,
+                Mode::parse(&args[5])?,
+            )
+        }
+        Some("--uds-sub") => {
+            die_with_parent()?;
+            uds_receiver(
+                &args[2],
+                args[3].parse()?,
+                args[4].parse()?,
+                Mode::parse(&args[5])?,
+            )
+        }
         other => {
             let frames: usize = other.map(str::parse).transpose()?.unwrap_or(200);
             driver(frames)

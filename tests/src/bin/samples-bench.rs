@@ -71,9 +71,9 @@ use iceoryx2_cal::{
     resizable_shared_memory, serialize, shared_memory, static_storage, zero_copy_connection,
 };
 use skymesh_e2e::transport_bench::{
-    bench_state, datagram_fields, finish_child, percentiles, process_cpu_ns, read_line,
-    recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate, SendSlot, Tally,
-    DATAGRAM_LEN,
+    bench_state, datagram_fields, die_with_parent, finish_child, percentiles, process_cpu_ns,
+    read_line, recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate,
+    SendSlot, Tally, DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -197,8 +197,14 @@ impl Pong {
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some("--sub") => receiver(Via::parse(&args[2])?, &args[3], args[4].parse()?),
-        Some("--pong") => pong_child(Pong::parse(&args[2])?, &args[3], args[4].parse()?),
+        Some("--sub") => {
+            die_with_parent()?;
+            receiver(Via::parse(&args[2])?, &args[3], args[4].parse()?)
+        }
+        Some("--pong") => {
+            die_with_parent()?;
+            pong_child(Pong::parse(&args[2])?, &args[3], args[4].parse()?)
+        }
         _ => {
             // [SCALE] [--only NAME,NAME...] (receiver / ping-pong mode names; for profiling)
             let mut scale = 1;
