@@ -261,10 +261,7 @@ struct DomainCleanup {
 
 impl Drop for DomainCleanup {
     fn drop(&mut self) {
-        let Ok(d) = Domain::load(
-            &self.domain,
-            Some(&repo_root().join("deploy/iceoryx2.toml")),
-        ) else {
+        let Ok(d) = mesh_domain(&self.domain) else {
             return;
         };
         d.cleanup_dead_nodes();
@@ -274,6 +271,14 @@ impl Drop for DomainCleanup {
             d.remove_leftover_files();
         }
     }
+}
+
+/// The iceoryx2 domain `name` of a test mesh, with the shared deploy config.
+fn mesh_domain(name: &str) -> Result<Domain> {
+    Ok(Domain::load(
+        name,
+        Some(&repo_root().join("deploy/iceoryx2.toml")),
+    )?)
 }
 
 /// A bus node of the test itself in a mesh's domain ([`Mesh::bus`]): a [`Bus`]
@@ -755,10 +760,7 @@ grace_period_ms = 3000
 
     /// This mesh's iceoryx2 domain, with the shared deploy config.
     pub fn ipc_domain(&self) -> Result<Domain> {
-        Ok(Domain::load(
-            &self.domain,
-            Some(&repo_root().join("deploy/iceoryx2.toml")),
-        )?)
+        mesh_domain(&self.domain)
     }
 
     /// A bus node for the test itself, in the mesh's domain. Call inside a tokio
