@@ -259,6 +259,29 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: Option<f64>) -> f64 {
     p50
 }
 
+/// Where the slowest commands' time went. `split:gw` is each command's bus stamp
+/// minus its baseline stamp: what the gateway and the bus hop took beyond the
+/// broker's delivery to a plain MQTT client (signed: the broker serves the two
+/// subscribers one after the other). Then the slowest 1 % (at least three) by
+/// total, each split into the broker's delivery (the baseline's stamp), the
+/// gateway's share and autopilot-link's.
+fn tail_report(mut parts: Vec<[f64; 4]>) {
+    if parts.is_empty() {
+        return;
+    }
+    report("split:gw", parts.iter().map(|p| p[2]).collect(), None);
+    parts.sort_by(|a, b| b[0].total_cmp(&a[0]));
+    let n = (parts.len() / 100).max(3).min(parts.len());
+    let slowest: Vec<String> = parts[..n]
+        .iter()
+        .map(|p| format!("{:.2} = {:.2} + {:.2} + {:.2}", p[0], p[1], p[2], p[3]))
+        .collect();
+    println!(
+        "slowest {n} (ms: total = broker to a client + gateway and bus + autopilot-link): {}",
+        slowest.join(", ")
+    );
+}
+
 async fn bench(
     mesh: &Mesh,
     seen_rx: mpsc::Receiver<Seen>,
@@ -365,6 +388,8 @@ async fn bench(
 
     let (mut drc_ms, mut base_ms, mut unmatched) = (Vec::new(), Vec::new(), 0usize);
     let (mut bus_ms, mut link_ms) = (Vec::new(), Vec::new());
+    // Per command with all four stamps: (total, baseline, bus − baseline, link), ms.
+    let mut parts: Vec<[f64; 4]> = Vec::new();
     for (i, &(t0, h)) in sent.iter().enumerate().skip(WARMUP) {
         let end = sent.get(i + 1).map(|s| s.0 + Duration::from_secs(1));
         let want = -h as f32;
@@ -386,8 +411,16 @@ async fn bench(
                 link_ms.push((s.at.saturating_duration_since(b.at)).as_secs_f64() * 1e3);
             }
         }
-        if let Some(at) = base_at.get(&(i as u64)) {
-            base_ms.push((*at - t0).as_secs_f64() * 1e3);
+        let base = base_at
+            .get(&(i as u64))
+            .map(|at| (*at - t0).as_secs_f64() * 1e3);
+        if let Some(b) = base {
+            base_ms.push(b);
+        }
+        if let (Some(s), Some(b), Some(base)) = (hit, find(&on_bus), base) {
+            let bus = (b.at - t0).as_secs_f64() * 1e3;
+            let link = s.at.saturating_duration_since(b.at).as_secs_f64() * 1e3;
+            parts.push([(s.at - t0).as_secs_f64() * 1e3, base, bus - base, link]);
         }
     }
 
@@ -402,6 +435,7 @@ async fn bench(
     report("drc", drc_ms, Some(base_p50));
     report("split:bus", bus_ms, Some(base_p50));
     report("split:link", link_ms, None);
+    tail_report(parts);
     let mut results: Vec<_> = results.into_iter().collect();
     results.sort();
     println!(
