@@ -379,17 +379,27 @@ pub fn datagram_fields(buf: &[u8], len: usize, vehicle_id: u8) -> Result<(u64, u
 /// A blocking receive on a socket with a read timeout: `None` once nothing came for
 /// that long (the phase is over, or its last message was lost).
 pub fn recv_until_idle(sock: &std::net::UdpSocket, buf: &mut [u8]) -> Result<Option<usize>> {
-    match sock.recv(buf) {
-        Ok(len) => Ok(Some(len)),
-        Err(e)
-            if matches!(
-                e.kind(),
-                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-            ) =>
-        {
-            Ok(None)
+    until_idle(|| sock.recv(buf))
+}
+
+/// [`recv_until_idle`]'s handling of one receive's result. A receive interrupted by
+/// a signal (a tracer attaching: a timed `recv` is not restarted, it fails with
+/// `EINTR`) is tried again, not counted as the end of the phase or as an error.
+fn until_idle(mut recv: impl FnMut() -> std::io::Result<usize>) -> Result<Option<usize>> {
+    loop {
+        match recv() {
+            Ok(len) => return Ok(Some(len)),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                return Ok(None)
+            }
+            Err(e) => return Err(e.into()),
         }
-        Err(e) => Err(e.into()),
     }
 }
 
@@ -398,6 +408,23 @@ pub use skymesh_runtime::ipc::DomainGuard;
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn an_interrupted_receive_is_tried_again() {
+        use std::io::{Error, ErrorKind};
+        let mut results = vec![
+            Ok(7),
+            Err(Error::from(ErrorKind::Interrupted)),
+            Err(Error::from(ErrorKind::Interrupted)),
+        ];
+        let got = super::until_idle(|| results.pop().unwrap()).unwrap();
+        assert_eq!(got, Some(7));
+        assert!(results.is_empty());
+        let mut idle = vec![Err(Error::from(ErrorKind::WouldBlock))];
+        assert_eq!(super::until_idle(|| idle.pop().unwrap()).unwrap(), None);
+        let mut refused = vec![Err(Error::from(ErrorKind::ConnectionRefused))];
+        assert!(super::until_idle(|| refused.pop().unwrap()).is_err());
+    }
+
     use super::*;
 
     #[test]
