@@ -379,26 +379,28 @@ pub fn datagram_fields(buf: &[u8], len: usize, vehicle_id: u8) -> Result<(u64, u
 /// A blocking receive on a socket with a read timeout: `None` once nothing came for
 /// that long (the phase is over, or its last message was lost).
 pub fn recv_until_idle(sock: &std::net::UdpSocket, buf: &mut [u8]) -> Result<Option<usize>> {
-    until_idle(|| sock.recv(buf))
+    match retry_interrupted(|| sock.recv(buf)) {
+        Ok(len) => Ok(Some(len)),
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ) =>
+        {
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
-/// [`recv_until_idle`]'s handling of one receive's result. A receive interrupted by
-/// a signal (a tracer attaching: a timed `recv` is not restarted, it fails with
-/// `EINTR`) is tried again, not counted as the end of the phase or as an error.
-fn until_idle(mut recv: impl FnMut() -> std::io::Result<usize>) -> Result<Option<usize>> {
+/// `io` again while it is interrupted by a signal. A tracer attaching (`strace -p`)
+/// interrupts a receive on a socket with a read timeout, which the kernel does not
+/// restart (`EINTR`): every timed receive of the benches goes through this.
+pub fn retry_interrupted<T>(mut io: impl FnMut() -> std::io::Result<T>) -> std::io::Result<T> {
     loop {
-        match recv() {
-            Ok(len) => return Ok(Some(len)),
+        match io() {
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                return Ok(None)
-            }
-            Err(e) => return Err(e.into()),
+            r => return r,
         }
     }
 }
@@ -408,6 +410,8 @@ pub use skymesh_runtime::ipc::DomainGuard;
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn an_interrupted_receive_is_tried_again() {
         use std::io::{Error, ErrorKind};
@@ -416,16 +420,21 @@ mod tests {
             Err(Error::from(ErrorKind::Interrupted)),
             Err(Error::from(ErrorKind::Interrupted)),
         ];
-        let got = super::until_idle(|| results.pop().unwrap()).unwrap();
-        assert_eq!(got, Some(7));
+        assert_eq!(retry_interrupted(|| results.pop().unwrap()).unwrap(), 7);
         assert!(results.is_empty());
-        let mut idle = vec![Err(Error::from(ErrorKind::WouldBlock))];
-        assert_eq!(super::until_idle(|| idle.pop().unwrap()).unwrap(), None);
-        let mut refused = vec![Err(Error::from(ErrorKind::ConnectionRefused))];
-        assert!(super::until_idle(|| refused.pop().unwrap()).is_err());
+        // Nothing comes: the phase is over, not an error.
+        let idle = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        idle.set_read_timeout(Some(std::time::Duration::from_millis(10)))
+            .unwrap();
+        assert_eq!(recv_until_idle(&idle, &mut [0u8; 8]).unwrap(), None);
+        let mut refused = vec![Err::<usize, _>(Error::from(ErrorKind::ConnectionRefused))];
+        assert_eq!(
+            retry_interrupted(|| refused.pop().unwrap())
+                .unwrap_err()
+                .kind(),
+            ErrorKind::ConnectionRefused
+        );
     }
-
-    use super::*;
 
     #[test]
     fn percentiles_nearest_rank() {

@@ -405,22 +405,21 @@ async fn bench(
             Some(s) => drc_ms.push((s.at - t0).as_secs_f64() * 1e3),
             None => unmatched += 1,
         }
-        if let Some(b) = find(&on_bus) {
-            bus_ms.push((b.at - t0).as_secs_f64() * 1e3);
-            if let Some(s) = hit {
-                link_ms.push((s.at.saturating_duration_since(b.at)).as_secs_f64() * 1e3);
-            }
-        }
-        let base = base_at
-            .get(&(i as u64))
-            .map(|at| (*at - t0).as_secs_f64() * 1e3);
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        let base = base_at.get(&(i as u64)).map(|at| ms(*at - t0));
         if let Some(b) = base {
             base_ms.push(b);
         }
-        if let (Some(s), Some(b), Some(base)) = (hit, find(&on_bus), base) {
-            let bus = (b.at - t0).as_secs_f64() * 1e3;
-            let link = s.at.saturating_duration_since(b.at).as_secs_f64() * 1e3;
-            parts.push([(s.at - t0).as_secs_f64() * 1e3, base, bus - base, link]);
+        if let Some(b) = find(&on_bus) {
+            let bus = ms(b.at - t0);
+            bus_ms.push(bus);
+            if let Some(s) = hit {
+                let link = ms(s.at.saturating_duration_since(b.at));
+                link_ms.push(link);
+                if let Some(base) = base {
+                    parts.push([ms(s.at - t0), base, bus - base, link]);
+                }
+            }
         }
     }
 

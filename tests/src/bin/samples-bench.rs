@@ -72,8 +72,8 @@ use iceoryx2_cal::{
 };
 use skymesh_e2e::transport_bench::{
     bench_state, datagram_fields, die_with_parent, finish_child, percentiles, process_cpu_ns,
-    read_line, recv_until_idle, send_loop, spawn_child, stamp_datagram, DomainGuard, Rate,
-    SendSlot, Tally, DATAGRAM_LEN,
+    read_line, recv_until_idle, retry_interrupted, send_loop, spawn_child, stamp_datagram,
+    DomainGuard, Rate, SendSlot, Tally, DATAGRAM_LEN,
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
@@ -925,7 +925,7 @@ fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>,
             }
             stamp_datagram(&mut buf, VEHICLE, k);
             sock.send(&buf)?;
-            let len = sock.recv(&mut back)?;
+            let len = retry_interrupted(|| sock.recv(&mut back))?;
             let t1 = monotonic_ns();
             let (seq, t0) = datagram_fields(&back, len, VEHICLE)?;
             anyhow::ensure!(seq == k as u64 + 1, "pong {seq} for ping {}", k + 1);
@@ -994,7 +994,7 @@ fn pong_child(mode: Pong, domain: &str, total: usize) -> anyhow::Result<()> {
         println!("ready {}", sock.local_addr()?.port());
         let mut buf = [0u8; LEN + 1];
         for k in 0..total {
-            let (len, from) = sock.recv_from(&mut buf)?;
+            let (len, from) = retry_interrupted(|| sock.recv_from(&mut buf))?;
             if k == WARMUP {
                 cpu0 = process_cpu_ns();
             }
