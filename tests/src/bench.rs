@@ -3,6 +3,7 @@
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context as _, Result};
@@ -12,8 +13,31 @@ use skymesh_ipc_types::{
 };
 
 use skymesh_autopilot_link::frame::FrameParser;
+use skymesh_runtime::realtime::{self, RealtimePriority};
 
 use crate::{Mesh, MeshOptions};
+
+/// The priority [`bench_thread_realtime`] gives the bench's own threads.
+static BENCH_REALTIME: OnceLock<RealtimePriority> = OnceLock::new();
+
+/// From now on, the bench's own threads (the MAVLink tap, bus watchers, MQTT
+/// clients) run `SCHED_FIFO` at `priority`: they stand in for the world outside the
+/// companion computer (the cloud, the flight controller), which does not queue
+/// behind its vision work. Set it before the mesh starts; the bench's main thread,
+/// which starts the supervisor, keeps normal scheduling (children inherit a policy).
+pub fn set_bench_realtime(priority: RealtimePriority) {
+    let _ = BENCH_REALTIME.set(priority);
+}
+
+/// Puts the calling bench thread under [`set_bench_realtime`]'s priority, if set
+/// (a refusal is printed: the bench still runs, with its stamps possibly late).
+pub fn bench_thread_realtime() {
+    if let Some(p) = BENCH_REALTIME.get() {
+        if let Err(e) = realtime::apply(*p) {
+            eprintln!("bench thread: real-time priority {} refused: {e}", p.get());
+        }
+    }
+}
 
 /// `--name N` from the command line, else `default`.
 pub fn arg(name: &str, default: u64) -> u64 {
@@ -63,6 +87,8 @@ pub fn mavlink_tap_both<F, G>(
     G: FnMut(&mut FrameParser, Instant) + Clone + Send + 'static,
 {
     std::thread::spawn(move || loop {
+        // Its two forwarding threads inherit the policy.
+        bench_thread_realtime();
         let Ok((link, _)) = listener.accept() else {
             return;
         };

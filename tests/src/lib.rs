@@ -172,6 +172,8 @@ pub struct MeshOptions {
     /// `restart` key), e.g. a slower restart so a test sees what happens meanwhile.
     /// Not for `mqtt-broker`, which has one already.
     pub restart: Vec<(String, String)>,
+    /// Per-service `realtime_priority` (service name, SCHED_FIFO priority 1..=99).
+    pub realtime: Vec<(String, u8)>,
 }
 
 impl Default for MeshOptions {
@@ -205,6 +207,7 @@ impl Default for MeshOptions {
             vision_extra: String::new(),
             digiview_extra: String::new(),
             restart: Vec::new(),
+            realtime: Vec::new(),
         }
     }
 }
@@ -663,6 +666,13 @@ after = ["vision-pipeline"]
                 bail!("restart policy for {name}: no such service in this mesh");
             }
             services = services.replace(&key, &format!("{key}restart = {table}\n"));
+        }
+        for (name, priority) in &opts.realtime {
+            let key = format!("name = \"{name}\"\n");
+            if !services.contains(&key) {
+                bail!("realtime priority for {name}: no such service in this mesh");
+            }
+            services = services.replace(&key, &format!("{key}realtime_priority = {priority}\n"));
         }
         std::fs::write(
             d.join("skymesh.toml"),

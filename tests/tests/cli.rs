@@ -121,6 +121,25 @@ fn bad_configuration_exits_64_with_a_clear_message() {
                 String::from_utf8_lossy(&out.stderr)
             );
         }
+        // And a real-time priority outside SCHED_FIFO's 1..=99 (0 = normal scheduling).
+        for (priority, code) in [("100", 64), ("-1", 64), ("fifo", 64), ("0", 0), ("20", 0)] {
+            let out = Command::new(binary(bin))
+                .arg("--check-config")
+                .env("SKYMESH_DOMAIN", format!("cli{}", std::process::id()))
+                .env_remove("SKYMESH_CONFIG")
+                .env("SKYMESH_REALTIME_PRIORITY", priority)
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(
+                out.status.code(),
+                Some(code),
+                "{bin} with SKYMESH_REALTIME_PRIORITY={priority}: {err}"
+            );
+            if code == 64 {
+                assert!(err.contains("SKYMESH_REALTIME_PRIORITY"), "{bin}: {err}");
+            }
+        }
     }
 }
 

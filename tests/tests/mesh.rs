@@ -299,3 +299,78 @@ fn a_test_bus_outliving_its_mesh_takes_the_domain_files_with_it() {
     let files = domain.leftover_files();
     assert!(files.is_empty(), "files left: {files:?}");
 }
+
+/// Policy (field 41) and rt_priority (field 40) of every thread of `pid`.
+fn thread_scheduling(pid: u32) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task"))
+        .unwrap()
+        .flatten()
+    {
+        let Ok(stat) = std::fs::read_to_string(task.path().join("stat")) else {
+            continue; // the thread ended meanwhile
+        };
+        let (_, rest) = stat.rsplit_once(')').unwrap();
+        let f: Vec<&str> = rest.split_ascii_whitespace().collect();
+        // After `)`, field 3 is index 0: rt_priority (40) is 37, policy (41) is 38.
+        out.push((f[38].parse().unwrap(), f[37].parse().unwrap()));
+    }
+    out
+}
+
+/// `realtime_priority` reaches the service: every thread of autopilot-link runs
+/// SCHED_FIFO at it, again after a restart, the supervisor's gauge reads it back, and
+/// vehicle-sim (not configured) stays at normal scheduling. Where the kernel refuses
+/// real-time priority to this user, the service runs anyway and says why.
+#[test]
+fn a_realtime_priority_reaches_every_thread_and_survives_a_restart() {
+    // Whether this user may use SCHED_FIFO at all: tried on a thread of our own.
+    let permitted = std::thread::spawn(|| {
+        let p = skymesh_runtime::realtime::RealtimePriority::new(1)
+            .unwrap()
+            .unwrap();
+        skymesh_runtime::realtime::apply(p).is_ok()
+    })
+    .join()
+    .unwrap();
+    let mut mesh = Mesh::start(MeshOptions {
+        realtime: vec![("autopilot-link".into(), 21)],
+        ..Default::default()
+    })
+    .unwrap();
+    let link = mesh.wait_running("autopilot-link", STARTUP).unwrap();
+    let sim = mesh.wait_running("vehicle-sim", STARTUP).unwrap();
+    let gauge = |m: &Mesh, s: &str| {
+        m.metric(&format!(
+            "skymesh_service_realtime_priority{{service=\"{s}\"}}"
+        ))
+        .unwrap()
+    };
+    let expect_fifo = |pid: u32| {
+        let threads = thread_scheduling(pid);
+        assert!(threads.len() > 1, "{threads:?}");
+        if permitted {
+            // SCHED_FIFO is policy 1.
+            assert!(threads.iter().all(|t| *t == (1, 21)), "{threads:?}");
+        } else {
+            assert!(threads.iter().all(|t| *t == (0, 0)), "{threads:?}");
+        }
+    };
+    expect_fifo(link);
+    let want = if permitted { 21.0 } else { 0.0 };
+    assert_eq!(gauge(&mesh, "autopilot-link"), Some(want));
+    assert!(thread_scheduling(sim).iter().all(|t| *t == (0, 0)));
+    assert_eq!(gauge(&mesh, "vehicle-sim"), Some(0.0));
+    if !permitted {
+        assert!(
+            mesh.output().contains("real-time priority refused"),
+            "{}",
+            mesh.output()
+        );
+    }
+    signal(link, Signal::SIGKILL).unwrap();
+    let again = mesh
+        .wait_restarted("autopilot-link", link, STARTUP)
+        .unwrap();
+    expect_fifo(again);
+}

@@ -27,6 +27,7 @@ pub mod health;
 pub mod ipc;
 pub mod net;
 pub mod rate;
+pub mod realtime;
 pub mod refusals;
 mod service;
 pub mod signals;

@@ -14,7 +14,7 @@ use crate::exit;
 use crate::health::{self, HealthState};
 use crate::ipc::{self, Bus, Domain};
 use crate::stats::Stats;
-use crate::{signals, systemd};
+use crate::{realtime, signals, systemd};
 
 /// Overrides the number of tokio worker threads of a service (1..=16).
 pub const WORKERS_ENV: &str = "SKYMESH_TOKIO_WORKERS";
@@ -199,9 +199,10 @@ where
         }
         let shm_min_free = ipc::shm_min_free_from_env()?;
         let workers = workers_from_env()?;
-        Ok((settings, domain, name, shm_min_free, workers))
+        let realtime = realtime::from_env()?;
+        Ok((settings, domain, name, shm_min_free, workers, realtime))
     });
-    let (settings, domain, name, shm_min_free, workers) = match loaded {
+    let (settings, domain, name, shm_min_free, workers, realtime) = match loaded {
         Ok(v) => v,
         Err(e) => {
             tracing::error!(error = %e, "bad configuration");
@@ -223,6 +224,8 @@ where
         return ExitCode::from(code);
     }
 
+    // Before the tokio runtime starts its threads: they inherit the policy.
+    realtime::apply_at_start(realtime);
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(workers)
         .enable_all()

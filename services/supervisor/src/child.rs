@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::{killpg, Signal};
 use nix::unistd::Pid;
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::realtime;
 use tokio::process::{Child, Command};
 
 use crate::config::ServiceSpec;
@@ -89,6 +90,12 @@ pub fn command(spec: &ServiceSpec, env: &Environment) -> std::io::Result<Command
     if let Some(p) = &env.ipc_config {
         cmd.env("SKYMESH_IPC_CONFIG", p);
     }
+    // Only from the service's own key: not inherited from the supervisor's
+    // environment (a priority meant for one service must not reach every other).
+    match spec.realtime_priority {
+        Some(p) => cmd.env(realtime::REALTIME_ENV, p.to_string()),
+        None => cmd.env_remove(realtime::REALTIME_ENV),
+    };
     if let Some(f) = &env.log_format {
         cmd.env("SKYMESH_LOG_FORMAT", f);
     }
@@ -194,6 +201,7 @@ mod tests {
             after: vec![],
             critical: false,
             heartbeat: false,
+            realtime_priority: Some(12),
             restart: RestartPolicy::default(),
         }
     }
@@ -212,7 +220,7 @@ mod tests {
     #[tokio::test]
     async fn child_gets_the_mesh_environment_its_own_group_and_a_log_file() {
         let dir = tempfile::tempdir().unwrap();
-        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $SKYMESH_HEARTBEAT_QUIET $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR; \
+        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $SKYMESH_HEARTBEAT_QUIET $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR $SKYMESH_REALTIME_PRIORITY; \
                       [ \"$(cut -d' ' -f5 /proc/$$/stat)\" = \"$$\" ] && echo own-group; exit 3";
         let mut run = spawn(
             &sh("a", script),
@@ -223,7 +231,7 @@ mod tests {
         assert_eq!(ending(&status), Ending::Code(3));
         let log = std::fs::read_to_string(dir.path().join("a.log")).unwrap();
         assert!(
-            log.contains("a childtest /x/iceoryx2.toml 250 1 1 none 1"),
+            log.contains("a childtest /x/iceoryx2.toml 250 1 1 none 1 12"),
             "{log}"
         );
         assert!(log.contains("own-group"), "{log}");

@@ -12,7 +12,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use skymesh_ipc_types::topics;
 use skymesh_runtime::config::{in_range, socket_addr};
-use skymesh_runtime::ConfigError;
+use skymesh_runtime::{realtime, ConfigError};
 
 use crate::policy::{RestartMode, RestartPolicy};
 
@@ -24,12 +24,14 @@ pub const DEFAULT_METRICS: &str = "127.0.0.1:9464";
 pub const SEARCH_PATHS: [&str; 2] = ["deploy/skymesh.toml", "/etc/skymesh/skymesh.toml"];
 
 /// Environment variables the supervisor sets for every child; a service's `env` may not override them.
-pub const RESERVED_ENV: [&str; 8] = [
+pub const RESERVED_ENV: [&str; 9] = [
     "SKYMESH_SERVICE_NAME",
     "SKYMESH_DOMAIN",
     "SKYMESH_IPC_CONFIG",
     "SKYMESH_HEARTBEAT_MS",
     "SKYMESH_HEARTBEAT_QUIET",
+    // From the service's `realtime_priority` key.
+    realtime::REALTIME_ENV,
     "NOTIFY_SOCKET",
     "WATCHDOG_USEC",
     "WATCHDOG_PID",
@@ -105,6 +107,9 @@ struct RawService {
     enabled: bool,
     #[serde(default = "yes")]
     heartbeat: bool,
+    /// `SCHED_FIFO` priority of every thread of the service (0: normal scheduling).
+    #[serde(default)]
+    realtime_priority: u8,
     restart: Option<RawRestart>,
 }
 
@@ -158,6 +163,9 @@ pub struct ServiceSpec {
     pub critical: bool,
     /// False for programs that publish no skymesh heartbeat (e.g. a third-party broker).
     pub heartbeat: bool,
+    /// `SCHED_FIFO` priority for every thread of the service, passed as
+    /// `SKYMESH_REALTIME_PRIORITY` (the runtime applies it); `None`: normal scheduling.
+    pub realtime_priority: Option<u8>,
     pub restart: RestartPolicy,
 }
 
@@ -383,6 +391,9 @@ impl RawConfig {
                     ));
                 }
             }
+            let realtime_priority = realtime::RealtimePriority::new(raw.realtime_priority)
+                .map_err(|m| ConfigError::invalid(field("realtime_priority"), m))?
+                .map(realtime::RealtimePriority::get);
             let restart = match &raw.restart {
                 Some(r) => r.apply(&format!("service[{i}].restart"), default_policy)?,
                 None => default_policy,
@@ -413,6 +424,7 @@ impl RawConfig {
                     .collect(),
                 critical: raw.critical,
                 heartbeat: raw.heartbeat,
+                realtime_priority,
                 restart,
             });
         }
@@ -541,11 +553,29 @@ mod tests {
         );
         assert_eq!(vs.program, PathBuf::from("skymesh-vehicle-sim"));
         assert!(s.service("autopilot-link").unwrap().after == ["vehicle-sim"]);
+        // The control path runs real-time; the frame path does not.
+        let prio = |n: &str| s.service(n).unwrap().realtime_priority;
+        assert_eq!(prio("autopilot-link"), Some(30));
+        assert_eq!(prio("dji-gateway"), Some(20));
+        assert_eq!(prio("mqtt-broker"), Some(20));
+        assert_eq!((prio("camera"), prio("vision-pipeline")), (None, None));
         // The shipped [restart] table spells out the built-in defaults.
         assert!(s
             .services
             .iter()
             .all(|x| x.restart == RestartPolicy::default()));
+    }
+
+    #[test]
+    fn realtime_priority_is_optional_and_zero_means_normal_scheduling() {
+        let s = parse(
+            "[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = 20\n\
+             [[service]]\nname = \"b\"\nbinary = \"x\"\nrealtime_priority = 0\n\
+             [[service]]\nname = \"c\"\nbinary = \"x\"\n",
+        )
+        .unwrap();
+        let prio = |n: &str| s.service(n).unwrap().realtime_priority;
+        assert_eq!((prio("a"), prio("b"), prio("c")), (Some(20), None, None));
     }
 
     #[test]
@@ -619,6 +649,9 @@ mod tests {
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\nenv = { SKYMESH_DOMAIN = \"x\" }", "SKYMESH_DOMAIN"),
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\nrestart = { budget = -1 }", "budget"),
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\ncolour = \"red\"", "colour"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = 100", "service[0].realtime_priority"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = -1", "realtime_priority"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\nenv = { SKYMESH_REALTIME_PRIORITY = \"20\" }", "SKYMESH_REALTIME_PRIORITY"),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.to_string().contains(needle), "{text:?}: {e}");

@@ -24,7 +24,7 @@ use crate::procfs;
 use crate::state::{Mesh, Phase, ServiceEntry};
 
 /// Families the supervisor itself exports; a service may not report these names.
-const OWN: [(&str, MetricType, &str); 14] = [
+const OWN: [(&str, MetricType, &str); 15] = [
     ("skymesh_service_up", MetricType::GAUGE, "1 if the service is running (or degraded), else 0."),
     ("skymesh_service_state", MetricType::GAUGE, "1 for the service's current supervisor state, 0 for the others."),
     ("skymesh_service_restarts_total", MetricType::COUNTER, "Times the service was restarted (by the supervisor, or seen with a new pid in monitor-only mode)."),
@@ -33,6 +33,7 @@ const OWN: [(&str, MetricType, &str); 14] = [
     ("skymesh_service_heartbeat_age_seconds", MetricType::GAUGE, "Seconds since the service's last heartbeat was published."),
     ("skymesh_service_cpu_seconds_total", MetricType::COUNTER, "User plus system CPU time of the service's current process."),
     ("skymesh_service_resident_memory_bytes", MetricType::GAUGE, "Resident memory of the service's current process."),
+    ("skymesh_service_realtime_priority", MetricType::GAUGE, "SCHED_FIFO/SCHED_RR priority of the service's main thread as the kernel reports it (0: normal scheduling)."),
     ("skymesh_service_stats_dropped_series", MetricType::GAUGE, "Series the service has but could not fit into its stats sample."),
     ("skymesh_supervisor_stale_nodes_cleaned_total", MetricType::COUNTER, "Dead iceoryx2 nodes whose stale resources the supervisor removed."),
     ("skymesh_supervisor_adopted_total", MetricType::COUNTER, "Running processes of the service this supervisor adopted (started by an earlier supervisor that died) instead of starting new ones."),
@@ -295,6 +296,10 @@ impl MeshCollector {
             fams.own(
                 "skymesh_service_resident_memory_bytes",
                 gauge_metric(svc(), u.resident_bytes as f64),
+            );
+            fams.own(
+                "skymesh_service_realtime_priority",
+                gauge_metric(svc(), f64::from(u.realtime_priority)),
             );
         }
         if let Some(stats) = &e.stats {

@@ -1,4 +1,5 @@
-//! CPU time and resident memory of a process, from `/proc/<pid>/stat` and `statm`.
+//! CPU time, resident memory and scheduling of a process, from `/proc/<pid>/stat`
+//! and `statm`.
 
 use std::sync::OnceLock;
 
@@ -10,6 +11,8 @@ pub struct ProcUsage {
     /// User + system CPU time.
     pub cpu_seconds: f64,
     pub resident_bytes: u64,
+    /// The main thread's `SCHED_FIFO`/`SCHED_RR` priority; 0 under a normal policy.
+    pub realtime_priority: u32,
 }
 
 /// Clock ticks per second and page size, asked of the kernel once.
@@ -46,6 +49,7 @@ pub fn usage(pid: u32) -> Option<ProcUsage> {
     Some(ProcUsage {
         cpu_seconds: ticks as f64 / ticks_per_s,
         resident_bytes: pages.saturating_mul(page),
+        realtime_priority: parse_stat_realtime_priority(&stat).unwrap_or(0),
     })
 }
 
@@ -59,6 +63,21 @@ pub fn parse_stat_cpu_ticks(stat: &str) -> Option<u64> {
     let utime: u64 = fields.nth(11)?.parse().ok()?;
     let stime: u64 = fields.next()?.parse().ok()?;
     Some(utime.saturating_add(stime))
+}
+
+/// The real-time priority of a `/proc/<pid>/stat` line: `rt_priority` (field 40)
+/// under `SCHED_FIFO` or `SCHED_RR` (`policy`, field 41: 1 or 2), else 0.
+pub fn parse_stat_realtime_priority(stat: &str) -> Option<u32> {
+    let (_, rest) = stat.rsplit_once(')')?;
+    let mut fields = rest.split_ascii_whitespace();
+    // After `)`: field 3 is index 0, so rt_priority (40) is index 37.
+    let rt_priority: u32 = fields.nth(37)?.parse().ok()?;
+    let policy: u32 = fields.next()?.parse().ok()?;
+    Some(if matches!(policy, 1 | 2) {
+        rt_priority
+    } else {
+        0
+    })
 }
 
 /// The resident set size in pages (second field of `/proc/<pid>/statm`).
@@ -83,10 +102,31 @@ mod tests {
     }
 
     #[test]
+    fn parses_the_realtime_priority_only_under_a_realtime_policy() {
+        // `chrt -f 20 cat /proc/self/stat` on kernel 6.18: rt_priority 20, policy 1.
+        let fifo = "14251 (cat) R 14249 14249 16858 0 -1 4194560 174 0 0 0 0 0 0 0 -21 0 1 0 \
+                    5633607 3133440 379 18446744073709551615 93844405014528 93844405034409 \
+                    140721775032320 0 0 0 0 0 0 0 0 0 17 1 20 1 0 0 0 93844405050416 \
+                    93844405052032 93844871458816 140721775033056 140721775033076 \
+                    140721775033076 140721775034347 0";
+        assert_eq!(parse_stat_realtime_priority(fifo), Some(20));
+        let rr = fifo.replace(" 17 1 20 1 ", " 17 1 20 2 ");
+        assert_eq!(parse_stat_realtime_priority(&rr), Some(20));
+        // SCHED_OTHER (0) and SCHED_BATCH (3) have no real-time priority.
+        let other = fifo.replace(" 17 1 20 1 ", " 17 1 0 0 ");
+        assert_eq!(parse_stat_realtime_priority(&other), Some(0));
+        let batch = fifo.replace(" 17 1 20 1 ", " 17 1 0 3 ");
+        assert_eq!(parse_stat_realtime_priority(&batch), Some(0));
+        assert_eq!(parse_stat_realtime_priority("1 (x) S 1 2 3"), None);
+    }
+
+    #[test]
     fn reads_this_process() {
         let u = usage(std::process::id()).expect("own /proc entry");
         assert!(u.resident_bytes > 0);
         assert!(u.cpu_seconds >= 0.0);
+        // The test harness runs with normal scheduling.
+        assert_eq!(u.realtime_priority, 0);
         assert!(usage(u32::MAX).is_none());
     }
 }

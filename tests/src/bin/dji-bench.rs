@@ -21,7 +21,12 @@
 //! subscriber on `drc/down` on the same broker, the time from the publish call to its
 //! receipt (the broker hop every DRC command pays before the gateway sees it).
 //!
-//! `cargo run --release -p skymesh-e2e --bin dji-bench -- --commands 300`
+//! `cargo run --release -p skymesh-e2e --bin dji-bench -- --commands 300 [--realtime 20] [--vision]`
+//!
+//! `--vision` adds the camera and the vision pipeline to the mesh (the load a
+//! companion computer carries in flight); `--realtime P` runs the control path
+//! `SCHED_FIFO` as deploy/skymesh.toml does (broker and gateway at P, autopilot-link
+//! and vehicle-sim at P + 10) and the bench's own threads at P + 10.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -34,7 +39,9 @@ use mavlink::dialects::ardupilotmega::MavMessage;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
-use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
+use skymesh_e2e::bench::{
+    arg, bench_thread_realtime, percentile, set_bench_realtime, start_tapped_mesh,
+};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, Command, ServiceId, VehicleCommand};
 use skymesh_runtime::{Bus, Stats};
@@ -73,6 +80,7 @@ fn command_watch(mesh: &Mesh, stop: Arc<AtomicBool>) -> Result<mpsc::Receiver<Se
     let (tx, rx) = mpsc::channel();
     let (ready_tx, ready_rx) = mpsc::channel();
     std::thread::spawn(move || {
+        bench_thread_realtime();
         let run = || -> Result<()> {
             let rt = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
@@ -449,23 +457,68 @@ fn main() -> Result<()> {
     if commands < 1 {
         bail!("--commands must be at least 1");
     }
+    // `--realtime P`: the control path real-time as deploy/skymesh.toml has it (the
+    // broker and the gateway at P, autopilot-link and vehicle-sim at P + 10), and the
+    // bench's own threads at P + 10. `--vision`: the camera (the embedded default,
+    // 1280x720 at 30 fps) and the vision pipeline run in the same mesh.
+    let rt_priority = u8::try_from(arg("--realtime", 0))
+        .ok()
+        .filter(|p| *p <= 89)
+        .context("--realtime must be 0 (off) to 89")?;
+    let vision = std::env::args().any(|a| a == "--vision");
+    let mut realtime = Vec::new();
+    if let Some(low) =
+        skymesh_runtime::realtime::RealtimePriority::new(rt_priority).map_err(anyhow::Error::msg)?
+    {
+        let high = low.get() + 10;
+        for (name, p) in [
+            ("mqtt-broker", low.get()),
+            ("dji-gateway", low.get()),
+            ("autopilot-link", high),
+            ("vehicle-sim", high),
+        ] {
+            realtime.push((name.to_string(), p));
+        }
+        if let Ok(Some(bench)) = skymesh_runtime::realtime::RealtimePriority::new(high) {
+            set_bench_realtime(bench);
+        }
+    }
+    println!(
+        "dji-bench: control path {}; camera and vision pipeline {}",
+        if rt_priority == 0 {
+            "normal scheduling".to_string()
+        } else {
+            format!(
+                "SCHED_FIFO (broker, gateway {rt_priority}; autopilot-link, vehicle-sim, bench {})",
+                rt_priority + 10
+            )
+        },
+        if vision { "running" } else { "off" }
+    );
+    let mut services = vec![
+        "vehicle-sim",
+        "autopilot-link",
+        "mqtt-broker",
+        "dji-gateway",
+    ];
+    if vision {
+        services.extend(["camera", "vision-pipeline"]);
+    }
     let (seen_tx, seen_rx) = mpsc::channel();
     let mut mesh = start_tapped_mesh(
         MeshOptions {
             dji: true,
             attitude_hz: 25.0,
+            vision,
+            realtime,
             ..Default::default()
         },
-        &[
-            "vehicle-sim",
-            "autopilot-link",
-            "mqtt-broker",
-            "dji-gateway",
-        ],
+        &services,
         move |parser, now| scan_setpoints(parser, now, &seen_tx),
     )?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
+        .on_thread_start(bench_thread_realtime)
         .enable_all()
         .build()?;
     let stop_watch = Arc::new(AtomicBool::new(false));
