@@ -17,25 +17,32 @@ use skymesh_runtime::realtime::{self, RealtimePriority};
 
 use crate::{Mesh, MeshOptions};
 
-/// The priority [`bench_thread_realtime`] gives the bench's own threads.
-static BENCH_REALTIME: OnceLock<RealtimePriority> = OnceLock::new();
+/// The priority and CPUs [`bench_thread_realtime`] gives the bench's own threads.
+static BENCH_REALTIME: OnceLock<(RealtimePriority, Vec<usize>)> = OnceLock::new();
 
 /// From now on, the bench's own threads (the MAVLink tap, bus watchers, MQTT
-/// clients) run `SCHED_FIFO` at `priority`: they stand in for the world outside the
-/// companion computer (the cloud, the flight controller), which does not queue
-/// behind its vision work. Set it before the mesh starts; the bench's main thread,
-/// which starts the supervisor, keeps normal scheduling (children inherit a policy).
-pub fn set_bench_realtime(priority: RealtimePriority) {
-    let _ = BENCH_REALTIME.set(priority);
+/// clients) run `SCHED_FIFO` at `priority`, on `cpus` if any: they stand in for the
+/// world outside the companion computer (the cloud, the flight controller), which
+/// does not queue behind its vision work. Set it before the mesh starts; the
+/// bench's main thread, which starts the supervisor, keeps normal scheduling
+/// (children inherit a policy and an affinity).
+pub fn set_bench_realtime(priority: RealtimePriority, cpus: Vec<usize>) {
+    let _ = BENCH_REALTIME.set((priority, cpus));
 }
 
-/// Puts the calling bench thread under [`set_bench_realtime`]'s priority, if set
-/// (a refusal is printed: the bench still runs, with its stamps possibly late).
+/// Puts the calling bench thread under [`set_bench_realtime`]'s priority and CPUs,
+/// if set (a refusal is printed: the bench still runs, its stamps possibly late).
 pub fn bench_thread_realtime() {
-    if let Some(p) = BENCH_REALTIME.get() {
-        if let Err(e) = realtime::apply(*p) {
-            eprintln!("bench thread: real-time priority {} refused: {e}", p.get());
+    let Some((p, cpus)) = BENCH_REALTIME.get() else {
+        return;
+    };
+    if !cpus.is_empty() {
+        if let Err(e) = realtime::pin(cpus) {
+            eprintln!("bench thread: CPU affinity {cpus:?} refused: {e}");
         }
+    }
+    if let Err(e) = realtime::apply(*p) {
+        eprintln!("bench thread: real-time priority {} refused: {e}", p.get());
     }
 }
 

@@ -174,6 +174,8 @@ pub struct MeshOptions {
     pub restart: Vec<(String, String)>,
     /// Per-service `realtime_priority` (service name, SCHED_FIFO priority 1..=99).
     pub realtime: Vec<(String, u8)>,
+    /// Per-service `cpu_affinity` (service name, CPUs).
+    pub cpu_affinity: Vec<(String, Vec<usize>)>,
 }
 
 impl Default for MeshOptions {
@@ -208,6 +210,7 @@ impl Default for MeshOptions {
             digiview_extra: String::new(),
             restart: Vec::new(),
             realtime: Vec::new(),
+            cpu_affinity: Vec::new(),
         }
     }
 }
@@ -660,19 +663,27 @@ after = ["vision-pipeline"]
             );
         }
 
-        for (name, table) in &opts.restart {
+        // Keys for single services, placed right after their `name`.
+        let per_service = opts
+            .restart
+            .iter()
+            .map(|(name, table)| (name, format!("restart = {table}")))
+            .chain(
+                opts.realtime
+                    .iter()
+                    .map(|(name, p)| (name, format!("realtime_priority = {p}"))),
+            )
+            .chain(
+                opts.cpu_affinity
+                    .iter()
+                    .map(|(name, cpus)| (name, format!("cpu_affinity = {cpus:?}"))),
+            );
+        for (name, line) in per_service {
             let key = format!("name = \"{name}\"\n");
             if !services.contains(&key) {
-                bail!("restart policy for {name}: no such service in this mesh");
+                bail!("`{line}` for {name}: no such service in this mesh");
             }
-            services = services.replace(&key, &format!("{key}restart = {table}\n"));
-        }
-        for (name, priority) in &opts.realtime {
-            let key = format!("name = \"{name}\"\n");
-            if !services.contains(&key) {
-                bail!("realtime priority for {name}: no such service in this mesh");
-            }
-            services = services.replace(&key, &format!("{key}realtime_priority = {priority}\n"));
+            services = services.replace(&key, &format!("{key}{line}\n"));
         }
         std::fs::write(
             d.join("skymesh.toml"),

@@ -140,6 +140,24 @@ fn bad_configuration_exits_64_with_a_clear_message() {
                 assert!(err.contains("SKYMESH_REALTIME_PRIORITY"), "{bin}: {err}");
             }
         }
+        for (cpus, code) in [("1-3", 64), ("x", 64), ("4096", 64), ("0", 0), ("0, 1", 0)] {
+            let out = Command::new(binary(bin))
+                .arg("--check-config")
+                .env("SKYMESH_DOMAIN", format!("cli{}", std::process::id()))
+                .env_remove("SKYMESH_CONFIG")
+                .env("SKYMESH_CPU_AFFINITY", cpus)
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(
+                out.status.code(),
+                Some(code),
+                "{bin} with SKYMESH_CPU_AFFINITY={cpus}: {err}"
+            );
+            if code == 64 {
+                assert!(err.contains("SKYMESH_CPU_AFFINITY"), "{bin}: {err}");
+            }
+        }
     }
 }
 

@@ -318,12 +318,27 @@ fn thread_scheduling(pid: u32) -> Vec<(u32, u32)> {
     out
 }
 
-/// `realtime_priority` reaches the service: every thread of autopilot-link runs
-/// SCHED_FIFO at it, again after a restart, the supervisor's gauge reads it back, and
-/// vehicle-sim (not configured) stays at normal scheduling. Where the kernel refuses
+/// `Cpus_allowed_list` of every thread of `pid`.
+fn thread_cpus(pid: u32) -> Vec<String> {
+    let mut out = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap().flatten() {
+        let Ok(status) = std::fs::read_to_string(task.path().join("status")) else {
+            continue;
+        };
+        if let Some(l) = status.lines().find(|l| l.starts_with("Cpus_allowed_list:")) {
+            out.push(l["Cpus_allowed_list:".len()..].trim().to_string());
+        }
+    }
+    out
+}
+
+/// `realtime_priority` and `cpu_affinity` reach the service: every thread of
+/// autopilot-link runs SCHED_FIFO at the priority on the one CPU, again after a
+/// restart, the supervisor's gauge reads the priority back, and vehicle-sim (not
+/// configured) stays at normal scheduling on every CPU. Where the kernel refuses
 /// real-time priority to this user, the service runs anyway and says why.
 #[test]
-fn a_realtime_priority_reaches_every_thread_and_survives_a_restart() {
+fn a_realtime_priority_and_cpu_reach_every_thread_and_survive_a_restart() {
     // Whether this user may use SCHED_FIFO at all: tried on a thread of our own.
     let permitted = std::thread::spawn(|| {
         let p = skymesh_runtime::realtime::RealtimePriority::new(1)
@@ -333,8 +348,12 @@ fn a_realtime_priority_reaches_every_thread_and_survives_a_restart() {
     })
     .join()
     .unwrap();
+    // The last CPU this test may use (CPU 1 on a two-CPU machine).
+    let all = skymesh_runtime::realtime::current_cpus();
+    let cpu = *all.last().unwrap();
     let mut mesh = Mesh::start(MeshOptions {
         realtime: vec![("autopilot-link".into(), 21)],
+        cpu_affinity: vec![("autopilot-link".into(), vec![cpu])],
         ..Default::default()
     })
     .unwrap();
@@ -347,6 +366,8 @@ fn a_realtime_priority_reaches_every_thread_and_survives_a_restart() {
         .unwrap()
     };
     let expect_fifo = |pid: u32| {
+        let pinned = thread_cpus(pid);
+        assert!(pinned.iter().all(|c| *c == cpu.to_string()), "{pinned:?}");
         let threads = thread_scheduling(pid);
         assert!(threads.len() > 1, "{threads:?}");
         if permitted {
@@ -360,6 +381,10 @@ fn a_realtime_priority_reaches_every_thread_and_survives_a_restart() {
     let want = if permitted { 21.0 } else { 0.0 };
     assert_eq!(gauge(&mesh, "autopilot-link"), Some(want));
     assert!(thread_scheduling(sim).iter().all(|t| *t == (0, 0)));
+    if all.len() > 1 {
+        let sim_cpus = thread_cpus(sim);
+        assert!(sim_cpus.iter().all(|c| *c != cpu.to_string()), "{sim_cpus:?}");
+    }
     assert_eq!(gauge(&mesh, "vehicle-sim"), Some(0.0));
     if !permitted {
         assert!(

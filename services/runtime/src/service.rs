@@ -199,10 +199,10 @@ where
         }
         let shm_min_free = ipc::shm_min_free_from_env()?;
         let workers = workers_from_env()?;
-        let realtime = realtime::from_env()?;
-        Ok((settings, domain, name, shm_min_free, workers, realtime))
+        let sched = (realtime::cpus_from_env()?, realtime::from_env()?);
+        Ok((settings, domain, name, shm_min_free, workers, sched))
     });
-    let (settings, domain, name, shm_min_free, workers, realtime) = match loaded {
+    let (settings, domain, name, shm_min_free, workers, (cpus, realtime)) = match loaded {
         Ok(v) => v,
         Err(e) => {
             tracing::error!(error = %e, "bad configuration");
@@ -224,8 +224,8 @@ where
         return ExitCode::from(code);
     }
 
-    // Before the tokio runtime starts its threads: they inherit the policy.
-    realtime::apply_at_start(realtime);
+    // Before the tokio runtime starts its threads: they inherit affinity and policy.
+    realtime::apply_at_start(&cpus, realtime);
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(workers)
         .enable_all()

@@ -96,6 +96,10 @@ pub fn command(spec: &ServiceSpec, env: &Environment) -> std::io::Result<Command
         Some(p) => cmd.env(realtime::REALTIME_ENV, p.to_string()),
         None => cmd.env_remove(realtime::REALTIME_ENV),
     };
+    match &spec.cpu_affinity {
+        Some(cpus) => cmd.env(realtime::AFFINITY_ENV, cpus),
+        None => cmd.env_remove(realtime::AFFINITY_ENV),
+    };
     if let Some(f) = &env.log_format {
         cmd.env("SKYMESH_LOG_FORMAT", f);
     }
@@ -202,6 +206,7 @@ mod tests {
             critical: false,
             heartbeat: false,
             realtime_priority: Some(12),
+            cpu_affinity: Some("0,1".into()),
             restart: RestartPolicy::default(),
         }
     }
@@ -220,7 +225,7 @@ mod tests {
     #[tokio::test]
     async fn child_gets_the_mesh_environment_its_own_group_and_a_log_file() {
         let dir = tempfile::tempdir().unwrap();
-        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $SKYMESH_HEARTBEAT_QUIET $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR $SKYMESH_REALTIME_PRIORITY; \
+        let script = "echo $SKYMESH_SERVICE_NAME $SKYMESH_DOMAIN $SKYMESH_IPC_CONFIG $SKYMESH_HEARTBEAT_MS $SKYMESH_HEARTBEAT_QUIET $EXTRA ${NOTIFY_SOCKET:-none} $NO_COLOR $SKYMESH_REALTIME_PRIORITY $SKYMESH_CPU_AFFINITY; \
                       [ \"$(cut -d' ' -f5 /proc/$$/stat)\" = \"$$\" ] && echo own-group; exit 3";
         let mut run = spawn(
             &sh("a", script),
@@ -231,7 +236,7 @@ mod tests {
         assert_eq!(ending(&status), Ending::Code(3));
         let log = std::fs::read_to_string(dir.path().join("a.log")).unwrap();
         assert!(
-            log.contains("a childtest /x/iceoryx2.toml 250 1 1 none 1 12"),
+            log.contains("a childtest /x/iceoryx2.toml 250 1 1 none 1 12 0,1"),
             "{log}"
         );
         assert!(log.contains("own-group"), "{log}");

@@ -24,14 +24,15 @@ pub const DEFAULT_METRICS: &str = "127.0.0.1:9464";
 pub const SEARCH_PATHS: [&str; 2] = ["deploy/skymesh.toml", "/etc/skymesh/skymesh.toml"];
 
 /// Environment variables the supervisor sets for every child; a service's `env` may not override them.
-pub const RESERVED_ENV: [&str; 9] = [
+pub const RESERVED_ENV: [&str; 10] = [
     "SKYMESH_SERVICE_NAME",
     "SKYMESH_DOMAIN",
     "SKYMESH_IPC_CONFIG",
     "SKYMESH_HEARTBEAT_MS",
     "SKYMESH_HEARTBEAT_QUIET",
-    // From the service's `realtime_priority` key.
+    // From the service's `realtime_priority` and `cpu_affinity` keys.
     realtime::REALTIME_ENV,
+    realtime::AFFINITY_ENV,
     "NOTIFY_SOCKET",
     "WATCHDOG_USEC",
     "WATCHDOG_PID",
@@ -110,6 +111,9 @@ struct RawService {
     /// `SCHED_FIFO` priority of every thread of the service (0: normal scheduling).
     #[serde(default)]
     realtime_priority: u8,
+    /// CPUs every thread of the service may run on (empty: no pinning).
+    #[serde(default)]
+    cpu_affinity: Vec<usize>,
     restart: Option<RawRestart>,
 }
 
@@ -166,6 +170,9 @@ pub struct ServiceSpec {
     /// `SCHED_FIFO` priority for every thread of the service, passed as
     /// `SKYMESH_REALTIME_PRIORITY` (the runtime applies it); `None`: normal scheduling.
     pub realtime_priority: Option<u8>,
+    /// CPUs for every thread of the service, passed as `SKYMESH_CPU_AFFINITY`
+    /// (`1`, `2,3`); `None`: no pinning.
+    pub cpu_affinity: Option<String>,
     pub restart: RestartPolicy,
 }
 
@@ -394,6 +401,8 @@ impl RawConfig {
             let realtime_priority = realtime::RealtimePriority::new(raw.realtime_priority)
                 .map_err(|m| ConfigError::invalid(field("realtime_priority"), m))?
                 .map(realtime::RealtimePriority::get);
+            let cpu_affinity = realtime::cpu_list(&raw.cpu_affinity)
+                .map_err(|m| ConfigError::invalid(field("cpu_affinity"), m))?;
             let restart = match &raw.restart {
                 Some(r) => r.apply(&format!("service[{i}].restart"), default_policy)?,
                 None => default_policy,
@@ -425,6 +434,7 @@ impl RawConfig {
                 critical: raw.critical,
                 heartbeat: raw.heartbeat,
                 realtime_priority,
+                cpu_affinity: (!cpu_affinity.is_empty()).then_some(cpu_affinity),
                 restart,
             });
         }
@@ -558,7 +568,12 @@ mod tests {
         assert_eq!(prio("autopilot-link"), Some(30));
         assert_eq!(prio("dji-gateway"), Some(20));
         assert_eq!(prio("mqtt-broker"), Some(20));
-        assert_eq!((prio("camera"), prio("vision-pipeline")), (None, None));
+        let cpus = |n: &str| s.service(n).unwrap().cpu_affinity.clone();
+        assert_eq!(cpus("autopilot-link").as_deref(), Some("1"));
+        assert_eq!(cpus("dji-gateway").as_deref(), Some("1"));
+        for normal in ["camera", "vision-pipeline", "vehicle-sim", "hardware"] {
+            assert_eq!((prio(normal), cpus(normal)), (None, None), "{normal}");
+        }
         // The shipped [restart] table spells out the built-in defaults.
         assert!(s
             .services
@@ -567,7 +582,7 @@ mod tests {
     }
 
     #[test]
-    fn realtime_priority_is_optional_and_zero_means_normal_scheduling() {
+    fn realtime_priority_and_cpu_affinity_are_optional() {
         let s = parse(
             "[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = 20\n\
              [[service]]\nname = \"b\"\nbinary = \"x\"\nrealtime_priority = 0\n\
@@ -576,6 +591,13 @@ mod tests {
         .unwrap();
         let prio = |n: &str| s.service(n).unwrap().realtime_priority;
         assert_eq!((prio("a"), prio("b"), prio("c")), (Some(20), None, None));
+        let s = parse(
+            "[[service]]\nname = \"a\"\nbinary = \"x\"\ncpu_affinity = [2, 3]\n\
+             [[service]]\nname = \"b\"\nbinary = \"x\"\ncpu_affinity = []\n",
+        )
+        .unwrap();
+        assert_eq!(s.service("a").unwrap().cpu_affinity.as_deref(), Some("2,3"));
+        assert_eq!(s.service("b").unwrap().cpu_affinity, None);
     }
 
     #[test]
@@ -652,6 +674,9 @@ mod tests {
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = 100", "service[0].realtime_priority"),
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\nrealtime_priority = -1", "realtime_priority"),
             ("[[service]]\nname = \"a\"\nbinary = \"x\"\nenv = { SKYMESH_REALTIME_PRIORITY = \"20\" }", "SKYMESH_REALTIME_PRIORITY"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\ncpu_affinity = [1, 4096]", "service[0].cpu_affinity"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\ncpu_affinity = 1", "cpu_affinity"),
+            ("[[service]]\nname = \"a\"\nbinary = \"x\"\nenv = { SKYMESH_CPU_AFFINITY = \"1\" }", "SKYMESH_CPU_AFFINITY"),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.to_string().contains(needle), "{text:?}: {e}");

@@ -25,8 +25,9 @@
 //!
 //! `--vision` adds the camera and the vision pipeline to the mesh (the load a
 //! companion computer carries in flight); `--realtime P` runs the control path
-//! `SCHED_FIFO` as deploy/skymesh.toml does (broker and gateway at P, autopilot-link
-//! and vehicle-sim at P + 10) and the bench's own threads at P + 10.
+//! `SCHED_FIFO` on CPU 1 as deploy/skymesh.toml does (broker and gateway at P,
+//! autopilot-link at P + 10; `--pin none` or `--pin N` for no or another CPU) and
+//! the bench's own threads at P + 10 on the same CPU.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -457,16 +458,28 @@ fn main() -> Result<()> {
     if commands < 1 {
         bail!("--commands must be at least 1");
     }
-    // `--realtime P`: the control path real-time as deploy/skymesh.toml has it (the
-    // broker and the gateway at P, autopilot-link and vehicle-sim at P + 10), and the
-    // bench's own threads at P + 10. `--vision`: the camera (the embedded default,
-    // 1280x720 at 30 fps) and the vision pipeline run in the same mesh.
+    // `--realtime P`: the control path as deploy/skymesh.toml has it (the broker and
+    // the gateway SCHED_FIFO at P, autopilot-link at P + 10, all three on CPU 1, or
+    // on no CPU in particular with `--pin none`, or on `--pin N`), and the bench's own
+    // threads at P + 10 on the same CPU. `--vision`: the camera (the embedded
+    // default, 1280x720 at 30 fps) and the vision pipeline run in the same mesh,
+    // with normal scheduling on any CPU.
     let rt_priority = u8::try_from(arg("--realtime", 0))
         .ok()
         .filter(|p| *p <= 89)
         .context("--realtime must be 0 (off) to 89")?;
+    let pin: Vec<usize> = match std::env::args()
+        .collect::<Vec<_>>()
+        .windows(2)
+        .find(|w| w[0] == "--pin")
+        .map(|w| w[1].clone())
+    {
+        Some(v) if v == "none" => Vec::new(),
+        Some(v) => skymesh_runtime::realtime::parse_cpus(&v).map_err(anyhow::Error::msg)?,
+        None => vec![1],
+    };
     let vision = std::env::args().any(|a| a == "--vision");
-    let mut realtime = Vec::new();
+    let (mut realtime, mut cpu_affinity) = (Vec::new(), Vec::new());
     if let Some(low) =
         skymesh_runtime::realtime::RealtimePriority::new(rt_priority).map_err(anyhow::Error::msg)?
     {
@@ -475,12 +488,14 @@ fn main() -> Result<()> {
             ("mqtt-broker", low.get()),
             ("dji-gateway", low.get()),
             ("autopilot-link", high),
-            ("vehicle-sim", high),
         ] {
             realtime.push((name.to_string(), p));
+            if !pin.is_empty() {
+                cpu_affinity.push((name.to_string(), pin.clone()));
+            }
         }
         if let Ok(Some(bench)) = skymesh_runtime::realtime::RealtimePriority::new(high) {
-            set_bench_realtime(bench);
+            set_bench_realtime(bench, pin.clone());
         }
     }
     println!(
@@ -489,7 +504,7 @@ fn main() -> Result<()> {
             "normal scheduling".to_string()
         } else {
             format!(
-                "SCHED_FIFO (broker, gateway {rt_priority}; autopilot-link, vehicle-sim, bench {})",
+                "SCHED_FIFO (broker, gateway {rt_priority}; autopilot-link, bench {}) on CPUs {pin:?}",
                 rt_priority + 10
             )
         },
@@ -511,6 +526,7 @@ fn main() -> Result<()> {
             attitude_hz: 25.0,
             vision,
             realtime,
+            cpu_affinity,
             ..Default::default()
         },
         &services,
