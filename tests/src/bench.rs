@@ -46,6 +46,77 @@ pub fn bench_thread_realtime() {
     }
 }
 
+/// How an end-to-end bench runs the mesh's control path and load, from its command
+/// line: `--realtime P` gives the named services `SCHED_FIFO` as deploy/skymesh.toml
+/// does (priority P, or P + 10 for the ones marked high) on CPU 1 (`--pin N`,
+/// `--pin none`), and the bench's own threads P + 10 on the same CPUs
+/// ([`set_bench_realtime`]); `--vision` adds the camera (the embedded default,
+/// 1280x720 at 30 fps) and the vision pipeline, with normal scheduling on any CPU.
+#[derive(Debug, Default)]
+pub struct ControlPath {
+    pub realtime: Vec<(String, u8)>,
+    pub cpu_affinity: Vec<(String, Vec<usize>)>,
+    pub vision: bool,
+    /// One line for the bench's header.
+    pub describe: String,
+}
+
+impl ControlPath {
+    /// Reads `--realtime`, `--pin` and `--vision`; `services` are the control path's
+    /// (name, high).
+    pub fn from_args(services: &[(&str, bool)]) -> Result<ControlPath> {
+        let args: Vec<String> = std::env::args().collect();
+        let value = |name: &str| args.windows(2).find(|w| w[0] == name).map(|w| w[1].clone());
+        let low = match value("--realtime") {
+            Some(v) => v
+                .parse::<u8>()
+                .ok()
+                .filter(|p| *p <= 89)
+                .context("--realtime must be 0 (off) to 89")?,
+            None => 0,
+        };
+        let pin = match value("--pin") {
+            Some(v) if v == "none" => Vec::new(),
+            Some(v) => realtime::parse_cpus(&v).map_err(anyhow::Error::msg)?,
+            None => vec![1],
+        };
+        let mut path = ControlPath {
+            vision: args.iter().any(|a| a == "--vision"),
+            ..Default::default()
+        };
+        let Some(low) = RealtimePriority::new(low).map_err(anyhow::Error::msg)? else {
+            path.describe = format!(
+                "control path normal scheduling; camera and vision pipeline {}",
+                if path.vision { "running" } else { "off" }
+            );
+            return Ok(path);
+        };
+        let high = low.get() + 10;
+        for (name, is_high) in services {
+            let p = if *is_high { high } else { low.get() };
+            path.realtime.push((name.to_string(), p));
+            if !pin.is_empty() {
+                path.cpu_affinity.push((name.to_string(), pin.clone()));
+            }
+        }
+        if let Ok(Some(bench)) = RealtimePriority::new(high) {
+            set_bench_realtime(bench, pin.clone());
+        }
+        path.describe = format!(
+            "control path SCHED_FIFO {} (P = {}, P + 10 = {high}; the bench P + 10) on CPUs {pin:?}; \
+             camera and vision pipeline {}",
+            services
+                .iter()
+                .map(|(n, h)| format!("{n} {}", if *h { "P + 10" } else { "P" }))
+                .collect::<Vec<_>>()
+                .join(", "),
+            low.get(),
+            if path.vision { "running" } else { "off" }
+        );
+        Ok(path)
+    }
+}
+
 /// `--name N` from the command line, else `default`.
 pub fn arg(name: &str, default: u64) -> u64 {
     let args: Vec<String> = std::env::args().collect();

@@ -321,7 +321,10 @@ fn thread_scheduling(pid: u32) -> Vec<(u32, u32)> {
 /// `Cpus_allowed_list` of every thread of `pid`.
 fn thread_cpus(pid: u32) -> Vec<String> {
     let mut out = Vec::new();
-    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap().flatten() {
+    for task in std::fs::read_dir(format!("/proc/{pid}/task"))
+        .unwrap()
+        .flatten()
+    {
         let Ok(status) = std::fs::read_to_string(task.path().join("status")) else {
             continue;
         };
@@ -383,7 +386,10 @@ fn a_realtime_priority_and_cpu_reach_every_thread_and_survive_a_restart() {
     assert!(thread_scheduling(sim).iter().all(|t| *t == (0, 0)));
     if all.len() > 1 {
         let sim_cpus = thread_cpus(sim);
-        assert!(sim_cpus.iter().all(|c| *c != cpu.to_string()), "{sim_cpus:?}");
+        assert!(
+            sim_cpus.iter().all(|c| *c != cpu.to_string()),
+            "{sim_cpus:?}"
+        );
     }
     assert_eq!(gauge(&mesh, "vehicle-sim"), Some(0.0));
     if !permitted {

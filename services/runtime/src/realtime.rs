@@ -7,7 +7,8 @@
 //! command's hops through the broker, a gateway, the bus and the autopilot link are
 //! not queued behind the camera and the vision pipeline. Measured with the vision
 //! load running (docs/benchmarks.md, "Real-time priority for the control path"):
-//! DRC `drone_control` → MAVLink setpoint p99 6.5–6.7 ms without, 1.2 ms with.
+//! DRC `drone_control` → MAVLink setpoint p99 6.7–7.1 ms without, 0.83–0.92 ms
+//! with (on one CPU, below).
 //!
 //! The supervisor passes the variable from a service's `realtime_priority` key;
 //! systemd units set the policy themselves (`CPUSchedulingPolicy=fifo`), and the
@@ -23,7 +24,7 @@
 //! a VM, a halted vCPU the host must schedule again). Measured on the project's VM
 //! with nothing else running, real-time priority alone took the DRC path's p99 from
 //! 1.1–1.2 ms to 3.0–4.0 ms; with the control path's processes on one CPU, each
-//! hop's wake-up is on the CPU that is already awake, and the p99 was 1.1–1.2 ms.
+//! hop's wake-up is on the CPU that is already awake, and the p99 was 0.94–1.02 ms.
 //! The affinity is applied the same way as the priority (the main thread, before any
 //! other starts; threads inherit it); a CPU the machine does not have is a warning.
 //!

@@ -27,7 +27,7 @@
 //! companion computer carries in flight); `--realtime P` runs the control path
 //! `SCHED_FIFO` on CPU 1 as deploy/skymesh.toml does (broker and gateway at P,
 //! autopilot-link at P + 10; `--pin none` or `--pin N` for no or another CPU) and
-//! the bench's own threads at P + 10 on the same CPU.
+//! the bench's own threads at P + 10 on the same CPU (`bench::ControlPath`).
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -40,9 +40,7 @@ use mavlink::dialects::ardupilotmega::MavMessage;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
 use skymesh_autopilot_link::frame::FrameParser;
-use skymesh_e2e::bench::{
-    arg, bench_thread_realtime, percentile, set_bench_realtime, start_tapped_mesh,
-};
+use skymesh_e2e::bench::{arg, bench_thread_realtime, percentile, start_tapped_mesh, ControlPath};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, Command, ServiceId, VehicleCommand};
 use skymesh_runtime::{Bus, Stats};
@@ -458,58 +456,13 @@ fn main() -> Result<()> {
     if commands < 1 {
         bail!("--commands must be at least 1");
     }
-    // `--realtime P`: the control path as deploy/skymesh.toml has it (the broker and
-    // the gateway SCHED_FIFO at P, autopilot-link at P + 10, all three on CPU 1, or
-    // on no CPU in particular with `--pin none`, or on `--pin N`), and the bench's own
-    // threads at P + 10 on the same CPU. `--vision`: the camera (the embedded
-    // default, 1280x720 at 30 fps) and the vision pipeline run in the same mesh,
-    // with normal scheduling on any CPU.
-    let rt_priority = u8::try_from(arg("--realtime", 0))
-        .ok()
-        .filter(|p| *p <= 89)
-        .context("--realtime must be 0 (off) to 89")?;
-    let pin: Vec<usize> = match std::env::args()
-        .collect::<Vec<_>>()
-        .windows(2)
-        .find(|w| w[0] == "--pin")
-        .map(|w| w[1].clone())
-    {
-        Some(v) if v == "none" => Vec::new(),
-        Some(v) => skymesh_runtime::realtime::parse_cpus(&v).map_err(anyhow::Error::msg)?,
-        None => vec![1],
-    };
-    let vision = std::env::args().any(|a| a == "--vision");
-    let (mut realtime, mut cpu_affinity) = (Vec::new(), Vec::new());
-    if let Some(low) =
-        skymesh_runtime::realtime::RealtimePriority::new(rt_priority).map_err(anyhow::Error::msg)?
-    {
-        let high = low.get() + 10;
-        for (name, p) in [
-            ("mqtt-broker", low.get()),
-            ("dji-gateway", low.get()),
-            ("autopilot-link", high),
-        ] {
-            realtime.push((name.to_string(), p));
-            if !pin.is_empty() {
-                cpu_affinity.push((name.to_string(), pin.clone()));
-            }
-        }
-        if let Ok(Some(bench)) = skymesh_runtime::realtime::RealtimePriority::new(high) {
-            set_bench_realtime(bench, pin.clone());
-        }
-    }
-    println!(
-        "dji-bench: control path {}; camera and vision pipeline {}",
-        if rt_priority == 0 {
-            "normal scheduling".to_string()
-        } else {
-            format!(
-                "SCHED_FIFO (broker, gateway {rt_priority}; autopilot-link, bench {}) on CPUs {pin:?}",
-                rt_priority + 10
-            )
-        },
-        if vision { "running" } else { "off" }
-    );
+    let control = ControlPath::from_args(&[
+        ("mqtt-broker", false),
+        ("dji-gateway", false),
+        ("autopilot-link", true),
+    ])?;
+    println!("dji-bench: {}", control.describe);
+    let vision = control.vision;
     let mut services = vec![
         "vehicle-sim",
         "autopilot-link",
@@ -525,8 +478,8 @@ fn main() -> Result<()> {
             dji: true,
             attitude_hz: 25.0,
             vision,
-            realtime,
-            cpu_affinity,
+            realtime: control.realtime,
+            cpu_affinity: control.cpu_affinity,
             ..Default::default()
         },
         &services,

@@ -16,7 +16,11 @@
 //! that decodes it and writes a MAVLink setpoint over a second loopback TCP socket to
 //! the same tap (what a single-process translator would cost).
 //!
-//! `cargo run --release -p skymesh-e2e --bin solo-bench -- --rounds 30`
+//! `cargo run --release -p skymesh-e2e --bin solo-bench -- --rounds 30 [--realtime 20] [--vision]`
+//!
+//! `--realtime P` / `--vision`: the control path real-time on CPU 1 as shipped
+//! (solo-gateway and shot-engine at P, autopilot-link at P + 10), the camera and
+//! the vision pipeline in the mesh (`bench::ControlPath`).
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -27,7 +31,7 @@ use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::{MavMessage, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use mavlink::MavHeader;
 use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
-use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh};
+use skymesh_e2e::bench::{arg, bench_thread_realtime, percentile, start_tapped_mesh, ControlPath};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, VehicleState};
 use solo_proto::{shots, Location, SoloMessage};
@@ -263,21 +267,37 @@ fn report(name: &str, mut ms: Vec<f64>, base_p50: f64) {
 
 fn main() -> Result<()> {
     let rounds = arg("--rounds", 20) as usize;
+    let control = ControlPath::from_args(&[
+        ("solo-gateway", false),
+        ("shot-engine", false),
+        ("autopilot-link", true),
+    ])?;
+    println!("solo-bench: {}", control.describe);
+    let mut services = vec![
+        "vehicle-sim",
+        "autopilot-link",
+        "solo-gateway",
+        "shot-engine",
+    ];
+    if control.vision {
+        services.extend(["camera", "vision-pipeline"]);
+    }
     let (seen_tx, seen_rx) = mpsc::channel();
     let mut mesh = start_tapped_mesh(
         MeshOptions {
             solo: true,
             attitude_hz: 25.0,
+            vision: control.vision,
+            realtime: control.realtime,
+            cpu_affinity: control.cpu_affinity,
             ..Default::default()
         },
-        &[
-            "vehicle-sim",
-            "autopilot-link",
-            "solo-gateway",
-            "shot-engine",
-        ],
+        &services,
         move |parser, now| scan_frames(parser, now, &seen_tx),
     )?;
+    // The app's writes are this thread's: from here on it runs as the bench's
+    // threads do (the supervisor, already started, keeps normal scheduling).
+    bench_thread_realtime();
     take_off(&mesh)?;
 
     let app = TcpStream::connect(("127.0.0.1", mesh.solo_port))?;
