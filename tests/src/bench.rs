@@ -115,6 +115,26 @@ impl ControlPath {
         );
         Ok(path)
     }
+
+    /// `opts` with this control path's scheduling and load, and the services to
+    /// wait for: `services`, with the camera and the vision pipeline when they run.
+    pub fn mesh(
+        self,
+        opts: MeshOptions,
+        services: &[&'static str],
+    ) -> (MeshOptions, Vec<&'static str>) {
+        let mut wait = services.to_vec();
+        if self.vision {
+            wait.extend(["camera", "vision-pipeline"]);
+        }
+        let opts = MeshOptions {
+            vision: self.vision,
+            realtime: self.realtime,
+            cpu_affinity: self.cpu_affinity,
+            ..opts
+        };
+        (opts, wait)
+    }
 }
 
 /// `--name N` from the command line, else `default`.

@@ -462,29 +462,23 @@ fn main() -> Result<()> {
         ("autopilot-link", true),
     ])?;
     println!("dji-bench: {}", control.describe);
-    let vision = control.vision;
-    let mut services = vec![
-        "vehicle-sim",
-        "autopilot-link",
-        "mqtt-broker",
-        "dji-gateway",
-    ];
-    if vision {
-        services.extend(["camera", "vision-pipeline"]);
-    }
-    let (seen_tx, seen_rx) = mpsc::channel();
-    let mut mesh = start_tapped_mesh(
+    let (opts, services) = control.mesh(
         MeshOptions {
             dji: true,
             attitude_hz: 25.0,
-            vision,
-            realtime: control.realtime,
-            cpu_affinity: control.cpu_affinity,
             ..Default::default()
         },
-        &services,
-        move |parser, now| scan_setpoints(parser, now, &seen_tx),
-    )?;
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "mqtt-broker",
+            "dji-gateway",
+        ],
+    );
+    let (seen_tx, seen_rx) = mpsc::channel();
+    let mut mesh = start_tapped_mesh(opts, &services, move |parser, now| {
+        scan_setpoints(parser, now, &seen_tx)
+    })?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .on_thread_start(bench_thread_realtime)

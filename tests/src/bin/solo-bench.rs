@@ -273,28 +273,23 @@ fn main() -> Result<()> {
         ("autopilot-link", true),
     ])?;
     println!("solo-bench: {}", control.describe);
-    let mut services = vec![
-        "vehicle-sim",
-        "autopilot-link",
-        "solo-gateway",
-        "shot-engine",
-    ];
-    if control.vision {
-        services.extend(["camera", "vision-pipeline"]);
-    }
-    let (seen_tx, seen_rx) = mpsc::channel();
-    let mut mesh = start_tapped_mesh(
+    let (opts, services) = control.mesh(
         MeshOptions {
             solo: true,
             attitude_hz: 25.0,
-            vision: control.vision,
-            realtime: control.realtime,
-            cpu_affinity: control.cpu_affinity,
             ..Default::default()
         },
-        &services,
-        move |parser, now| scan_frames(parser, now, &seen_tx),
-    )?;
+        &[
+            "vehicle-sim",
+            "autopilot-link",
+            "solo-gateway",
+            "shot-engine",
+        ],
+    );
+    let (seen_tx, seen_rx) = mpsc::channel();
+    let mut mesh = start_tapped_mesh(opts, &services, move |parser, now| {
+        scan_frames(parser, now, &seen_tx)
+    })?;
     // The app's writes are this thread's: from here on it runs as the bench's
     // threads do (the supervisor, already started, keeps normal scheduling).
     bench_thread_realtime();
