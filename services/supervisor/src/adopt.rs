@@ -56,20 +56,13 @@ pub struct Instance {
     pub exe: PathBuf,
 }
 
-/// Fields 3 (state), 5 (pgrp) and 22 (starttime) of a `/proc/<pid>/stat` line. The
-/// command name (field 2) may contain spaces and `)`, so fields are counted from the
-/// last `)`.
+/// Fields 3 (state), 5 (pgrp) and 22 (starttime) of a `/proc/<pid>/stat` line.
 pub fn parse_stat(stat: &str) -> Option<StatFields> {
-    let (_, rest) = stat.rsplit_once(')')?;
-    let fields: Vec<&str> = rest.split_ascii_whitespace().collect();
-    // After `)`: field 3 is index 0.
-    let state = fields.first()?.chars().next()?;
-    let pgid = fields.get(2)?.parse().ok()?;
-    let start_ticks = fields.get(19)?.parse().ok()?;
+    let fields = crate::procfs::StatLine::parse(stat)?;
     Some(StatFields {
-        state,
-        pgid,
-        start_ticks,
+        state: fields.field(3)?.chars().next()?,
+        pgid: fields.number(5)?,
+        start_ticks: fields.number(22)?,
     })
 }
 

@@ -44,40 +44,66 @@ pub fn usage(pid: u32) -> Option<ProcUsage> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     let statm = std::fs::read_to_string(format!("/proc/{pid}/statm")).ok()?;
     let (ticks_per_s, page) = units();
-    let ticks = parse_stat_cpu_ticks(&stat)?;
+    let stat = StatLine::parse(&stat)?;
+    let ticks = cpu_ticks(&stat)?;
     let pages = parse_statm_resident_pages(&statm)?;
     Some(ProcUsage {
         cpu_seconds: ticks as f64 / ticks_per_s,
         resident_bytes: pages.saturating_mul(page),
-        realtime_priority: parse_stat_realtime_priority(&stat).unwrap_or(0),
+        realtime_priority: realtime_priority(&stat).unwrap_or(0),
     })
 }
 
-/// utime + stime (fields 14 and 15) of a `/proc/<pid>/stat` line. The command name
-/// (field 2) is in parentheses and may contain spaces and `)`, so fields are counted
-/// from the last `)`.
-pub fn parse_stat_cpu_ticks(stat: &str) -> Option<u64> {
-    let (_, rest) = stat.rsplit_once(')')?;
-    let mut fields = rest.split_ascii_whitespace();
-    // After `)`: field 3 (state) is index 0, so utime (14) is index 11.
-    let utime: u64 = fields.nth(11)?.parse().ok()?;
-    let stime: u64 = fields.next()?.parse().ok()?;
+/// The fields of a `/proc/<pid>/stat` line, addressed by their numbers in proc(5).
+/// The command name (field 2) is in parentheses and may contain spaces and `)`, so
+/// fields are counted from the last `)`; fields 1 and 2 are not kept.
+#[derive(Debug)]
+pub struct StatLine<'a>(Vec<&'a str>);
+
+impl<'a> StatLine<'a> {
+    pub fn parse(stat: &'a str) -> Option<Self> {
+        let (_, rest) = stat.rsplit_once(')')?;
+        Some(Self(rest.split_ascii_whitespace().collect()))
+    }
+
+    /// Field `n` (3 = state, 5 = pgrp, 14 = utime, …), if the line has it.
+    pub fn field(&self, n: usize) -> Option<&'a str> {
+        self.0.get(n.checked_sub(3)?).copied()
+    }
+
+    /// Field `n` parsed as a number.
+    pub fn number<T: std::str::FromStr>(&self, n: usize) -> Option<T> {
+        self.field(n)?.parse().ok()
+    }
+}
+
+/// utime + stime (fields 14 and 15).
+fn cpu_ticks(stat: &StatLine<'_>) -> Option<u64> {
+    let utime: u64 = stat.number(14)?;
+    let stime: u64 = stat.number(15)?;
     Some(utime.saturating_add(stime))
 }
 
-/// The real-time priority of a `/proc/<pid>/stat` line: `rt_priority` (field 40)
-/// under `SCHED_FIFO` or `SCHED_RR` (`policy`, field 41: 1 or 2), else 0.
-pub fn parse_stat_realtime_priority(stat: &str) -> Option<u32> {
-    let (_, rest) = stat.rsplit_once(')')?;
-    let mut fields = rest.split_ascii_whitespace();
-    // After `)`: field 3 is index 0, so rt_priority (40) is index 37.
-    let rt_priority: u32 = fields.nth(37)?.parse().ok()?;
-    let policy: u32 = fields.next()?.parse().ok()?;
+/// `rt_priority` (field 40) under `SCHED_FIFO` or `SCHED_RR` (`policy`, field 41:
+/// 1 or 2), else 0.
+fn realtime_priority(stat: &StatLine<'_>) -> Option<u32> {
+    let rt_priority: u32 = stat.number(40)?;
+    let policy: u32 = stat.number(41)?;
     Some(if matches!(policy, 1 | 2) {
         rt_priority
     } else {
         0
     })
+}
+
+/// utime + stime of a `/proc/<pid>/stat` line.
+pub fn parse_stat_cpu_ticks(stat: &str) -> Option<u64> {
+    cpu_ticks(&StatLine::parse(stat)?)
+}
+
+/// The real-time priority of a `/proc/<pid>/stat` line; 0 under a normal policy.
+pub fn parse_stat_realtime_priority(stat: &str) -> Option<u32> {
+    realtime_priority(&StatLine::parse(stat)?)
 }
 
 /// The resident set size in pages (second field of `/proc/<pid>/statm`).
