@@ -69,6 +69,11 @@ impl Deadline {
         Deadline(monotonic_ns().saturating_add(ns))
     }
 
+    /// True once `now_ns` (`CLOCK_MONOTONIC`) is at or past it.
+    pub(crate) fn passed(self, now_ns: u64) -> bool {
+        now_ns >= self.0
+    }
+
     fn timespec(self) -> futex::Timespec {
         futex::Timespec {
             tv_sec: i64::try_from(self.0 / 1_000_000_000).unwrap_or(i64::MAX),
@@ -99,6 +104,13 @@ fn name_hash(topic: &str) -> u64 {
     topic.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
+}
+
+/// The name of a frame stream's *making* word: a second event count, odd from
+/// the moment its publisher starts a frame until it has sent it
+/// ([`TopicWord::begin_making`], [`crate::FrameSubscriber::set_early_wake`]).
+pub(crate) fn making_word(topic: &str) -> String {
+    format!("{topic}#making")
 }
 
 /// One process's handle on a topic's event count. The bus opens it for every
@@ -145,13 +157,41 @@ impl TopicWord {
     /// A publish's part, after its sample is in place: counts it, and wakes every
     /// receiver of the topic that waits (in every process).
     pub fn wake(&self) -> Result<(), IpcError> {
+        self.word().seq.fetch_add(1, SeqCst);
+        self.wake_waiters()
+    }
+
+    /// After a change of the count: the `FUTEX_WAKE` call, only while a receive is
+    /// announced as waiting.
+    fn wake_waiters(&self) -> Result<(), IpcError> {
         let w = self.word();
-        w.seq.fetch_add(1, SeqCst);
         if w.waiters.load(SeqCst) != 0 {
             futex::wake(&w.seq, futex::Flags::empty(), u32::MAX)
                 .map_err(|e| ipc_err("futex wake", &self.topic, e))?;
         }
         Ok(())
+    }
+
+    /// A frame publisher's announcement, after its loan, that a frame is in the
+    /// making (the stream's *making* word, [`making_word`]): makes the word odd and
+    /// wakes the receivers waiting for it
+    /// ([`crate::FrameSubscriber::set_early_wake`]). Follow with
+    /// [`TopicWord::end_making`] whatever becomes of the frame. Two atomic
+    /// operations while nobody waits.
+    pub(crate) fn begin_making(&self) -> Result<(), IpcError> {
+        // Already odd only after a publisher died between begin and end: the word
+        // then stays as it is, and this frame's end makes it even again.
+        self.word().seq.fetch_or(1, SeqCst);
+        self.wake_waiters()
+    }
+
+    /// The frame announced by [`TopicWord::begin_making`] is sent or given up: the
+    /// word even again (a new value). Nobody waits on an odd word, so no wake-up.
+    pub(crate) fn end_making(&self) {
+        let w = self.word();
+        let _ = w
+            .seq
+            .fetch_update(SeqCst, SeqCst, |v| (v & 1 == 1).then(|| v.wrapping_add(1)));
     }
 
     /// A receive's first step: announces a wait and reads the count. Look for a
@@ -213,6 +253,12 @@ pub struct Armed<'a> {
 }
 
 impl Armed<'_> {
+    /// On a stream's making word: a frame was in the making when the wait was
+    /// announced (the word was odd), so there is nothing to sleep for.
+    pub(crate) fn in_making(&self) -> bool {
+        self.seen & 1 == 1
+    }
+
     /// Sleeps as [`Armed::wait`] does, until `deadline` at the latest (`None`: no
     /// limit); `true` if it passed (then or before the call).
     pub fn wait_until(self, deadline: Option<Deadline>) -> Result<bool, IpcError> {

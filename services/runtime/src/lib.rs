@@ -39,7 +39,7 @@ pub mod warn_limit;
 pub use anticipate::AnticipationStats;
 pub use blocking::BlockingSubscriber;
 pub use config::{ConfigError, ServiceConfig};
-pub use frames::{FrameError, FramePublisher, FrameSubscriber};
+pub use frames::{EarlyWakeStats, FrameError, FramePublisher, FrameSubscriber};
 pub use futex::{Armed, Deadline, TopicWord};
 /// The iceoryx2 service flavour of the futex wake-up's event (for benchmarks that
 /// measure raw iceoryx2 beside the bus).

@@ -388,3 +388,83 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     sub.set_futex_wake().unwrap();
     blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
 }
+
+/// `set_early_wake` on a frame stream: the receiver sleeps until the publisher
+/// starts each frame and polls until it is sent, so frames are taken while polling
+/// (a publisher that did not wake the receiver at a frame's start would leave
+/// every receive asleep until its 5 s timeout, with nothing polled); every frame
+/// arrives in order, and the receive times out when the stream stops.
+#[test]
+fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
+    let d = domain("ew");
+    let bus = Bus::open(&d, "frame-ew", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::camera_frames("early");
+    let mut sub = bus.frame_subscriber(&topic).unwrap();
+    assert_eq!(sub.early_wake(), None);
+    sub.set_early_wake(Duration::from_millis(2)).unwrap();
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
+    let stats = sub.early_wake().expect("on");
+    assert!(stats.polls > 0 && stats.hits > 0, "{stats:?}");
+    assert!(stats.hits <= stats.polls);
+}
+
+/// Set in the child that dies in the middle of a frame: the domain to publish in.
+const DIE_MID_FRAME_ENV: &str = "SKYMESH_FRAMES_TEST_DIE_MID_FRAME";
+
+/// The publisher half of [`a_publisher_killed_mid_frame_does_not_stall_early_receivers`]:
+/// starts a frame, says so on stdout and never finishes it.
+#[test]
+fn child_dies_mid_frame() {
+    let Ok(name) = std::env::var(DIE_MID_FRAME_ENV) else {
+        return;
+    };
+    let d = Domain::load(&name, None).unwrap();
+    let bus = Bus::open(&d, "frame-dier", ServiceId::Camera, 3, Stats::new()).unwrap();
+    let (f, w, h, s) = FRAMES[4];
+    let len = f.frame_len(w, h, s).unwrap() as usize;
+    let mut publ = bus
+        .frame_publisher(&topics::camera_frames("dier"), len)
+        .unwrap();
+    let _ = publ.publish_with(len, |_, _| {
+        println!("filling");
+        std::io::stdout().flush().unwrap();
+        std::thread::sleep(Duration::from_secs(600));
+    });
+}
+
+/// A camera killed between a frame's start and its send leaves the stream's making
+/// word announcing a frame that never comes: an early receiver polls for it, gives
+/// up after its `max_spin` and waits for the send, so the next publisher's frames
+/// all arrive, in order, and the stream's state recovers (frames taken while
+/// polling again).
+#[test]
+fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
+    let d = domain("die");
+    let bus = Bus::open(&d, "frame-die", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::camera_frames("dier");
+    let mut sub = bus.frame_subscriber(&topic).unwrap();
+    sub.set_early_wake(Duration::from_millis(2)).unwrap();
+    let mut child = Command::new(std::env::current_exe().unwrap())
+        .args([
+            "child_dies_mid_frame",
+            "--exact",
+            "--test-threads=1",
+            "--nocapture",
+        ])
+        .env(DIE_MID_FRAME_ENV, &d.name)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    while !line.contains("filling") {
+        line.clear();
+        assert!(out.read_line(&mut line).unwrap() > 0, "child ended early");
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    d.cleanup_dead_nodes();
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
+    let stats = sub.early_wake().expect("on");
+    assert!(stats.hits > 0, "{stats:?}");
+}

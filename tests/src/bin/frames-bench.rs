@@ -6,7 +6,7 @@
 //! cargo run --release -p skymesh-e2e --bin frames-bench [-- FRAMES_PER_PHASE]
 //! ```
 //!
-//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, eight phases per size in this
+//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, ten phases per size in this
 //! order (fresh child process each), FRAMES_PER_PHASE frames each (default 200), the
 //! first [`WARMUP`] not counted (page faults of fresh mappings, first wake-ups):
 //!
@@ -33,8 +33,15 @@
 //!   (`FrameSubscriber::set_futex_wake`) instead of its socket event; compared with a
 //!   fresh socket `xfer` phase.
 //!
+//! - `ew`: `xfer` with the iceoryx2 receiver woken when the publisher *starts* the
+//!   frame (after its loan, before the pixel write) and polling until it is sent
+//!   (`FrameSubscriber::set_early_wake`, [`ANT_MAX_SPIN`]); compared with a fresh
+//!   socket `xfer` phase. The receiver prints how many frames it polled for and took.
+//!
 //! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_TRACE=1` makes the `ant`
-//! receiver print every frame's latency and anticipation state (stderr).
+//! receiver print every frame's latency and anticipation state (stderr);
+//! `FRAMES_BENCH_RX_CPU=1 taskset -c 0 frames-bench` gives the receivers CPU 1 and
+//! the sender CPU 0.
 //!
 //! Both sides use `CLOCK_MONOTONIC`, shared by the processes of one machine. CPU per
 //! frame is `CLOCK_PROCESS_CPUTIME_ID` over the counted frames on each side. In the
@@ -77,6 +84,10 @@ enum Mode {
     /// Transfer only, the iceoryx2 receiver woken through the event count
     /// (`FrameSubscriber::set_futex_wake`); its socket phase is `xfer`'s.
     Fx,
+    /// Transfer only, the iceoryx2 receiver woken when the publisher starts the
+    /// frame and polling until it is sent (`FrameSubscriber::set_early_wake`); its
+    /// socket phase is `xfer`'s.
+    Ew,
 }
 
 /// The anticipating receiver's longest poll per frame.
@@ -89,13 +100,14 @@ impl Mode {
             Mode::Xfer => "xfer",
             Mode::Ant => "ant",
             Mode::Fx => "fx",
+            Mode::Ew => "ew",
         }
     }
 
     /// The socket phase compared with this one.
     fn socket(self) -> Mode {
         match self {
-            Mode::Ant | Mode::Fx => Mode::Xfer,
+            Mode::Ant | Mode::Fx | Mode::Ew => Mode::Xfer,
             m => m,
         }
     }
@@ -106,6 +118,7 @@ impl Mode {
             "xfer" => Ok(Mode::Xfer),
             "ant" => Ok(Mode::Ant),
             "fx" => Ok(Mode::Fx),
+            "ew" => Ok(Mode::Ew),
             _ => anyhow::bail!("unknown mode `{s}`"),
         }
     }
@@ -116,6 +129,7 @@ fn main() -> Result<()> {
     match args.get(1).map(String::as_str) {
         Some("--iox-sub") => {
             die_with_parent()?;
+            pin_receiver()?;
             iox_receiver(
                 &args[2],
                 args[3].parse()?,
@@ -125,6 +139,7 @@ fn main() -> Result<()> {
         }
         Some("--uds-sub") => {
             die_with_parent()?;
+            pin_receiver()?;
             uds_receiver(
                 &args[2],
                 args[3].parse()?,
@@ -137,6 +152,19 @@ fn main() -> Result<()> {
             driver(frames)
         }
     }
+}
+
+/// `FRAMES_BENCH_RX_CPU=N`: every receiving child (iceoryx2 and socket alike) pins
+/// itself to CPU N, the consumer on a core of its own. Place the sender with
+/// `taskset -c M frames-bench`.
+fn pin_receiver() -> Result<()> {
+    let Ok(v) = std::env::var("FRAMES_BENCH_RX_CPU") else {
+        return Ok(());
+    };
+    let cpus = skymesh_runtime::realtime::parse_cpus(&v)
+        .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU: {e}"))?;
+    skymesh_runtime::realtime::pin(&cpus)
+        .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU={v}: cannot pin: {e}"))
 }
 
 /// What the sender writes into every pixel of frame `k` (the receiver checks it).
@@ -208,7 +236,7 @@ fn driver(frames: usize) -> Result<()> {
             continue;
         }
         let len = (w * h * 3) as usize;
-        for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx] {
+        for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx, Mode::Ew] {
             let iox = iox_run(w, h, frames, mode)?;
             let uds = uds_run(len, frames, mode.socket())?;
             let (pi, pu) = (iox.p(), uds.p());
@@ -253,7 +281,7 @@ fn driver(frames: usize) -> Result<()> {
             iox_p.push((w, mode, pi));
         }
     }
-    println!("iceoryx2 publisher, per frame (xfer, ant and fx phases): µs");
+    println!("iceoryx2 publisher, per frame (xfer, ant, fx and ew phases): µs");
     println!(
         "{:>9} {:>4} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
         "size",
@@ -285,7 +313,7 @@ fn driver(frames: usize) -> Result<()> {
             se[2] / 1e3,
         );
     }
-    for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx] {
+    for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx, Mode::Ew] {
         let find = |w: u32| iox_p.iter().find(|e| e.0 == w && e.1 == mode).map(|e| e.2);
         if let (Some(small), Some(big)) = (find(640), find(1920)) {
             println!(
@@ -352,7 +380,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     drop(publ);
     drop(bus);
     let (loan, write, send) = match mode {
-        Mode::Xfer | Mode::Ant | Mode::Fx => (loan, write, send),
+        Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => (loan, write, send),
         Mode::Full => (Vec::new(), Vec::new(), Vec::new()),
     };
     Ok(Phase {
@@ -374,6 +402,9 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
     if mode == Mode::Fx {
         sub.set_futex_wake()?;
     }
+    if mode == Mode::Ew {
+        sub.set_early_wake(ANT_MAX_SPIN)?;
+    }
     let mut tally = Tally::new(frames, WARMUP);
     println!("ready");
     // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
@@ -386,7 +417,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
                 let t1 = monotonic_ns();
                 (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx => {
+            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
                 let t1 = monotonic_ns();
                 let ends = (
                     pixels.first().copied().unwrap_or(0),
@@ -400,7 +431,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
         ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
         match mode {
             Mode::Full => check_sum(k, n, sum)?,
-            Mode::Xfer | Mode::Ant | Mode::Fx => check_ends(k, ends)?,
+            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => check_ends(k, ends)?,
         }
         tally.add(k, t0, t1);
         if std::env::var_os("FRAMES_BENCH_TRACE").is_some() {
@@ -418,6 +449,12 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
             a.period.map_or(f64::NAN, |p| p.as_secs_f64() * 1e3),
             a.windows,
             a.hits
+        );
+    }
+    if let Some(e) = sub.early_wake() {
+        eprintln!(
+            "    (ew receiver: {} frames polled for from their start, {} taken while polling)",
+            e.polls, e.hits
         );
     }
     tally.report()
@@ -451,7 +488,7 @@ fn uds_run(len: usize, frames: usize, mode: Mode) -> Result<Phase> {
                 buf[HEAD..].fill(fill_value(k));
                 t0
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx => {
+            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
                 buf[HEAD..].fill(fill_value(k));
                 monotonic_ns()
             }
@@ -497,7 +534,7 @@ fn uds_receiver(path: &str, len: usize, frames: usize, mode: Mode) -> Result<()>
                 check_sum(k, n, sum)?;
                 tally.add(k, t0, t1);
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx => {
+            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
                 let t1 = monotonic_ns();
                 check_ends(k, (buf[0], buf[len - 1]))?;
                 tally.add(k, t0, t1);
