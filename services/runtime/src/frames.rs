@@ -20,7 +20,7 @@ use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 
 use crate::anticipate::{Anticipating, AnticipationStats, PollPause};
 use crate::clock::monotonic_ns;
-use crate::futex::{making_word, Deadline, TopicWord};
+use crate::futex::{making_word, wait_either, Deadline, Either, TopicWord};
 use crate::ipc::{
     ipc_err, recv_anticipating, time_left, with_qos, with_retry, Bus, IpcError, ReceiveCounts,
     SocketWait, Svc, WaitSource, Wakers,
@@ -216,6 +216,10 @@ impl FramePublisher {
         header.header.stamp_ns = monotonic_ns();
         header.header.service = self.service;
         header.header.instance = self.instance;
+        // Ended before the send: a receiver that takes this frame the moment it is
+        // sent and comes back for the next must not find it still in the making
+        // (it would poll for a frame a period away).
+        self.making.end_making();
         sample
             .send()
             .map_err(|e| ipc_err("send frame", &self.topic, e))?;
@@ -235,7 +239,8 @@ impl FramePublisher {
     }
 }
 
-/// Ends a frame's making however `publish_with` returns (sent, refused, failed).
+/// Ends a frame's making however `publish_with` returns early (refused, failed);
+/// after the send's own `end_making` it changes nothing.
 struct EndMaking<'a>(&'a TopicWord);
 
 impl Drop for EndMaking<'_> {
@@ -533,47 +538,137 @@ fn recv_early<R>(
     deadline: Option<Deadline>,
     mut look: impl FnMut() -> Result<Option<R>, FrameError>,
 ) -> Result<Option<R>, FrameError> {
-    if let Some(r) = look()? {
-        return Ok(Some(r));
-    }
-    let armed = early.making.arm();
-    if !armed.in_making() {
-        // Nothing in the making: a frame sent since the first look is pending
-        // (its making ended before this announcement), else sleep until the
-        // publisher starts the next one.
-        if let Some(r) = look()? {
-            return Ok(Some(r));
-        }
-        if armed.wait_until(deadline)? {
-            return look();
-        }
-    } else {
-        drop(armed);
-    }
-    // Woken by a frame's start (or announced while one was in the making): poll
-    // until it is sent.
-    early.polls.fetch_add(1, Relaxed);
-    let start = monotonic_ns();
-    let until = start.saturating_add(u64::try_from(early.max_spin.as_nanos()).unwrap_or(u64::MAX));
-    let mut pause = PollPause::new(start);
     loop {
         if let Some(r) = look()? {
-            early.hits.fetch_add(1, Relaxed);
             return Ok(Some(r));
         }
-        let now = monotonic_ns();
-        if now >= until || deadline.is_some_and(|d| d.passed(now)) {
-            break;
+        let making = early.making.arm();
+        if !making.in_making() {
+            // Nothing in the making: sleep until the publisher starts a frame or
+            // sends one (a publisher that does not announce its frames, e.g. of an
+            // older build, still wakes the receiver), announced on both words
+            // before the last look so neither is missed.
+            let sent = word.arm();
+            if let Some(r) = look()? {
+                return Ok(Some(r));
+            }
+            match wait_either(&making, &sent, deadline)? {
+                Either::TimedOut => return look(),
+                Either::Unsupported => {
+                    drop((making, sent));
+                    warn_no_waitv();
+                    return word.recv(deadline, look);
+                }
+                Either::Woken => {}
+            }
+            drop((making, sent));
+            if !early.making.in_making() {
+                // A send (or its whole making since the wake-up), a signal: look.
+                continue;
+            }
+        } else {
+            drop(making);
         }
-        pause.pause(now);
+        // A frame is in the making: poll until it is sent.
+        early.polls.fetch_add(1, Relaxed);
+        let start = monotonic_ns();
+        let spin = u64::try_from(early.max_spin.as_nanos()).unwrap_or(u64::MAX);
+        let until = start.saturating_add(spin);
+        let mut pause = PollPause::new(start);
+        loop {
+            if let Some(r) = look()? {
+                early.hits.fetch_add(1, Relaxed);
+                return Ok(Some(r));
+            }
+            let now = monotonic_ns();
+            if now >= until || deadline.is_some_and(|d| d.passed(now)) {
+                break;
+            }
+            pause.pause(now);
+        }
+        // Not sent within `max_spin` (a slow frame, a publisher that died
+        // mid-frame): wait for the send itself.
+        return word.recv(deadline, look);
     }
-    // Not sent within `max_spin` (a slow frame, a publisher that died mid-frame, a
-    // spurious wake-up): wait for the send itself.
-    word.recv(deadline, look)
+}
+
+/// Once per process: the kernel cannot wait on two words, so early receives wait
+/// for the send as `set_futex_wake` does.
+fn warn_no_waitv() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        tracing::warn!(
+            "early frame wake-up needs futex_waitv (Linux 5.16 or later); receiving without it"
+        );
+    });
 }
 
 impl WaitSource for FrameSubscriber {
     fn listener(&self) -> Result<&Listener<Svc>, IpcError> {
         self.socket.listener(&self.topic)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc;
+
+    use skymesh_ipc_types::{topics, PixelFormat, ServiceId};
+
+    use crate::ipc::DomainGuard;
+    use crate::{Bus, Domain, Stats};
+
+    use super::*;
+
+    /// A frame sent the way a publisher that does not announce its frames sends
+    /// it (an older build's): loan, write, send, notify, no making word.
+    fn publish_unannounced(publ: &mut FramePublisher, seq: u64) {
+        let (f, w, h) = (PixelFormat::Nv12, 2, 2);
+        let len = f.frame_len(w, h, w).unwrap() as usize;
+        let mut sample = publ.port.loan_slice(len).unwrap();
+        let mut header = FrameHeader {
+            frame_seq: seq,
+            ..Default::default()
+        };
+        header.set_geometry(f, w, h, w);
+        header.payload_len = len as u32;
+        header.header.seq = seq;
+        header.header.stamp_ns = monotonic_ns();
+        *sample.user_header_mut() = header;
+        sample.send().unwrap();
+        publ.wakers.notify(&publ.topic).unwrap();
+    }
+
+    /// An early receiver asleep between frames wakes for a frame whose publisher
+    /// never announced it: it waits on the send too, not only on the making word
+    /// (waiting on the making word alone it would sleep until its timeout, here
+    /// none: the receive would never return).
+    #[test]
+    fn an_early_receiver_takes_frames_a_publisher_did_not_announce() {
+        let d = DomainGuard(Domain::load(&format!("ut{}early", std::process::id()), None).unwrap());
+        let bus = Bus::open(&d, "early-old", ServiceId::Tool, 0, Stats::new()).unwrap();
+        let topic = topics::camera_frames("old");
+        let mut sub = bus.frame_subscriber(&topic).unwrap();
+        sub.set_early_wake(Duration::from_millis(2)).unwrap();
+        let mut publ = bus.frame_publisher(&topic, 64).unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for _ in 0..3 {
+                let got = sub.recv_blocking_with(None, |h, _| h.frame_seq).unwrap();
+                tx.send((got, sub.early_wake())).unwrap();
+            }
+        });
+        for seq in 1..=3 {
+            // Let the receiver fall asleep first (it may not have; then the frame
+            // is pending when it looks, which proves nothing but breaks nothing).
+            std::thread::sleep(Duration::from_millis(50));
+            publish_unannounced(&mut publ, seq);
+            let (got, stats) = rx
+                .recv_timeout(Duration::from_secs(30))
+                .expect("the receiver woke for the unannounced frame");
+            assert_eq!(got, Some(seq));
+            // No frame was announced, so none was polled for.
+            assert_eq!(stats, Some(EarlyWakeStats { polls: 0, hits: 0 }));
+        }
     }
 }

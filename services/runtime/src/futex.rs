@@ -185,13 +185,20 @@ impl TopicWord {
         self.wake_waiters()
     }
 
-    /// The frame announced by [`TopicWord::begin_making`] is sent or given up: the
-    /// word even again (a new value). Nobody waits on an odd word, so no wake-up.
+    /// The frame announced by [`TopicWord::begin_making`] is about to be sent, or
+    /// is given up: the word even again (a new value). Nobody waits on an odd
+    /// word, so no wake-up. A second call changes nothing.
     pub(crate) fn end_making(&self) {
         let w = self.word();
         let _ = w
             .seq
             .fetch_update(SeqCst, SeqCst, |v| (v & 1 == 1).then(|| v.wrapping_add(1)));
+    }
+
+    /// True while a frame is in the making (the word is odd): on a stream's making
+    /// word.
+    pub(crate) fn in_making(&self) -> bool {
+        self.word().seq.load(SeqCst) & 1 == 1
     }
 
     /// A receive's first step: announces a wait and reads the count. Look for a
@@ -281,6 +288,46 @@ impl Armed<'_> {
     /// and at the clock whichever it was.
     pub fn wait(self, timeout: Option<Duration>) -> Result<(), IpcError> {
         self.wait_until(timeout.map(Deadline::after)).map(drop)
+    }
+}
+
+/// How [`wait_either`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Either {
+    /// One of the words changed (or a signal or spurious wake-up): look.
+    Woken,
+    TimedOut,
+    /// The kernel has no `futex_waitv` (Linux < 5.16).
+    Unsupported,
+}
+
+/// Sleeps until either armed word changes from what its arming read (a publish on
+/// either, in any process), `deadline` (`None`: no limit) or a signal: one
+/// `futex_waitv` call on both. Both stay announced while asleep, so either's
+/// publisher makes the wake-up call.
+pub(crate) fn wait_either(
+    a: &Armed<'_>,
+    b: &Armed<'_>,
+    deadline: Option<Deadline>,
+) -> Result<Either, IpcError> {
+    let entry = |armed: &Armed<'_>| {
+        let mut w = futex::Wait::new();
+        w.val = u64::from(armed.seen);
+        w.uaddr = futex::WaitPtr::new(armed.word.seq.as_ptr().cast());
+        w.flags = futex::WaitFlags::SIZE_U32;
+        w
+    };
+    let limit = deadline.map(Deadline::timespec);
+    match futex::waitv(
+        &[entry(a), entry(b)],
+        futex::WaitvFlags::empty(),
+        limit.as_ref(),
+        rustix::thread::ClockId::Monotonic,
+    ) {
+        Ok(_) | Err(rustix::io::Errno::AGAIN) | Err(rustix::io::Errno::INTR) => Ok(Either::Woken),
+        Err(rustix::io::Errno::TIMEDOUT) => Ok(Either::TimedOut),
+        Err(rustix::io::Errno::NOSYS) => Ok(Either::Unsupported),
+        Err(e) => Err(ipc_err("futex waitv", a.topic, e)),
     }
 }
 

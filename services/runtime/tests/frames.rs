@@ -323,6 +323,19 @@ fn blocking_receive_takes_a_periodic_stream(
     n: u64,
     period: Duration,
 ) {
+    periodic_stream_written_slowly(bus, topic, sub, n, period, Duration::ZERO);
+}
+
+/// [`blocking_receive_takes_a_periodic_stream`] with each frame's pixels taking
+/// `write_time` to write (a camera's capture into the loaned frame).
+fn periodic_stream_written_slowly(
+    bus: &Bus,
+    topic: &skymesh_ipc_types::Topic,
+    sub: &skymesh_runtime::FrameSubscriber,
+    n: u64,
+    period: Duration,
+    write_time: Duration,
+) {
     let (f, w, h, s) = FRAMES[4];
     let len = f.frame_len(w, h, s).unwrap() as usize;
     let mut publ = bus.frame_publisher(topic, len).unwrap();
@@ -335,6 +348,7 @@ fn blocking_receive_takes_a_periodic_stream(
                 publ.publish_with(len, |hd, pixels| {
                     hd.frame_seq = i;
                     hd.set_geometry(f, w, h, s);
+                    std::thread::sleep(write_time);
                     pixels.fill(i as u8);
                 })
                 .unwrap();
@@ -389,11 +403,12 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
 }
 
-/// `set_early_wake` on a frame stream: the receiver sleeps until the publisher
-/// starts each frame and polls until it is sent, so frames are taken while polling
-/// (a publisher that did not wake the receiver at a frame's start would leave
-/// every receive asleep until its 5 s timeout, with nothing polled); every frame
-/// arrives in order, and the receive times out when the stream stops.
+/// `set_early_wake` on a frame stream whose pixels take 5 ms to write: the
+/// receiver sleeps until the publisher starts each frame and polls until it is
+/// sent, so frames are taken while polling (a publisher that did not wake the
+/// receiver at a frame's start would leave every receive to wake at the send, with
+/// nothing polled); every frame arrives in order, and the receive times out when
+/// the stream stops.
 #[test]
 fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
     let d = domain("ew");
@@ -401,8 +416,9 @@ fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
     let topic = topics::camera_frames("early");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     assert_eq!(sub.early_wake(), None);
-    sub.set_early_wake(Duration::from_millis(2)).unwrap();
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
+    sub.set_early_wake(Duration::from_millis(20)).unwrap();
+    let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
+    periodic_stream_written_slowly(&bus, &topic, &sub, 40, period, write);
     let stats = sub.early_wake().expect("on");
     assert!(stats.polls > 0 && stats.hits > 0, "{stats:?}");
     assert!(stats.hits <= stats.polls);
@@ -443,7 +459,7 @@ fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
     let bus = Bus::open(&d, "frame-die", ServiceId::Tool, 0, Stats::new()).unwrap();
     let topic = topics::camera_frames("dier");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
-    sub.set_early_wake(Duration::from_millis(2)).unwrap();
+    sub.set_early_wake(Duration::from_millis(20)).unwrap();
     let mut child = Command::new(std::env::current_exe().unwrap())
         .args([
             "child_dies_mid_frame",
@@ -464,7 +480,8 @@ fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
     child.kill().unwrap();
     child.wait().unwrap();
     d.cleanup_dead_nodes();
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
+    let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
+    periodic_stream_written_slowly(&bus, &topic, &sub, 40, period, write);
     let stats = sub.early_wake().expect("on");
     assert!(stats.hits > 0, "{stats:?}");
 }

@@ -41,7 +41,7 @@
 //! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_TRACE=1` makes the `ant`
 //! receiver print every frame's latency and anticipation state (stderr);
 //! `FRAMES_BENCH_RX_CPU=1 taskset -c 0 frames-bench` gives the receivers CPU 1 and
-//! the sender CPU 0.
+//! the sender CPU 0; `FRAMES_BENCH_RX_RT=10` runs the receivers under `SCHED_FIFO`.
 //!
 //! Both sides use `CLOCK_MONOTONIC`, shared by the processes of one machine. CPU per
 //! frame is `CLOCK_PROCESS_CPUTIME_ID` over the counted frames on each side. In the
@@ -156,15 +156,24 @@ fn main() -> Result<()> {
 
 /// `FRAMES_BENCH_RX_CPU=N`: every receiving child (iceoryx2 and socket alike) pins
 /// itself to CPU N, the consumer on a core of its own. Place the sender with
-/// `taskset -c M frames-bench`.
+/// `taskset -c M frames-bench`. `FRAMES_BENCH_RX_RT=P`: the receiving children
+/// run under `SCHED_FIFO` at P (the sender keeps the bench's scheduling).
 fn pin_receiver() -> Result<()> {
-    let Ok(v) = std::env::var("FRAMES_BENCH_RX_CPU") else {
-        return Ok(());
-    };
-    let cpus = skymesh_runtime::realtime::parse_cpus(&v)
-        .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU: {e}"))?;
-    skymesh_runtime::realtime::pin(&cpus)
-        .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU={v}: cannot pin: {e}"))
+    use skymesh_runtime::realtime;
+    if let Ok(v) = std::env::var("FRAMES_BENCH_RX_CPU") {
+        let cpus =
+            realtime::parse_cpus(&v).map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU: {e}"))?;
+        realtime::pin(&cpus)
+            .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_CPU={v}: cannot pin: {e}"))?;
+    }
+    if let Ok(v) = std::env::var("FRAMES_BENCH_RX_RT") {
+        let priority = realtime::parse(&v)
+            .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_RT: {e}"))?
+            .ok_or_else(|| anyhow::anyhow!("FRAMES_BENCH_RX_RT: 0 is not real time"))?;
+        realtime::apply(priority)
+            .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_RX_RT={v}: refused: {e:?}"))?;
+    }
+    Ok(())
 }
 
 /// What the sender writes into every pixel of frame `k` (the receiver checks it).
