@@ -314,21 +314,10 @@ fn a_frame_whose_header_does_not_describe_its_pixels_is_not_sent() {
 }
 
 /// Publishes `n` small frames on `topic`, one every `period` (on a fixed
-/// schedule), while `sub` receives them with `recv_blocking_with`: each must arrive,
+/// schedule), each taking `write_time` to write (a camera's capture into the loaned
+/// frame), while `sub` receives them with `recv_blocking_with`: each must arrive,
 /// in order; then a receive with nothing published times out.
 fn blocking_receive_takes_a_periodic_stream(
-    bus: &Bus,
-    topic: &skymesh_ipc_types::Topic,
-    sub: &skymesh_runtime::FrameSubscriber,
-    n: u64,
-    period: Duration,
-) {
-    periodic_stream_written_slowly(bus, topic, sub, n, period, Duration::ZERO);
-}
-
-/// [`blocking_receive_takes_a_periodic_stream`] with each frame's pixels taking
-/// `write_time` to write (a camera's capture into the loaned frame).
-fn periodic_stream_written_slowly(
     bus: &Bus,
     topic: &skymesh_ipc_types::Topic,
     sub: &skymesh_runtime::FrameSubscriber,
@@ -384,7 +373,8 @@ fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
     let topic = topics::camera_frames("anticipate");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_anticipate(Duration::from_millis(2));
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 120, Duration::from_millis(10));
+    let period = Duration::from_millis(10);
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 120, period, Duration::ZERO);
     let stats = sub.anticipation().expect("on");
     assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
 }
@@ -400,7 +390,8 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     let topic = topics::camera_frames("futex");
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_futex_wake().unwrap();
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, Duration::from_millis(10));
+    let period = Duration::from_millis(10);
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, Duration::ZERO);
 }
 
 /// `set_early_wake` on a frame stream whose pixels take 5 ms to write: the
@@ -418,7 +409,7 @@ fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
     assert_eq!(sub.early_wake(), None);
     sub.set_early_wake(Duration::from_millis(20)).unwrap();
     let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    periodic_stream_written_slowly(&bus, &topic, &sub, 40, period, write);
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, write);
     let stats = sub.early_wake().expect("on");
     assert!(stats.polls > 0 && stats.hits > 0, "{stats:?}");
     assert!(stats.hits <= stats.polls);
@@ -481,7 +472,7 @@ fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
     child.wait().unwrap();
     d.cleanup_dead_nodes();
     let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    periodic_stream_written_slowly(&bus, &topic, &sub, 40, period, write);
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, write);
     let stats = sub.early_wake().expect("on");
     assert!(stats.hits > 0, "{stats:?}");
 }
