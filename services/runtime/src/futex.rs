@@ -37,6 +37,13 @@
 //! samples, look, and sleep again — a cost, never a lost wake-up. A receiver killed
 //! while announced leaves the announcement behind: publishers of that topic then
 //! make the wake-up call on every publish (~1 µs each) until the domain is removed.
+//!
+//! **A frame stream's making word.** Frame streams have a second word of the same
+//! kind, `<topic>#making` ([`making_word`]), which a frame publisher makes odd after
+//! its loan and even just before its send: an early receiver
+//! ([`crate::FrameSubscriber::set_early_wake`]) sleeps on it and on the topic's
+//! word together (`futex_waitv`) and polls for the frame while the pixels are
+//! written. Its file lives and goes with the topic's.
 
 use std::num::NonZeroU32;
 use std::sync::atomic::Ordering::SeqCst;
@@ -107,7 +114,7 @@ fn name_hash(topic: &str) -> u64 {
 }
 
 /// The name of a frame stream's *making* word: a second event count, odd from
-/// the moment its publisher starts a frame until it has sent it
+/// the moment its publisher starts a frame until just before it sends it
 /// ([`TopicWord::begin_making`], [`crate::FrameSubscriber::set_early_wake`]).
 pub(crate) fn making_word(topic: &str) -> String {
     format!("{topic}#making")
