@@ -289,6 +289,28 @@ impl PollPause {
     }
 }
 
+/// Polls with `take` (pausing with [`PollPause`] between looks) until it finds
+/// something, `until_ns` (`CLOCK_MONOTONIC`) passes, or `expired(now_ns)` says the
+/// caller's own deadline has; `None` then. The anticipating receives' window and
+/// the early frame receive's wait for a send.
+pub(crate) fn poll_until<R, E>(
+    until_ns: u64,
+    expired: impl Fn(u64) -> bool,
+    mut take: impl FnMut() -> Result<Option<R>, E>,
+) -> Result<Option<R>, E> {
+    let mut pause = PollPause::new(crate::clock::monotonic_ns());
+    loop {
+        if let Some(r) = take()? {
+            return Ok(Some(r));
+        }
+        let now = crate::clock::monotonic_ns();
+        if now >= until_ns || expired(now) {
+            return Ok(None);
+        }
+        pause.pause(now);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,7 +18,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use skymesh_ipc_types::{FrameHeader, FrameHeaderError, Topic};
 
-use crate::anticipate::{Anticipating, AnticipationStats, PollPause};
+use crate::anticipate::{poll_until, Anticipating, AnticipationStats};
 use crate::clock::monotonic_ns;
 use crate::futex::{making_word, wait_either, Deadline, Either, TopicWord};
 use crate::ipc::{
@@ -571,20 +571,12 @@ fn recv_early<R>(
         }
         // A frame is in the making: poll until it is sent.
         early.polls.fetch_add(1, Relaxed);
-        let start = monotonic_ns();
         let spin = u64::try_from(early.max_spin.as_nanos()).unwrap_or(u64::MAX);
-        let until = start.saturating_add(spin);
-        let mut pause = PollPause::new(start);
-        loop {
-            if let Some(r) = look()? {
-                early.hits.fetch_add(1, Relaxed);
-                return Ok(Some(r));
-            }
-            let now = monotonic_ns();
-            if now >= until || deadline.is_some_and(|d| d.passed(now)) {
-                break;
-            }
-            pause.pause(now);
+        let until = monotonic_ns().saturating_add(spin);
+        let expired = |now| deadline.is_some_and(|d| d.passed(now));
+        if let Some(r) = poll_until(until, expired, &mut look)? {
+            early.hits.fetch_add(1, Relaxed);
+            return Ok(Some(r));
         }
         // Not sent within `max_spin` (a slow frame, a publisher that died
         // mid-frame): wait for the send itself.

@@ -25,7 +25,7 @@ use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
 use tokio_util::sync::CancellationToken;
 
-use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan, PollPause};
+use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
 use crate::futex::{Deadline, TopicWord};
@@ -1130,20 +1130,13 @@ pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
             Plan::SpinUntil(until) => {
                 spun = true;
                 lock().windows += 1;
-                let mut pause = PollPause::new(monotonic_ns());
-                loop {
-                    if let Some(r) = take()? {
-                        // Its notification is consumed by the next wait, off the
-                        // latency path.
-                        blocking.notes.woke();
-                        lock().hits += 1;
-                        return Ok(Some(r));
-                    }
-                    let now = monotonic_ns();
-                    if now >= until || deadline.is_some_and(|d| Instant::now() >= d) {
-                        break;
-                    }
-                    pause.pause(now);
+                let expired = |_| deadline.is_some_and(|d| Instant::now() >= d);
+                if let Some(r) = anticipate::poll_until(until, expired, &mut take)? {
+                    // Its notification is consumed by the next wait, off the
+                    // latency path.
+                    blocking.notes.woke();
+                    lock().hits += 1;
+                    return Ok(Some(r));
                 }
             }
         }
