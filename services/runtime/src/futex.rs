@@ -105,6 +105,13 @@ type WordStorage = iceoryx2_cal::dynamic_storage::posix_shared_memory::Storage<W
 /// How long an open waits for a word that another process is creating.
 const OPEN_TIMEOUT: Duration = Duration::from_millis(500);
 
+/// `FUTEX_WAKE`'s count for "every waiter". The kernel reads the count as a C
+/// `int` and stops once it has woken that many or more, so `u32::MAX` (-1 there)
+/// wakes exactly one: with two receivers asleep on a topic, the other slept
+/// through the publish until the next one or its timeout. `INT_MAX`, as glibc's
+/// `pthread_cond_broadcast` passes.
+const WAKE_ALL: u32 = i32::MAX as u32;
+
 /// FNV-1a, 64 bits: the word's file name from the topic's name. Stable across
 /// builds and toolchains (every service of a mesh must derive the same name).
 fn name_hash(topic: &str) -> u64 {
@@ -169,11 +176,11 @@ impl TopicWord {
     }
 
     /// After a change of the count: the `FUTEX_WAKE` call, only while a receive is
-    /// announced as waiting.
+    /// announced as waiting. It wakes every waiter, in every process.
     fn wake_waiters(&self) -> Result<(), IpcError> {
         let w = self.word();
         if w.waiters.load(SeqCst) != 0 {
-            futex::wake(&w.seq, futex::Flags::empty(), u32::MAX)
+            futex::wake(&w.seq, futex::Flags::empty(), WAKE_ALL)
                 .map_err(|e| ipc_err("futex wake", &self.topic, e))?;
         }
         Ok(())
@@ -391,6 +398,51 @@ mod tests {
             "a fresh word, not the same"
         );
         drop(again);
+        remove(&p);
+    }
+
+    /// One publish wakes every receiver asleep on the topic, not one of them: each
+    /// waiter here opens its own handle, as a process of its own would, and must be
+    /// woken long before its 20 s guard.
+    #[test]
+    fn a_publish_wakes_every_waiter() {
+        const WAITERS: u32 = 3;
+        let p = prefix("c");
+        let topic = "skymesh/test/c";
+        let publ = TopicWord::open(&p, topic).unwrap();
+        let waiters: Vec<_> = (0..WAITERS)
+            .map(|_| {
+                let p = p.clone();
+                std::thread::spawn(move || {
+                    let recv = TopicWord::open(&p, topic).unwrap();
+                    let timed_out = recv
+                        .arm()
+                        .wait_until(Some(Deadline::after(Duration::from_secs(20))))
+                        .unwrap();
+                    !timed_out
+                })
+            })
+            .collect();
+        // Every wait announced before the publish (a wait announced but not yet
+        // asleep returns at once when the count has moved; one asleep needs the call).
+        let t0 = std::time::Instant::now();
+        while publ.waiters() < WAITERS {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "waiters did not arm"
+            );
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        publ.wake().unwrap();
+        let woken = waiters
+            .into_iter()
+            .map(|w| w.join().unwrap())
+            .filter(|woke| *woke)
+            .count();
+        assert_eq!(woken, WAITERS as usize, "waiters woken by one publish");
+        assert_eq!(publ.waiters(), 0);
+        drop(publ);
         remove(&p);
     }
 

@@ -766,6 +766,72 @@ fn futex_receiver_takes_a_stream<R: FutexReceiver>(
     );
 }
 
+/// One publish wakes every futex receiver asleep on its topic — two subscribers
+/// with `set_futex_wake` and two `BlockingSubscriber`s here, each on its own
+/// thread. Until 2026-11-29 the wake-up call woke exactly one of them (a count of
+/// `u32::MAX` is -1 to the kernel); the others slept through the sample until the
+/// next publish or, on a quiet topic, their timeout (20 s here; a receive ended
+/// by its timeout still takes the sample, so the test tells the two apart by when
+/// each returned: within half the timeout of the publish, against milliseconds
+/// when woken — not a measurement).
+#[test]
+fn one_publish_wakes_every_futex_receiver_of_the_topic() {
+    let d = domain("fxall");
+    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
+    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::vehicle_state(8);
+    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
+    let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
+    let guard = Duration::from_secs(20);
+    std::thread::scope(|s| {
+        let receivers: Vec<_> = (0..4)
+            .map(|i| {
+                let (b, topic) = (&b, &topic);
+                s.spawn(move || {
+                    // A `BlockingSubscriber` is made on the thread that uses it.
+                    let got = if i % 2 == 0 {
+                        let mut sub = b.subscriber::<VehicleState>(topic).unwrap();
+                        sub.set_futex_wake().unwrap();
+                        sub.recv_for(guard)
+                    } else {
+                        b.blocking_subscriber::<VehicleState>(topic)
+                            .unwrap()
+                            .recv_for(guard)
+                    };
+                    (got.map(|v| v.lat_deg), std::time::Instant::now())
+                })
+            })
+            .collect();
+        // All four asleep (or about to be: a wait announced before the publish
+        // returns at once once the count has moved) before the one publish.
+        let t0 = std::time::Instant::now();
+        while count.waiters() < 4 {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "receivers did not wait"
+            );
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        let published = std::time::Instant::now();
+        publ.publish(VehicleState {
+            lat_deg: 1.0,
+            ..Default::default()
+        })
+        .unwrap();
+        for (i, r) in receivers.into_iter().enumerate() {
+            let (got, at) = r.join().unwrap();
+            assert_eq!(got, Some(1.0), "receiver {i}'s sample");
+            let after = at.duration_since(published);
+            assert!(
+                after < guard / 2,
+                "receiver {i} slept through the publish: it returned {after:?} later, at its timeout"
+            );
+        }
+    });
+    assert_eq!(count.waiters(), 0);
+}
+
 /// Timeouts of two futex receivers on one topic are their own: after a long timeout
 /// ended by a sample, a shorter one ends on time (not at the old deadline), and one
 /// receiver's timeout neither ends nor shortens the other's wait. (Until 2026-11-28
