@@ -8,7 +8,8 @@
 //! ```
 //!
 //! At 100 Hz (300 messages × SCALE) and 1 kHz (2,000 × SCALE); for each rate and each
-//! N, the iceoryx2 phase then the UDP phase, fresh child processes for each phase.
+//! N, two iceoryx2 phases (the receivers below) then the UDP phase, fresh child
+//! processes for each phase.
 //! Latency = a child's `CLOCK_MONOTONIC` when it holds the message − the send stamp in
 //! the message: iceoryx2's `Publisher::publish` stamps `header.stamp_ns` once, then
 //! delivers to every subscriber and notifies; the UDP sender stamps once, then does
@@ -16,12 +17,18 @@
 //! i sends before its own — that is what unicast fan-out costs). Reported per N over
 //! all children's messages: p50/p99/p999; "last" = per message, the latency of the
 //! slowest child (p50/p99 over messages every child received); sender CPU per message;
-//! mean receiver CPU per message (over the children); and UDP ÷ iceoryx2. The first
-//! [`WARMUP`] messages of a phase are counted neither in latency nor in CPU.
+//! mean receiver CPU per message (over the children); and UDP ÷ iceoryx2 for each
+//! receiver. The first [`WARMUP`] messages of a phase are counted neither in latency
+//! nor in CPU.
 //!
-//! Children: iceoryx2 subscribers block in `Subscriber::recv_blocking` (on the topic's
-//! event, in the kernel, no spin, no async runtime); UDP children in a blocking
-//! `std::net::UdpSocket::recv`.
+//! Children block in the kernel, no spin, no async runtime:
+//! - `bs`: `BlockingSubscriber::recv_blocking`, the bus's subscriber for one thread,
+//!   asleep on the topic's event count (a futex word): the publisher's one
+//!   `FUTEX_WAKE` wakes every child;
+//! - `iox`: `Subscriber::recv_blocking` on the topic's socket event, how a
+//!   subscriber without the option waits (what the async receivers use): the
+//!   publisher's notify is one datagram per child;
+//! - `udp`: a blocking `std::net::UdpSocket::recv`.
 
 use std::collections::HashMap;
 use std::net::UdpSocket;
@@ -48,12 +55,35 @@ const LEN: usize = DATAGRAM_LEN;
 /// Subscriber counts.
 const FANOUT: [usize; 4] = [1, 2, 4, 8];
 
+/// How an iceoryx2 child waits for a sample.
+#[derive(Debug, Clone, Copy)]
+enum Wait {
+    /// `BlockingSubscriber` on the topic's event count (futex word).
+    Word,
+    /// `Subscriber::recv_blocking` on the topic's socket event.
+    Event,
+}
+
+impl Wait {
+    fn arg(self) -> &'static str {
+        match self {
+            Wait::Word => "word",
+            Wait::Event => "event",
+        }
+    }
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
         Some("--iox-sub") => {
             die_with_parent()?;
-            iox_receiver(&args[2], args[3].parse()?)
+            let wait = match args.get(4).map(String::as_str) {
+                Some("word") => Wait::Word,
+                Some("event") => Wait::Event,
+                other => bail!("--iox-sub: unknown wait {other:?}"),
+            };
+            iox_receiver(&args[2], args[3].parse()?, wait)
         }
         Some("--udp-sub") => {
             die_with_parent()?;
@@ -138,9 +168,10 @@ fn driver(scale: usize) -> Result<()> {
     ];
     println!(
         "fanout-bench: VehicleState ({LEN} bytes) from this process to N child processes; \
-         iceoryx2 (one publish, recv_blocking on the event) vs loopback UDP (one send_to per \
-         child, blocking recv); domain {name}; first {WARMUP} of each phase not counted; \
-         latency µs, CPU µs per message (rx = mean over children)"
+         iceoryx2 (one publish; bs: BlockingSubscriber on the event count, iox: recv_blocking \
+         on the socket event) vs loopback UDP (one send_to per child, blocking recv); domain \
+         {name}; first {WARMUP} of each phase not counted; latency µs, CPU µs per message \
+         (rx = mean over children)"
     );
     println!(
         "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8} {:>8} {:>8} | {:>8} {:>8} | {:>7} {:>7}",
@@ -159,9 +190,10 @@ fn driver(scale: usize) -> Result<()> {
     );
     for (rate, n) in plan {
         for subs in FANOUT {
-            let iox = iox_run(&domain.0, rate, n, subs)?.summary();
+            let bs = iox_run(&domain.0, rate, n, subs, Wait::Word)?.summary();
+            let iox = iox_run(&domain.0, rate, n, subs, Wait::Event)?.summary();
             let udp = udp_run(rate, n, subs)?.summary();
-            for (via, s) in [("iox", &iox), ("udp", &udp)] {
+            for (via, s) in [("bs", &bs), ("iox", &iox), ("udp", &udp)] {
                 println!(
                     "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.1} {:>8.1} {:>8.1} | {:>8.1} {:>8.1} | {:>7.2} {:>7.2}",
                     rate.label(),
@@ -178,21 +210,23 @@ fn driver(scale: usize) -> Result<()> {
                     s.rx_cpu / 1e3,
                 );
             }
-            println!(
-                "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.2} {:>8.2} {:>8.2} | {:>8.2} {:>8.2} | {:>7.2} {:>7.2}",
-                rate.label(),
-                subs,
-                n,
-                "u÷i",
-                "",
-                udp.all[0] / iox.all[0],
-                udp.all[1] / iox.all[1],
-                udp.all[2] / iox.all[2],
-                udp.last[0] / iox.last[0],
-                udp.last[1] / iox.last[1],
-                udp.tx_cpu / iox.tx_cpu,
-                udp.rx_cpu / iox.rx_cpu,
-            );
+            for (label, s) in [("u÷bs", &bs), ("u÷i", &iox)] {
+                println!(
+                    "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.2} {:>8.2} {:>8.2} | {:>8.2} {:>8.2} | {:>7.2} {:>7.2}",
+                    rate.label(),
+                    subs,
+                    n,
+                    label,
+                    "",
+                    udp.all[0] / s.all[0],
+                    udp.all[1] / s.all[1],
+                    udp.all[2] / s.all[2],
+                    udp.last[0] / s.last[0],
+                    udp.last[1] / s.last[1],
+                    udp.tx_cpu / s.tx_cpu,
+                    udp.rx_cpu / s.rx_cpu,
+                );
+            }
         }
     }
     let left = domain.0.leftover_files();
@@ -201,14 +235,18 @@ fn driver(scale: usize) -> Result<()> {
     Ok(())
 }
 
-fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize) -> Result<Phase> {
+fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize, wait: Wait) -> Result<Phase> {
     // A fresh bus and publisher per phase, so nothing of a previous phase lingers.
     let bus = Bus::open(domain, "bench-fanout-pub", ServiceId::Tool, 0, Stats::new())?;
     let mut publ = bus.publisher::<VehicleState>(&bench_topic())?;
     let mut children = Vec::with_capacity(subs);
     for _ in 0..subs {
-        let (child, mut out) =
-            spawn_child(&["--iox-sub".into(), domain.name.clone(), n.to_string()])?;
+        let (child, mut out) = spawn_child(&[
+            "--iox-sub".into(),
+            domain.name.clone(),
+            n.to_string(),
+            wait.arg().into(),
+        ])?;
         expect_line(&mut out, "ready")?;
         children.push((child, out));
     }
@@ -233,7 +271,7 @@ fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize) -> Result<Phase> 
     })
 }
 
-fn iox_receiver(domain: &str, n: usize) -> Result<()> {
+fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
     let domain = Domain::load(domain, None)?;
     let bus = Bus::open(
         &domain,
@@ -242,11 +280,9 @@ fn iox_receiver(domain: &str, n: usize) -> Result<()> {
         0,
         Stats::new(),
     )?;
-    let sub = bus.subscriber::<VehicleState>(&bench_topic())?;
     let mut tally = Tally::new(n, WARMUP);
-    println!("ready");
-    // Blocks in the kernel on the topic's event (no spin), as the UDP child blocks in `recv`.
-    while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+    // Blocks in the kernel (no spin), as the UDP child blocks in `recv`.
+    let mut take = |s: VehicleState| -> Result<bool> {
         let t1 = monotonic_ns();
         ensure!(
             s.vehicle_id == VEHICLE,
@@ -255,8 +291,26 @@ fn iox_receiver(domain: &str, n: usize) -> Result<()> {
         );
         let k = s.header.seq.saturating_sub(1) as usize;
         tally.add(k, s.header.stamp_ns, t1);
-        if k + 1 >= n {
-            break;
+        Ok(k + 1 >= n)
+    };
+    match wait {
+        Wait::Word => {
+            let sub = bus.blocking_subscriber::<VehicleState>(&bench_topic())?;
+            println!("ready");
+            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+                if take(s)? {
+                    break;
+                }
+            }
+        }
+        Wait::Event => {
+            let sub = bus.subscriber::<VehicleState>(&bench_topic())?;
+            println!("ready");
+            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
+                if take(s)? {
+                    break;
+                }
+            }
         }
     }
     tally.report()
