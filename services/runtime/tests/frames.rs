@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use skymesh_ipc_types::{topics, FrameHeader, LensModel, PixelFormat, ServiceId, MAX_FRAME_LEN};
 use skymesh_runtime::ipc::DomainGuard;
-use skymesh_runtime::{Bus, Domain, FrameError, Stats};
+use skymesh_runtime::{Bus, Domain, FrameError, FrameSubscriber, Stats};
 
 /// Set in the child process: the domain to publish in.
 const CHILD_DOMAIN_ENV: &str = "SKYMESH_FRAMES_TEST_CHILD_DOMAIN";
@@ -315,52 +315,61 @@ fn a_frame_whose_header_does_not_describe_its_pixels_is_not_sent() {
 
 /// Publishes `n` small frames on `topic`, one every `period` (on a fixed
 /// schedule), each taking `write_time` to write (a camera's capture into the loaned
-/// frame), while `sub` receives them with `recv_blocking_with`: each must arrive,
-/// in order; then a receive with nothing published times out.
+/// frame), while each of `subs` receives them with `recv_blocking_with` on a thread
+/// of its own: each must arrive at every receiver, in order; then a receive with
+/// nothing published times out. Gives the receivers back.
 fn blocking_receive_takes_a_periodic_stream(
     bus: &Bus,
     topic: &skymesh_ipc_types::Topic,
-    sub: &skymesh_runtime::FrameSubscriber,
+    subs: Vec<FrameSubscriber>,
     n: u64,
     period: Duration,
     write_time: Duration,
-) {
+) -> Vec<FrameSubscriber> {
     let (f, w, h, s) = FRAMES[4];
     let len = f.frame_len(w, h, s).unwrap() as usize;
     let mut publ = bus.frame_publisher(topic, len).unwrap();
     std::thread::scope(|scope| {
-        let publisher = scope.spawn(move || {
-            let t0 = std::time::Instant::now();
-            for i in 1..=n {
-                let due = t0 + period * i as u32;
-                std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
-                publ.publish_with(len, |hd, pixels| {
-                    hd.frame_seq = i;
-                    hd.set_geometry(f, w, h, s);
-                    std::thread::sleep(write_time);
-                    pixels.fill(i as u8);
+        let receivers: Vec<_> = subs
+            .into_iter()
+            .map(|sub| {
+                scope.spawn(move || {
+                    for i in 1..=n {
+                        let (seq, first) = sub
+                            .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
+                                (hd.frame_seq, pixels[0])
+                            })
+                            .unwrap()
+                            .expect("every frame arrives");
+                        assert_eq!((seq, first), (i, i as u8));
+                    }
+                    sub
                 })
-                .unwrap();
-            }
-            publ
-        });
-        for i in 1..=n {
-            let (seq, first) = sub
-                .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
-                    (hd.frame_seq, pixels[0])
-                })
-                .unwrap()
-                .expect("every frame arrives");
-            assert_eq!((seq, first), (i, i as u8));
-        }
-        let _publ = publisher.join().unwrap();
+            })
+            .collect();
         let t0 = std::time::Instant::now();
-        assert!(sub
-            .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
-            .unwrap()
-            .is_none());
-        assert!(t0.elapsed() >= Duration::from_millis(30));
-    });
+        for i in 1..=n {
+            let due = t0 + period * i as u32;
+            std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+            publ.publish_with(len, |hd, pixels| {
+                hd.frame_seq = i;
+                hd.set_geometry(f, w, h, s);
+                std::thread::sleep(write_time);
+                pixels.fill(i as u8);
+            })
+            .unwrap();
+        }
+        let subs: Vec<_> = receivers.into_iter().map(|r| r.join().unwrap()).collect();
+        for sub in &subs {
+            let t0 = std::time::Instant::now();
+            assert!(sub
+                .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
+                .unwrap()
+                .is_none());
+            assert!(t0.elapsed() >= Duration::from_millis(30));
+        }
+        subs
+    })
 }
 
 /// `set_anticipate` on a frame stream: every frame of a 100 fps stream arrives in
@@ -374,7 +383,15 @@ fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_anticipate(Duration::from_millis(2));
     let period = Duration::from_millis(10);
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 120, period, Duration::ZERO);
+    let sub = blocking_receive_takes_a_periodic_stream(
+        &bus,
+        &topic,
+        vec![sub],
+        120,
+        period,
+        Duration::ZERO,
+    )
+    .remove(0);
     let stats = sub.anticipation().expect("on");
     assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
 }
@@ -391,7 +408,7 @@ fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
     let mut sub = bus.frame_subscriber(&topic).unwrap();
     sub.set_futex_wake().unwrap();
     let period = Duration::from_millis(10);
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, Duration::ZERO);
+    blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, Duration::ZERO);
 }
 
 /// `set_early_wake` on a frame stream whose pixels take 5 ms to write: the
@@ -409,10 +426,41 @@ fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
     assert_eq!(sub.early_wake(), None);
     sub.set_early_wake(Duration::from_millis(20)).unwrap();
     let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, write);
+    let sub = blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, write)
+        .remove(0);
     let stats = sub.early_wake().expect("on");
     assert!(stats.polls > 0 && stats.hits > 0, "{stats:?}");
     assert!(stats.hits <= stats.polls);
+}
+
+/// Two consumers of one stream with `set_early_wake` (the vision pipeline and a
+/// recorder, say): the publisher's announcement of each frame wakes both, so each
+/// polls for most frames from their start. Until 2026-11-29 the announcement woke
+/// one waiter only: per frame one receiver polled and the other slept until the
+/// send, so the two together polled for about as many frames as were sent; now
+/// about twice as many (the bound leaves a quarter of the frames to a slow host).
+#[test]
+fn every_early_receiver_of_a_stream_is_woken_at_a_frames_start() {
+    const FRAMES_SENT: u64 = 24;
+    let d = domain("ew2");
+    let bus = Bus::open(&d, "frame-ew2", ServiceId::Tool, 0, Stats::new()).unwrap();
+    let topic = topics::camera_frames("early2");
+    let subs = (0..2)
+        .map(|_| {
+            let mut sub = bus.frame_subscriber(&topic).unwrap();
+            sub.set_early_wake(Duration::from_millis(40)).unwrap();
+            sub
+        })
+        .collect();
+    let (period, write) = (Duration::from_millis(25), Duration::from_millis(10));
+    let subs =
+        blocking_receive_takes_a_periodic_stream(&bus, &topic, subs, FRAMES_SENT, period, write);
+    let stats: Vec<_> = subs.iter().map(|s| s.early_wake().expect("on")).collect();
+    let polled: u64 = stats.iter().map(|s| s.polls).sum();
+    assert!(
+        polled >= FRAMES_SENT * 3 / 2,
+        "frames polled for: {stats:?}"
+    );
 }
 
 /// Set in the child that dies in the middle of a frame: the domain to publish in.
@@ -472,7 +520,8 @@ fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
     child.wait().unwrap();
     d.cleanup_dead_nodes();
     let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, &sub, 40, period, write);
+    let sub = blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, write)
+        .remove(0);
     let stats = sub.early_wake().expect("on");
     assert!(stats.hits > 0, "{stats:?}");
 }
