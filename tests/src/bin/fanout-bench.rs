@@ -42,7 +42,7 @@ use skymesh_e2e::transport_bench::{
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{Bus, Domain, Stats};
+use skymesh_runtime::{Bus, Domain, IpcError, Stats};
 
 /// Messages at the start of each phase not counted (first wake-ups, page faults).
 const WARMUP: usize = 50;
@@ -282,7 +282,7 @@ fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
     )?;
     let mut tally = Tally::new(n, WARMUP);
     // Blocks in the kernel (no spin), as the UDP child blocks in `recv`.
-    let mut take = |s: VehicleState| -> Result<bool> {
+    let take = |s: VehicleState| -> Result<bool> {
         let t1 = monotonic_ns();
         ensure!(
             s.vehicle_id == VEHICLE,
@@ -296,24 +296,29 @@ fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
     match wait {
         Wait::Word => {
             let sub = bus.blocking_subscriber::<VehicleState>(&bench_topic())?;
-            println!("ready");
-            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
-                if take(s)? {
-                    break;
-                }
-            }
+            receive_all(|| sub.recv_blocking(Some(IDLE_END)), take)?;
         }
         Wait::Event => {
             let sub = bus.subscriber::<VehicleState>(&bench_topic())?;
-            println!("ready");
-            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
-                if take(s)? {
-                    break;
-                }
-            }
+            receive_all(|| sub.recv_blocking(Some(IDLE_END)), take)?;
         }
     }
     tally.report()
+}
+
+/// Says `ready`, then hands every sample `recv` returns to `take` until it has the
+/// last or `recv` times out.
+fn receive_all(
+    mut recv: impl FnMut() -> Result<Option<VehicleState>, IpcError>,
+    mut take: impl FnMut(VehicleState) -> Result<bool>,
+) -> Result<()> {
+    println!("ready");
+    while let Some(s) = recv()? {
+        if take(s)? {
+            break;
+        }
+    }
+    Ok(())
 }
 
 fn udp_run(rate: Rate, n: usize, subs: usize) -> Result<Phase> {
