@@ -2,7 +2,10 @@
 // async runtime, no iceoryx2, no metrics — to measure what that work costs this
 // machine at the least (docs/benchmarks.md, "Then: whole-program LTO").
 //
-//   gcc -O2 -o /tmp/idle-floor scripts/idle-floor.c && /tmp/idle-floor 30
+//   gcc -O2 -o /tmp/idle-floor scripts/idle-floor.c && /tmp/idle-floor 30 [rest]
+//
+// `rest`: the swarm queue at rest and the pose broadcast asleep, as the idle mesh
+// runs since 2026-12-01 (nobody listening to the poses): `swarm` and `gc` at 1 Hz.
 //
 // Processes (CPU from /proc/<pid>/schedstat over the window):
 //   sim        50 Hz on the CLOCK_MONOTONIC grid: one TCP send to `link` (28 bytes,
@@ -94,6 +97,8 @@ static void timer_loop(int hz, int offset_us, int bytes, int udp_port, int read_
 int main(int argc, char **argv) {
   int secs = argc > 1 ? atoi(argv[1]) : 30;
   if (secs < 1) secs = 30;
+  int rest = argc > 2 && !strcmp(argv[2], "rest");
+  int swarm_hz = rest ? 1 : 30;
   shm = mmap(NULL, 1 << 20, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
   pid_t pids[16];
   const char *names[16];
@@ -145,10 +150,10 @@ int main(int argc, char **argv) {
     }
   }
   names[np++] = "link";
-  if (!(pids[np] = fork())) timer_loop(30, 0, 20480, 0, 0);
-  names[np++] = "swarm 30 Hz";
-  if (!(pids[np] = fork())) timer_loop(30, 2000, 20480, 6666, 1);
-  names[np++] = "gc 30 Hz + UDP";
+  if (!(pids[np] = fork())) timer_loop(swarm_hz, 0, 20480, 0, 0);
+  names[np++] = rest ? "swarm 1 Hz" : "swarm 30 Hz";
+  if (!(pids[np] = fork())) timer_loop(swarm_hz, 2000, 20480, 6666, 1);
+  names[np++] = rest ? "gc 1 Hz + UDP" : "gc 30 Hz + UDP";
   if (!(pids[np] = fork())) timer_loop(5, 0, 256, 0, 0);
   names[np++] = "shot 5 Hz";
   for (int k = 0; k < 6; k++) {

@@ -55,7 +55,8 @@ pub use shot::{
 pub use shot_fence::{AppFencePolygon, AppGeofence};
 pub use swarm::{
     drone_flags, swarm_flags, DroneState, SwarmCommand, SwarmCommandError, SwarmCommandKind,
-    SwarmDrone, SwarmReply, SwarmResult, SwarmState, ALL_DRONES, SWARM_MAX_DRONES,
+    SwarmDrone, SwarmReply, SwarmResult, SwarmState, SwarmWatch, ALL_DRONES, SWARM_MAX_DRONES,
+    SWARM_WATCH_LEASE_NS,
 };
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};

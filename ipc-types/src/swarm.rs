@@ -538,7 +538,31 @@ impl SwarmState {
     }
 }
 
-crate::impl_sample!(SwarmCommand, SwarmReply, SwarmState);
+/// A reader's word that it needs [`SwarmState`] at the queue's tick rate: the pose
+/// broadcast says so while somebody may listen to the poses (a destination that
+/// does not refuse), and renews it every second. The queue keeps each
+/// publisher's (header `service`, `instance`) newest word for
+/// [`SWARM_WATCH_LEASE_NS`]; while no word says `watching` and it has nothing to
+/// fly, it ticks once a second. A word that starts watching makes it tick at once,
+/// so a state published after the word comes within a tick's work.
+///
+/// Topic: [`crate::topics::swarm_watch`] (latest value per publisher).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("skymesh.SwarmWatch.v1")]
+#[repr(C)]
+pub struct SwarmWatch {
+    pub header: SampleHeader,
+    /// 1: the state is read at the queue's tick rate; 0: not any more.
+    pub watching: u8,
+    pub reserved: [u8; 7],
+}
+crate::assert_layout!(SwarmWatch, size = 24 + 8, align = 8);
+
+/// How long a [`SwarmWatch`] that says `watching` holds without being renewed
+/// (its publisher renews it every second; one that died stops counting after this).
+pub const SWARM_WATCH_LEASE_NS: u64 = 3_000_000_000;
+
+crate::impl_sample!(SwarmCommand, SwarmReply, SwarmState, SwarmWatch);
 
 #[cfg(test)]
 mod tests {

@@ -242,6 +242,12 @@ pub fn swarm_state() -> Topic {
     Topic::new("skymesh/swarm/state".into(), TopicQos::BULK_STATE)
 }
 
+/// [`crate::SwarmWatch`]: the pose broadcast's word that it reads the swarm state
+/// at the queue's rate (latest value per publisher).
+pub fn swarm_watch() -> Topic {
+    Topic::new("skymesh/swarm/watch".into(), TopicQos::SHARED_STATE)
+}
+
 /// Frames of camera stream `stream` ([`crate::FrameHeader`] + pixels), published by
 /// the camera service in place in shared memory.
 pub fn camera_frames(stream: &str) -> Topic {

@@ -33,6 +33,15 @@
 //! counted the same way). A datagram to a closed loopback port cost this process
 //! ~50 µs of CPU, at 30 Hz most of its idle cost. Broadcast addresses never refuse.
 //!
+//! The task tells the swarm queue whether it reads the state (`SwarmWatch` on
+//! `skymesh/swarm/watch`): watching while some destination may listen, renewed
+//! every [`WATCH_RENEW`]; not watching while every destination refuses, so the
+//! queue, when it has nothing to fly, ticks once a second instead of at its rate.
+//! A probe watches again first and waits for the state the queue then publishes at
+//! once (up to [`PROBE_STATE_WAIT`], or `state_timeout_s` if longer; the wait is
+//! counted as skipped ticks, `reason="not_listening"`), so it never carries a
+//! state from before it.
+//!
 //! Size: 84 bytes per drone, so 250 drones are 21 000 bytes in one datagram. That
 //! is one datagram on loopback (MTU 64 KiB), but on Ethernet or Wi-Fi (MTU 1500)
 //! the IP layer fragments it into 15 fragments, and losing any one loses the whole
@@ -44,10 +53,10 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use gc_proto::{encode_pose_datagram, PoseRecord, POSE_FLAGS_MASK, POSE_RECORD_LEN};
-use skymesh_ipc_types::{SwarmDrone, SwarmState, SWARM_MAX_DRONES};
+use skymesh_ipc_types::{SwarmDrone, SwarmState, SwarmWatch, SWARM_MAX_DRONES};
 use skymesh_runtime::refusals::{self, Admit, Refusals};
-use skymesh_runtime::timer::{instant_at, Ticker};
-use skymesh_runtime::{IpcError, Subscriber};
+use skymesh_runtime::timer::{instant_at, Ticker, Timer};
+use skymesh_runtime::{IpcError, Publisher, Subscriber};
 use tokio::net::UdpSocket;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
@@ -114,6 +123,41 @@ pub fn build_datagram_via_records(
 /// `broadcast_hz`) publishes it within a millisecond when idle.
 pub const QUEUE_TICK_ALLOWANCE: Duration = Duration::from_millis(2);
 
+/// How often the broadcast renews its word that it watches the state (the queue
+/// lets a word lapse after `SWARM_WATCH_LEASE_NS`, 3 s).
+pub const WATCH_RENEW: Duration = Duration::from_secs(1);
+
+/// How long a probe waits for the swarm queue's state after watching again, at
+/// least (the queue ticks at once on the word; this only bounds a queue that does
+/// not run).
+pub const PROBE_STATE_WAIT: Duration = Duration::from_secs(2);
+
+/// The broadcast's word on `skymesh/swarm/watch`: sent when it changes, and every
+/// [`WATCH_RENEW`] while it watches.
+struct Watch {
+    publisher: Publisher<SwarmWatch>,
+    watching: bool,
+    said_at: Option<Instant>,
+}
+
+impl Watch {
+    fn say(&mut self, watching: bool) -> Result<(), IpcError> {
+        let now = Instant::now();
+        let due = self
+            .said_at
+            .is_none_or(|t| now.duration_since(t) >= WATCH_RENEW);
+        if watching != self.watching || (watching && due) {
+            self.publisher.publish(SwarmWatch {
+                watching: u8::from(watching),
+                ..SwarmWatch::default()
+            })?;
+            self.watching = watching;
+            self.said_at = Some(now);
+        }
+        Ok(())
+    }
+}
+
 /// What the broadcast task needs.
 #[derive(Debug)]
 pub struct Broadcast {
@@ -130,8 +174,16 @@ impl Broadcast {
     pub async fn run(
         self,
         mut state: Subscriber<SwarmState>,
+        watch: Publisher<SwarmWatch>,
         stop: CancellationToken,
     ) -> Result<(), IpcError> {
+        let mut watch = Watch {
+            publisher: watch,
+            watching: false,
+            said_at: None,
+        };
+        // Every destination refusing: the ticks until the next probe are skipped.
+        let mut asleep = false;
         let metrics = self.drops.metrics().clone();
         let mut latest: Box<SwarmState> = Box::default();
         let mut received_at: Option<Instant> = None;
@@ -146,6 +198,7 @@ impl Broadcast {
         // to a period as with two unrelated clocks).
         let phase = QUEUE_TICK_ALLOWANCE.min(self.period / 2);
         let mut tick = Ticker::with_phase(self.period, phase).map_err(timer_err)?;
+        let mut probe_wait = Timer::new().map_err(timer_err)?;
         let mut refusals = Refusals::new("pose broadcast");
         let reports = self
             .socket
@@ -159,6 +212,32 @@ impl Broadcast {
             tokio::select! {
                 _ = stop.cancelled() => return Ok(()),
                 t = tick.tick() => { t.map_err(timer_err)?; }
+            }
+            let probing = std::mem::take(&mut asleep);
+            if probing {
+                // The queue rested: the states it published meanwhile are up to a
+                // second old. It ticks at once on the word; send what it publishes
+                // then.
+                while state.try_recv_with(|_| ())?.is_some() {}
+            }
+            watch.say(probing || refusals.all_refusing_until(&self.destinations).is_none())?;
+            if probing {
+                // On a timerfd: a pending tokio timer would cost wake-ups of its
+                // own (see skymesh_runtime::timer).
+                let waited = Instant::now();
+                let give_up = waited + self.state_timeout.max(PROBE_STATE_WAIT);
+                tokio::select! {
+                    _ = stop.cancelled() => return Ok(()),
+                    r = state.recv_with(|s| *latest = *s) => {
+                        r?;
+                        received_at = Some(Instant::now());
+                    }
+                    r = probe_wait.sleep_until(give_up) => r.map_err(timer_err)?,
+                }
+                let skipped = waited.elapsed().as_nanos() / self.period.as_nanos().max(1);
+                for _ in 0..skipped * self.destinations.len() as u128 {
+                    metrics.broadcast_skipped(BroadcastSkip::NotListening);
+                }
             }
             let now = Instant::now();
             // Drained in place (the sample is ~20 KiB; `latest()` would copy it
@@ -243,8 +322,11 @@ impl Broadcast {
                     }
                 }
             }
-            // Nobody listens anywhere: nothing to send until the first probe is due.
+            // Nobody listens anywhere: nothing to send until the first probe is due,
+            // and the queue need not tick for us meanwhile.
             if let Some(at_ns) = refusals.all_refusing_until(&self.destinations) {
+                watch.say(false)?;
+                asleep = true;
                 let at = instant_at(at_ns);
                 let skipped = at.saturating_duration_since(Instant::now()).as_nanos()
                     / self.period.as_nanos().max(1);

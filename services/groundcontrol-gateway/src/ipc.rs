@@ -1,16 +1,17 @@
-//! Every bus call of groundcontrol-gateway: the three swarm topics, typed.
+//! Every bus call of groundcontrol-gateway: the four swarm topics, typed.
 //!
 //! | topic | direction | type | who in the gateway |
 //! |---|---|---|---|
 //! | `skymesh/swarm/command` | publish | `SwarmCommand` | every session (shared publisher) |
 //! | `skymesh/swarm/reply` | subscribe | `SwarmReply` | the hub, which routes to clients |
 //! | `skymesh/swarm/state` | subscribe (latest value) | `SwarmState` | the pose broadcast |
+//! | `skymesh/swarm/watch` | publish | `SwarmWatch` | the pose broadcast: whether it reads the state |
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use anyhow::Context as _;
-use skymesh_ipc_types::{topics, SwarmCommand, SwarmReply, SwarmState};
+use skymesh_ipc_types::{topics, SwarmCommand, SwarmReply, SwarmState, SwarmWatch};
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 
 /// The `swarm_command` publisher, shared by every session, and the gateway's
@@ -49,6 +50,8 @@ pub struct Ports {
     pub replies: Subscriber<SwarmReply>,
     /// Every drone's state; the pose broadcast reads the latest.
     pub state: Subscriber<SwarmState>,
+    /// The pose broadcast's word that it reads the state at the queue's rate.
+    pub watch: Publisher<SwarmWatch>,
 }
 
 impl Ports {
@@ -73,6 +76,9 @@ impl Ports {
                 state.set_newest_only();
                 state
             },
+            watch: bus
+                .publisher::<SwarmWatch>(&topics::swarm_watch())
+                .context("opening the swarm_watch topic")?,
         })
     }
 }

@@ -105,7 +105,7 @@ pub async fn run(settings: Settings, sockets: Sockets, ctx: Context) -> anyhow::
         state_timeout: settings.state_timeout,
         drops: drops.clone(),
     };
-    let broadcast_task = tokio::spawn(broadcast.run(ports.state, stop.clone()));
+    let broadcast_task = tokio::spawn(broadcast.run(ports.state, ports.watch, stop.clone()));
 
     let destinations: Vec<String> = settings
         .broadcast_destinations

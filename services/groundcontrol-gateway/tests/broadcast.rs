@@ -261,3 +261,83 @@ async fn with_nobody_listening_anywhere_the_broadcast_sleeps_between_probes() {
     listen_until_every_tick(&mut gw, closed).await;
     gw.stop().await;
 }
+
+/// The next word on the watch topic.
+async fn next_word(gw: &mut Gateway) -> bool {
+    let w = tokio::time::timeout(PATIENCE, gw.watch.recv())
+        .await
+        .unwrap_or_else(|_| panic!("no word on the watch topic within {PATIENCE:?}"))
+        .expect("bus");
+    w.watching == 1
+}
+
+/// The broadcast says it watches the swarm state while some destination may listen
+/// (renewed every second), stops while every destination refuses (so the queue can
+/// rest), and for a probe watches again first and sends a state published after
+/// that.
+#[tokio::test]
+async fn the_broadcast_watches_the_state_only_while_somebody_may_listen() {
+    let closed = closed_port();
+    let mut gw = Gateway::start_with(|s| {
+        s.broadcast_period = Duration::from_millis(20);
+        s.broadcast_destinations = vec![closed];
+    })
+    .await;
+    assert!(next_word(&mut gw).await, "watching from the start");
+    // Until the refusal is known: then a word that it stopped.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    loop {
+        assert!(tokio::time::Instant::now() < deadline, "never stopped");
+        gw.publish_state(swarm_state(2, 1.0));
+        if gw
+            .watch
+            .try_recv()
+            .expect("bus")
+            .is_some_and(|w| w.watching == 0)
+        {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    // Something listens now. The next probe watches again, and what it sends is
+    // the state published after the word.
+    let mut late = skymesh_groundcontrol_gateway::client::PoseListener::bind(closed)
+        .await
+        .expect("bind the closed port");
+    assert!(next_word(&mut gw).await, "a probe watches again");
+    let (_, poses) = loop {
+        gw.publish_state(swarm_state(3, 9.0));
+        if let Some(d) = late.recv(Duration::from_millis(50)).await.expect("udp") {
+            break d;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "no probe");
+    };
+    let poses = poses.expect("records");
+    assert_eq!(poses.len(), 3);
+    assert_eq!(poses[0].timestamp, 9.0, "the probe carries the new state");
+    // Once every tick reaches the listener, the word is renewed every second and
+    // never withdrawn.
+    let mut got = 0;
+    while got < 25 {
+        assert!(tokio::time::Instant::now() < deadline, "{got} datagrams");
+        gw.publish_state(swarm_state(3, 9.0));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        while late.recv(Duration::ZERO).await.expect("udp").is_some() {
+            got += 1;
+        }
+    }
+    while gw.watch.try_recv().expect("bus").is_some() {}
+    let mut renewed = 0;
+    let t0 = tokio::time::Instant::now();
+    while t0.elapsed() < Duration::from_millis(2500) {
+        gw.publish_state(swarm_state(3, 9.0));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        while late.recv(Duration::ZERO).await.expect("udp").is_some() {}
+        while let Some(w) = gw.watch.try_recv().expect("bus") {
+            assert_eq!(w.watching, 1, "withdrawn while listened to");
+            renewed += 1;
+        }
+    }
+    assert!(renewed >= 2, "{renewed} words in 2.5 s");
+    gw.stop().await;
+}

@@ -10,7 +10,7 @@
 use anyhow::Context as _;
 use skymesh_ipc_types::{
     topics, CommandAck, GeofenceSet, HardwareRequest, SwarmCommand, SwarmReply, SwarmState,
-    VehicleCommand, VehicleState, VehicleStatus,
+    SwarmWatch, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 
@@ -34,6 +34,8 @@ pub struct Ports {
     pub swarm_commands: Subscriber<SwarmCommand>,
     pub replies: Publisher<SwarmReply>,
     pub state: Publisher<SwarmState>,
+    /// The readers' words that they read the state at the tick rate.
+    pub watch: Subscriber<SwarmWatch>,
     pub hardware: Option<Publisher<HardwareRequest>>,
     /// In the order of `Settings::drones`.
     pub drones: Vec<DronePorts>,
@@ -87,6 +89,9 @@ impl Ports {
             state: bus
                 .publisher(&topics::swarm_state())
                 .context("opening the swarm state topic")?,
+            watch: bus
+                .subscriber(&topics::swarm_watch())
+                .context("opening the swarm watch topic")?,
             hardware: match settings.hardware_drone {
                 Some(_) => Some(
                     bus.publisher(&topics::hardware_request())

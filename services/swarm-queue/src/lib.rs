@@ -9,7 +9,8 @@
 //! answers every command with exactly one `SwarmReply` (success, timeout or refused
 //! with a reason; `CHECK_ALL_IDLE` with one idle state per drone), and publishes
 //! every drone's `SwarmState` at `tick_hz` (pose, target, colour, `DroneState`,
-//! flags, queue) from which the gateway builds the pose broadcast.
+//! flags, queue) from which the gateway builds the pose broadcast (once a second
+//! at rest: nothing to fly and no reader watching, see `service`).
 //!
 //! | module | role |
 //! |---|---|

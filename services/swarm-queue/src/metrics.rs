@@ -35,6 +35,9 @@ pub struct Metrics {
     pub received: Counter,
     /// `skymesh_swarm_drones_flying`: drones armed and off the ground.
     pub flying: Gauge,
+    /// `skymesh_swarm_resting`: 1 while the queue ticks once a second (nothing to
+    /// fly, no reader watching its state), 0 while it ticks at `tick_hz`.
+    pub resting: Gauge,
 }
 
 impl Metrics {
@@ -46,6 +49,7 @@ impl Metrics {
             replies_dropped: stats.counter("skymesh_swarm_replies_dropped_total", &[]),
             received: stats.counter("skymesh_swarm_commands_received_total", &[]),
             flying: stats.gauge("skymesh_swarm_drones_flying", &[]),
+            resting: stats.gauge("skymesh_swarm_resting", &[]),
             queue_depth: ids
                 .iter()
                 .map(|id| stats.gauge("skymesh_swarm_queue_depth", &[("drone", &id.to_string())]))

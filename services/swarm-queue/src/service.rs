@@ -14,14 +14,55 @@
 //! Replies beyond the per-tick budget (`max_replies_per_tick`, within the reply
 //! topic's buffer of 1024) wait for the next tick, so bursts of answers never
 //! overrun the gateway's subscriber buffer.
+//!
+//! **At rest** the queue ticks once a second ([`REST_TICK`]) instead: when a tick
+//! leaves nothing for the next one to do ([`Swarm::at_rest`]: no drone has a
+//! command running, queued or waiting for its vehicle, no reply or output waits)
+//! and no reader watches its `SwarmState` (`skymesh/swarm/watch`: the pose
+//! broadcast says it watches while somebody may listen to the poses, and renews
+//! the word every second; a word lapses after `SWARM_WATCH_LEASE_NS`). The 30 Hz
+//! tick was then the whole of its work, and ~30 of the idle mesh's 180 wake-ups a
+//! second. A swarm command ends the rest as it arrives (the vehicles' topics are
+//! drained first, so it sees their current state), and so does a word that starts
+//! watching: the queue ticks at once, so the reader has a fresh state within a
+//! tick's work. `skymesh_swarm_resting` is 1 while it rests.
 
+use std::time::Duration;
+
+use skymesh_ipc_types::{SwarmWatch, SWARM_WATCH_LEASE_NS};
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::timer::Ticker;
 use skymesh_runtime::{CancellationToken, IpcError};
+use tokio::time::Instant;
 
 use crate::core::Swarm;
 use crate::ipc::Ports;
 use crate::metrics::Metrics;
+
+/// The tick period while the queue rests (see the module docs).
+pub const REST_TICK: Duration = Duration::from_secs(1);
+
+/// The readers that watch the state: each publisher's (header service, instance)
+/// word that it watches, and when that lapses (monotonic ns).
+#[derive(Debug, Default)]
+struct Watches(Vec<((u16, u16), u64)>);
+
+impl Watches {
+    /// A publisher's newest word, received at `now`.
+    fn word(&mut self, w: &SwarmWatch, now: u64) {
+        let key = (w.header.service, w.header.instance);
+        self.0.retain(|(k, _)| *k != key);
+        if w.watching != 0 {
+            self.0.push((key, now.saturating_add(SWARM_WATCH_LEASE_NS)));
+        }
+    }
+
+    /// Whether any reader watches at `now` (lapsed words are forgotten).
+    fn any(&mut self, now: u64) -> bool {
+        self.0.retain(|&(_, until)| until > now);
+        !self.0.is_empty()
+    }
+}
 
 /// Runs until `shutdown`.
 pub(crate) async fn run_loop(
@@ -38,24 +79,39 @@ pub(crate) async fn run_loop(
     let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
     let mut last_tick: Option<u64> = None;
     let mut budget = budget_per_tick;
+    let mut resting = false;
+    let mut watches = Watches::default();
     loop {
-        let step = tokio::select! {
+        let (step, ticked) = tokio::select! {
             biased;
             _ = shutdown.cancelled() => return Ok(()),
-            c = ports.swarm_commands.recv() => c.and_then(|c| {
+            c = ports.swarm_commands.recv() => (c.and_then(|c| {
                 let now = monotonic_ns();
+                if resting {
+                    // The last drain may be a second old: a command that needs a
+                    // position must see the vehicle's current one.
+                    drain_vehicles(&mut swarm, &mut ports, now)?;
+                }
                 swarm.handle_command(&c, now);
                 while let Some(c) = ports.swarm_commands.try_recv()? {
                     swarm.handle_command(&c, now);
                 }
                 publish(&mut swarm, &mut ports, &mut budget)
-            }),
+            }), false),
+            w = ports.watch.recv() => (w.and_then(|w| {
+                let now = monotonic_ns();
+                watches.word(&w, now);
+                while let Some(w) = ports.watch.try_recv()? {
+                    watches.word(&w, now);
+                }
+                Ok(())
+            }), false),
             t = interval.tick() => {
                 if let Err(e) = t {
                     return Err(anyhow::Error::new(e).context("the tick timer failed"));
                 }
                 let now = monotonic_ns();
-                if last_tick.is_some_and(|t| now.saturating_sub(t) > 2 * period_ns) {
+                if !resting && last_tick.is_some_and(|t| now.saturating_sub(t) > 2 * period_ns) {
                     metrics.overruns.inc();
                 }
                 last_tick = Some(now);
@@ -66,11 +122,26 @@ pub(crate) async fn run_loop(
                 if took > period_ns {
                     metrics.overruns.inc();
                 }
-                r
+                (r, true)
             }
         };
         if let Err(e) = step {
             return Err(anyhow::Error::new(e));
+        }
+        let rest = swarm.at_rest() && !watches.any(monotonic_ns());
+        if rest && (ticked || !resting) {
+            // After a tick, or on coming to rest: the next tick a rest period on. A
+            // command or word that leaves the queue at rest does not move it.
+            interval.skip_to(Instant::now() + REST_TICK);
+        } else if !rest && resting {
+            // At once: a reader that starts watching waits for a fresh state.
+            interval.reset_immediately();
+            last_tick = None;
+        }
+        if rest != resting {
+            tracing::debug!(resting = rest, "swarm queue tick rate");
+            metrics.resting.set(if rest { 1.0 } else { 0.0 });
+            resting = rest;
         }
     }
 }
@@ -82,6 +153,16 @@ fn tick(
     budget: &mut usize,
     now: u64,
 ) -> Result<(), IpcError> {
+    drain_vehicles(swarm, ports, now)?;
+    swarm.tick(now);
+    publish(swarm, ports, budget)?;
+    // Written in place in shared memory: the sample is ~20 KiB.
+    ports.state.publish_with(|out| swarm.fill_state(now, out))?;
+    Ok(())
+}
+
+/// Hands the queue every drone's newest state and status and every acknowledgement.
+fn drain_vehicles(swarm: &mut Swarm, ports: &mut Ports, now: u64) -> Result<(), IpcError> {
     for (idx, d) in ports.drones.iter().enumerate() {
         if let Some(s) = d.state.latest()? {
             swarm.handle_state(idx, &s, now);
@@ -93,10 +174,6 @@ fn tick(
             swarm.handle_ack(idx, &a, now);
         }
     }
-    swarm.tick(now);
-    publish(swarm, ports, budget)?;
-    // Written in place in shared memory: the sample is ~20 KiB.
-    ports.state.publish_with(|out| swarm.fill_state(now, out))?;
     Ok(())
 }
 

@@ -8,8 +8,9 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
 use skymesh_ipc_types::{
-    drone_flags, topics, CommandAck, DroneState, ServiceId, SwarmCommand, SwarmCommandKind,
-    SwarmReply, SwarmResult, SwarmState, VehicleCommand, VehicleState, VehicleStatus, ALL_DRONES,
+    drone_flags, swarm_flags, topics, CommandAck, DroneState, ServiceId, SwarmCommand,
+    SwarmCommandKind, SwarmReply, SwarmResult, SwarmState, SwarmWatch, VehicleCommand,
+    VehicleState, VehicleStatus, ALL_DRONES,
 };
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::ipc::DomainGuard;
@@ -148,24 +149,15 @@ impl Gateway {
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn takeoff_and_a_waypoint_over_the_bus() {
-    let domain = unique_domain();
-    let tool = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
-    let settings = settings("");
-    let stop = CancellationToken::new();
-    let autopilots = spawn_autopilots(tool.clone(), &settings, stop.clone());
-    let mut gw = Gateway {
-        commands: tool.publisher(&topics::swarm_command()).unwrap(),
-        replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
-        state: tool.subscriber(&topics::swarm_state()).unwrap(),
-        next: 0,
-        seen: Vec::new(),
-    };
-
+/// Runs the queue on its own bus of `domain` until `stop`; returns once it is ready.
+async fn start_queue(
+    domain: &Domain,
+    settings: Settings,
+    stop: &CancellationToken,
+) -> (tokio::task::JoinHandle<anyhow::Result<()>>, Stats) {
     let stats = Stats::new();
     let bus = Bus::open(
-        &domain,
+        domain,
         "swarm-queue",
         ServiceId::SwarmQueue,
         0,
@@ -186,6 +178,25 @@ async fn takeoff_and_a_waypoint_over_the_bus() {
         .await
         .unwrap()
         .unwrap();
+    (queue, stats)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn takeoff_and_a_waypoint_over_the_bus() {
+    let domain = unique_domain();
+    let tool = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+    let settings = settings("");
+    let stop = CancellationToken::new();
+    let autopilots = spawn_autopilots(tool.clone(), &settings, stop.clone());
+    let mut gw = Gateway {
+        commands: tool.publisher(&topics::swarm_command()).unwrap(),
+        replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
+        state: tool.subscriber(&topics::swarm_state()).unwrap(),
+        next: 0,
+        seen: Vec::new(),
+    };
+
+    let (queue, stats) = start_queue(&domain, settings, &stop).await;
 
     // The state comes at the tick rate, with both drones on the ground.
     let s = loop {
@@ -245,6 +256,115 @@ async fn takeoff_and_a_waypoint_over_the_bus() {
         &[("kind", "ext_go_external"), ("outcome", "success")],
     );
     assert_eq!(replies.get(), 2);
+}
+
+/// Waits until `skymesh_swarm_resting` reads `want`.
+async fn until_resting(stats: &Stats, want: bool) {
+    let gauge = stats.gauge("skymesh_swarm_resting", &[]);
+    let want = if want { 1.0 } else { 0.0 };
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while gauge.get() != want {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "skymesh_swarm_resting never read {want}"
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// The queue's ticks within `window`.
+async fn ticks_within(stats: &Stats, window: Duration) -> u64 {
+    let ticks = stats.histogram(
+        "skymesh_swarm_tick_seconds",
+        &[],
+        &skymesh_runtime::stats::LATENCY_BOUNDS_S,
+    );
+    let before = ticks.count();
+    tokio::time::sleep(window).await;
+    ticks.count() - before
+}
+
+/// Says on the watch topic whether the test reads the state at the queue's rate.
+fn say_watching(watch: &mut Publisher<SwarmWatch>, watching: bool) {
+    watch
+        .publish(SwarmWatch {
+            watching: u8::from(watching),
+            ..SwarmWatch::default()
+        })
+        .unwrap();
+}
+
+/// With nothing to fly and no reader watching its state, the queue ticks once a
+/// second instead of 30 times; a command that arrives then sees the vehicles'
+/// current state (the last tick's is stale by then); a reader's word that it
+/// watches brings the full rate back at once, and a word that it stopped, or a
+/// word not renewed, the rest.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn at_rest_and_unwatched_the_queue_ticks_once_a_second() {
+    let domain = unique_domain();
+    let tool = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+    // A pose is fresh for 0.1 s: much less than a rest period.
+    let settings = settings("pose_timeout_s = 0.1");
+    let stop = CancellationToken::new();
+    let autopilots = spawn_autopilots(tool.clone(), &settings, stop.clone());
+    let mut gw = Gateway {
+        commands: tool.publisher(&topics::swarm_command()).unwrap(),
+        replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
+        state: tool.subscriber(&topics::swarm_state()).unwrap(),
+        next: 0,
+        seen: Vec::new(),
+    };
+    let mut watch = tool
+        .publisher::<SwarmWatch>(&topics::swarm_watch())
+        .unwrap();
+    let (queue, stats) = start_queue(&domain, settings, &stop).await;
+
+    // Nobody watches, nothing to fly: a tick a second.
+    until_resting(&stats, true).await;
+    let resting = ticks_within(&stats, Duration::from_secs(3)).await;
+    assert!(resting <= 5, "{resting} ticks in 3 s at rest");
+
+    // RESET_HOME_POSITION needs a fresh position. At rest, 0.3 s after a tick, the
+    // position that tick read is older than pose_timeout_s.
+    for _ in 0..2 {
+        until_resting(&stats, true).await;
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let home = gw.send(1, SwarmCommandKind::ResetHomePosition, |c| {
+            c.flags |= swarm_flags::PRIVILEGED;
+        });
+        let r = gw.reply(home, 1).await;
+        assert_eq!(r.result(), Ok(SwarmResult::Success), "{:?}", r.reason);
+    }
+
+    // A reader watches: the full rate, and a state at once.
+    until_resting(&stats, true).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    while gw.state.try_recv().unwrap().is_some() {}
+    let said = tokio::time::Instant::now();
+    say_watching(&mut watch, true);
+    gw.state().await;
+    // With the word, not at the next rest tick (0.7 s on).
+    let after = said.elapsed();
+    assert!(
+        after < Duration::from_millis(600),
+        "a state {after:?} after the word"
+    );
+    let watched = ticks_within(&stats, Duration::from_secs(2)).await;
+    assert!(watched >= 20, "{watched} ticks in 2 s while watched");
+    assert_eq!(stats.gauge("skymesh_swarm_resting", &[]).get(), 0.0);
+
+    // The reader stops watching: the rest again.
+    say_watching(&mut watch, false);
+    until_resting(&stats, true).await;
+
+    // A word not renewed lapses (after 3 s).
+    say_watching(&mut watch, true);
+    until_resting(&stats, false).await;
+    until_resting(&stats, true).await;
+
+    stop.cancel();
+    queue.await.unwrap().expect("clean stop");
+    autopilots.await.unwrap();
 }
 
 /// How many file descriptors the ports of a 250-drone queue take. Run with

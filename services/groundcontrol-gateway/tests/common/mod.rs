@@ -13,6 +13,7 @@ use skymesh_groundcontrol_gateway::client::PoseListener;
 use skymesh_groundcontrol_gateway::{run, Settings, Sockets};
 use skymesh_ipc_types::{
     topics, FixedStr, ServiceId, SwarmCommand, SwarmDrone, SwarmReply, SwarmResult, SwarmState,
+    SwarmWatch,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use tokio::task::JoinHandle;
@@ -79,6 +80,8 @@ pub struct Gateway {
     pub commands: Subscriber<SwarmCommand>,
     pub replies: Publisher<SwarmReply>,
     pub state: Publisher<SwarmState>,
+    /// The broadcast's words that it watches the state.
+    pub watch: Subscriber<SwarmWatch>,
     shutdown: CancellationToken,
     task: Option<JoinHandle<anyhow::Result<()>>>,
 }
@@ -123,6 +126,9 @@ impl Gateway {
         let state = tool
             .publisher::<SwarmState>(&topics::swarm_state())
             .expect("swarm_state publisher");
+        let watch = tool
+            .subscriber::<SwarmWatch>(&topics::swarm_watch())
+            .expect("swarm_watch subscriber");
         let sockets = Sockets::bind(&settings).await.expect("bind");
         let (tcp, _) = sockets.local_addrs().expect("addresses");
         let shutdown = CancellationToken::new();
@@ -141,6 +147,7 @@ impl Gateway {
             commands,
             replies,
             state,
+            watch,
             shutdown,
             task: Some(task),
         }

@@ -1191,11 +1191,20 @@ impl Swarm {
     }
 
     /// The hardware drone's colour to its LEDs, at most every 100 ms, only on change.
+    /// The hardware drone's colour as LED bytes (`None` without a hardware drone).
+    fn led_bytes(&self) -> Option<[u8; 3]> {
+        let idx = self.hw_index?;
+        Some(
+            self.drones[idx]
+                .color
+                .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8),
+        )
+    }
+
     fn leds(&mut self, now: u64) {
-        let Some(idx) = self.hw_index else { return };
-        let bytes = self.drones[idx]
-            .color
-            .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
+        let Some(bytes) = self.led_bytes() else {
+            return;
+        };
         if self.hw_last == Some(bytes) || now.saturating_sub(self.hw_last_ns) < LED_PERIOD_NS {
             return;
         }
@@ -1213,6 +1222,18 @@ impl Swarm {
     }
 
     // ---- execution -----------------------------------------------------------
+
+    /// Whether a tick would only refresh the state: no drone has a command running,
+    /// queued or waiting for its vehicle's answer (a side command), no reply or
+    /// output waits to be published, and the LEDs show the hardware drone's colour.
+    /// Then nothing the queue does depends on when it next ticks: a swarm command
+    /// ends the rest as it arrives.
+    pub fn at_rest(&self) -> bool {
+        self.drones.iter().all(|d| d.idle() && d.side.is_empty())
+            && self.replies.is_empty()
+            && self.out.is_empty()
+            && self.led_bytes().is_none_or(|b| self.hw_last == Some(b))
+    }
 
     /// Steps every drone: side-command timeouts, the current command, the next
     /// command when the current one finished; LEDs; gauges.

@@ -496,6 +496,57 @@ fn pause_holds_for_its_seconds() {
     assert_eq!(h.reply(after, 1).unwrap().0, SwarmResult::Success);
 }
 
+/// At rest only when a tick would just refresh the state: not while a command
+/// runs or waits in the queue, a reply waits to be published, or the LEDs are
+/// behind the hardware drone's colour.
+#[test]
+fn at_rest_only_with_nothing_to_fly_answer_or_show() {
+    let mut h = H::new(2);
+    h.run(0.2);
+    assert!(h.swarm.at_rest(), "on the ground, nothing asked");
+    let p = h.send(1, K::ExtPause, |c| c.f[0] = 0.5);
+    let queued = h.send(1, K::ExtPause, |c| c.f[0] = 0.2);
+    assert!(!h.swarm.at_rest(), "a pause running, another queued");
+    h.run(0.6);
+    assert!(h.answered(p, 1) && !h.answered(queued, 1));
+    assert!(!h.swarm.at_rest(), "the queued pause runs");
+    h.run(0.3);
+    assert!(h.answered(queued, 1));
+    assert!(h.swarm.at_rest());
+    // A reply not yet published.
+    let c = SwarmCommand {
+        request_id: 999,
+        client: 7,
+        drone: ALL_DRONES,
+        kind: K::ExtCheckAllIdle.to_wire(),
+        ..SwarmCommand::default()
+    };
+    h.swarm.handle_command(&c, h.now);
+    assert!(!h.swarm.at_rest(), "replies waiting");
+    h.pump();
+    assert!(h.swarm.at_rest());
+    // Two colours within the LEDs' 100 ms: the second waits for the next write.
+    for rgb in [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+        let c = h.send(1, K::ExtColor, |c| {
+            c.flags = swarm_flags::HAS_EXT1;
+            c.f[4..7].copy_from_slice(&rgb);
+            c.f[0] = 0.0;
+        });
+        assert!(h.run_until(1.0, |h| h.answered(c, 1)));
+    }
+    assert!(h.swarm.drone(0).idle() && h.swarm.drone(1).idle());
+    assert!(!h.swarm.at_rest(), "the LEDs behind the colour");
+    h.run(0.2);
+    assert!(h.swarm.at_rest());
+    // The other drone's colour is not on the hardware.
+    h.send(2, K::ExtColor, |c| {
+        c.flags = swarm_flags::HAS_EXT1;
+        c.f[4..7].copy_from_slice(&[0.0, 0.0, 1.0]);
+        c.f[0] = 0.0;
+    });
+    assert!(h.swarm.at_rest());
+}
+
 #[test]
 fn colours_fade_and_reach_the_hardware() {
     let mut h = H::new(2);
