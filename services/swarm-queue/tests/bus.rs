@@ -96,6 +96,17 @@ struct Gateway {
 }
 
 impl Gateway {
+    /// The gateway's ports on `tool`'s bus.
+    fn open(tool: &Bus) -> Gateway {
+        Gateway {
+            commands: tool.publisher(&topics::swarm_command()).unwrap(),
+            replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
+            state: tool.subscriber(&topics::swarm_state()).unwrap(),
+            next: 0,
+            seen: Vec::new(),
+        }
+    }
+
     fn send(
         &mut self,
         drone: u16,
@@ -188,13 +199,7 @@ async fn takeoff_and_a_waypoint_over_the_bus() {
     let settings = settings("");
     let stop = CancellationToken::new();
     let autopilots = spawn_autopilots(tool.clone(), &settings, stop.clone());
-    let mut gw = Gateway {
-        commands: tool.publisher(&topics::swarm_command()).unwrap(),
-        replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
-        state: tool.subscriber(&topics::swarm_state()).unwrap(),
-        next: 0,
-        seen: Vec::new(),
-    };
+    let mut gw = Gateway::open(&tool);
 
     let (queue, stats) = start_queue(&domain, settings, &stop).await;
 
@@ -307,13 +312,7 @@ async fn at_rest_and_unwatched_the_queue_ticks_once_a_second() {
     let settings = settings("pose_timeout_s = 0.1");
     let stop = CancellationToken::new();
     let autopilots = spawn_autopilots(tool.clone(), &settings, stop.clone());
-    let mut gw = Gateway {
-        commands: tool.publisher(&topics::swarm_command()).unwrap(),
-        replies: tool.subscriber(&topics::swarm_reply()).unwrap(),
-        state: tool.subscriber(&topics::swarm_state()).unwrap(),
-        next: 0,
-        seen: Vec::new(),
-    };
+    let mut gw = Gateway::open(&tool);
     let mut watch = tool
         .publisher::<SwarmWatch>(&topics::swarm_watch())
         .unwrap();
