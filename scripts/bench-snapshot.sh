@@ -42,5 +42,6 @@ run mesh "$b/mesh-bench" --default-mesh --kills 3 --window-secs 30 --settle-secs
 if command -v gcc >/dev/null; then
   gcc -O2 -o "$out/idle-floor" scripts/idle-floor.c
   run idle-floor "$out/idle-floor" 30
+  run idle-floor-rest "$out/idle-floor" 30 rest
 fi
 echo "=== done $(date +%T): $out"
