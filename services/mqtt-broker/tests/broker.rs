@@ -34,11 +34,8 @@ impl Broker {
 
 /// The broker on a free port with `extra` TOML.
 async fn start(extra: &str) -> Broker {
-    let addr = free_addr();
-    Broker {
-        addr,
-        run: Running::start(&config_toml(addr, extra)).await,
-    }
+    let (run, [addr]) = Running::start_on_free_ports(|[addr]| config_toml(addr, extra)).await;
+    Broker { addr, run }
 }
 
 #[tokio::test]

@@ -83,13 +83,11 @@ impl std::ops::Deref for Broker {
 /// The broker with `top` (top-level TOML: users, timeouts) and a TLS listener
 /// (`tls_extra` appended to its table).
 async fn start(top: &str, tls_extra: &str) -> Broker {
-    let plain = free_addr();
-    let tls = free_addr();
-    let toml = format!("{top}\n{}", tls_table(tls, tls_extra));
-    Broker {
-        tls,
-        run: Running::start(&config_toml(plain, &toml)).await,
-    }
+    let (run, [_, tls]) = Running::start_on_free_ports(|[plain, tls]| {
+        config_toml(plain, &format!("{top}\n{}", tls_table(tls, tls_extra)))
+    })
+    .await;
+    Broker { tls, run }
 }
 
 impl Broker {

@@ -35,6 +35,40 @@ pub struct Running {
 impl Running {
     /// Serves the broker config `toml`; returns once the broker is ready.
     pub async fn start(toml: &str) -> Running {
+        Running::try_start(toml)
+            .await
+            .unwrap_or_else(|e| panic!("the broker did not start: {e:#}"))
+    }
+
+    /// Serves a config made by `toml` for free ports (`N` of them, distinct), and
+    /// picks new ports when one of them was taken between being picked and the
+    /// broker binding it (another test, or the broker's own loopback listener): a
+    /// free port is only free when it is picked. Returns the broker and its ports.
+    pub async fn start_on_free_ports<const N: usize>(
+        toml: impl Fn([SocketAddr; N]) -> String,
+    ) -> (Running, [SocketAddr; N]) {
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            let held: Vec<std::net::TcpListener> = (0..N)
+                .map(|_| std::net::TcpListener::bind("127.0.0.1:0").expect("bind port 0"))
+                .collect();
+            let addrs: [SocketAddr; N] =
+                std::array::from_fn(|i| held[i].local_addr().expect("local addr"));
+            drop(held);
+            match Running::try_start(&toml(addrs)).await {
+                Ok(run) => return (run, addrs),
+                Err(e @ (BrokerError::Listen { .. } | BrokerError::Stopped(_))) if attempt < 5 => {
+                    eprintln!("the broker did not start on {addrs:?} ({e:#}): other ports");
+                }
+                Err(e) => panic!("the broker did not start: {e:#}"),
+            }
+        }
+    }
+
+    /// Serves the broker config `toml`; returns once the broker is ready, or the
+    /// error it stopped with before that.
+    pub async fn try_start(toml: &str) -> Result<Running, BrokerError> {
         let settings = parse::<RawConfig>(toml, "test").expect("test config is valid");
         let stats = Stats::new();
         let shutdown = CancellationToken::new();
@@ -47,15 +81,21 @@ impl Running {
                 let _ = ready_tx.send(());
             },
         ));
-        tokio::time::timeout(PATIENCE, ready_rx)
+        let ready = tokio::time::timeout(PATIENCE, ready_rx)
             .await
-            .expect("ready within patience")
-            .expect("ready called");
-        Running {
+            .expect("ready within patience");
+        if ready.is_err() {
+            // `serve` returned without calling `ready`.
+            return Err(task
+                .await
+                .expect("the broker task")
+                .expect_err("serve returned Ok before it was ready"));
+        }
+        Ok(Running {
             stats,
             shutdown,
             task,
-        }
+        })
     }
 
     /// Asks the broker to stop and checks that `serve` returned Ok.
