@@ -234,10 +234,12 @@ impl Broadcast {
                     }
                     r = probe_wait.sleep_until(give_up) => r.map_err(timer_err)?,
                 }
-                let skipped = waited.elapsed().as_nanos() / self.period.as_nanos().max(1);
-                for _ in 0..skipped * self.destinations.len() as u128 {
-                    metrics.broadcast_skipped(BroadcastSkip::NotListening);
-                }
+                metrics.broadcast_ticks_skipped(
+                    BroadcastSkip::NotListening,
+                    waited.elapsed(),
+                    self.period,
+                    self.destinations.len(),
+                );
             }
             let now = Instant::now();
             // Drained in place (the sample is ~20 KiB; `latest()` would copy it
@@ -272,10 +274,7 @@ impl Broadcast {
                     r = state.recv_with(|s| *latest = *s) => r?,
                 };
                 // Keep the skip counter what a tick per period would have made it.
-                let missed = paused.elapsed().as_nanos() / self.period.as_nanos().max(1);
-                for _ in 0..missed {
-                    metrics.broadcast_skipped(reason);
-                }
+                metrics.broadcast_ticks_skipped(reason, paused.elapsed(), self.period, 1);
                 received_at = Some(Instant::now());
                 tick.reset_immediately();
                 continue;
@@ -328,11 +327,12 @@ impl Broadcast {
                 watch.say(false)?;
                 asleep = true;
                 let at = instant_at(at_ns);
-                let skipped = at.saturating_duration_since(Instant::now()).as_nanos()
-                    / self.period.as_nanos().max(1);
-                for _ in 0..skipped * self.destinations.len() as u128 {
-                    metrics.broadcast_skipped(BroadcastSkip::NotListening);
-                }
+                metrics.broadcast_ticks_skipped(
+                    BroadcastSkip::NotListening,
+                    at.saturating_duration_since(Instant::now()),
+                    self.period,
+                    self.destinations.len(),
+                );
                 tick.skip_to(at);
             }
         }

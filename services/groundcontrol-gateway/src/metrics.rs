@@ -184,6 +184,22 @@ impl Metrics {
     pub fn broadcast_skipped(&self, reason: BroadcastSkip) {
         self.broadcast_skipped.inc(reason.as_str());
     }
+
+    /// Counts what a tick every `period` would have counted over a `span` the
+    /// broadcast did not tick: `per_tick` skips (`reason`) per tick.
+    pub fn broadcast_ticks_skipped(
+        &self,
+        reason: BroadcastSkip,
+        span: std::time::Duration,
+        period: std::time::Duration,
+        per_tick: usize,
+    ) {
+        let ticks = span.as_nanos() / period.as_nanos().max(1);
+        let n = u64::try_from(ticks.saturating_mul(per_tick as u128)).unwrap_or(u64::MAX);
+        if n > 0 {
+            self.broadcast_skipped.get(reason.as_str(), "").add(n);
+        }
+    }
 }
 
 #[cfg(test)]
