@@ -428,14 +428,19 @@ impl Received {
         if let (Some(stamps), Some(path)) = (&self.stamps, std::env::var_os("SAMPLES_BENCH_STAMPS"))
         {
             // Appended: one file collects every phase, each line `pid k t0 t1`.
-            let mut f = std::fs::OpenOptions::new()
+            // Receivers of an interleaved phase end together, so the lines are
+            // written in one `write` (an unbuffered `writeln!` writes each piece
+            // on its own, and two processes' pieces interleave).
+            let pid = std::process::id();
+            let mut lines = String::with_capacity(stamps.len() * 48);
+            for (k, t0, t1) in stamps {
+                lines.push_str(&format!("{pid} {k} {t0} {t1}\n"));
+            }
+            std::fs::OpenOptions::new()
                 .create(true)
                 .append(true)
-                .open(path)?;
-            let pid = std::process::id();
-            for (k, t0, t1) in stamps {
-                writeln!(f, "{pid} {k} {t0} {t1}")?;
-            }
+                .open(path)?
+                .write_all(lines.as_bytes())?;
         }
         self.tally.report()
     }
