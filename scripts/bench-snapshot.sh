@@ -2,7 +2,7 @@
 # Every issue-10 measurement once, back to back, with one release build: the
 # snapshot behind the summary table of docs/benchmarks.md ("Issue 10 in one table").
 # Each program runs its baseline in the same run; this only runs them in a row and
-# keeps their output. ~22 minutes here, plus the build.
+# keeps their output. ~20 minutes here, plus the build.
 #
 # usage: scripts/bench-snapshot.sh [OUT_DIR]    (default target/bench-snapshot)
 #        SKIP_BUILD=1 scripts/bench-snapshot.sh  (the release binaries as they are)
