@@ -141,7 +141,7 @@ impl Bus {
 pub struct FramePublisher {
     port: iceoryx2::port::publisher::Publisher<Svc, [u8], FrameHeader>,
     wakers: Wakers,
-    /// The stream's making word: odd while a frame is between loan and send, for
+    /// The stream's making word: odd from just before a frame's loan until its send, for
     /// the receivers that wake then ([`FrameSubscriber::set_early_wake`]).
     making: TopicWord,
     seq: u64,
@@ -188,15 +188,19 @@ impl FramePublisher {
             topic: self.topic.clone(),
             len,
         })?;
+        // Before the loan: an early receiver's wake-up then runs while the frame is
+        // loaned (iceoryx2 zero-fills it) and written, and it is polling when the
+        // frame is sent. Announced after the loan, the wake-up had only the pixel
+        // write to run in (0.1–0.2 ms at 1080p here) and missed it for 2–30 frames
+        // of 400 on its own core; before it, for 0–3, at the cost of polling
+        // through the fill too (docs/benchmarks.md, "Early wake"). A loan that
+        // fails ends the making like every other early return.
+        self.making.begin_making()?;
+        let _making = EndMaking(&self.making);
         let mut sample = self
             .port
             .loan_slice(len)
             .map_err(|e| ipc_err("loan frame", &self.topic, e))?;
-        // Before the pixels are written: an early receiver's wake-up then runs
-        // while they are, and it is polling when the frame is sent. (Before the
-        // loan, which zero-fills the frame, it would poll through the fill too.)
-        self.making.begin_making()?;
-        let _making = EndMaking(&self.making);
         // iceoryx2 lends header and payload through two `&mut self` accessors, so the
         // header (152 bytes) is filled on the side and stored; the pixels are written
         // where they lie.
@@ -435,10 +439,10 @@ impl FrameSubscriber {
 
     /// Low-latency receive with [`FrameSubscriber::recv_blocking_with`] that needs no
     /// regular stream: the receiver sleeps until the publisher *starts* a frame
-    /// (has loaned it, before the pixels are written: at 1080p RGB 0.3–0.9 ms on
-    /// this project's VM) and then polls shared memory until the frame is sent, at most
-    /// `max_spin`, so the frame is in hand within microseconds of its send and the
-    /// wake-up ran while the pixels were written. Unlike
+    /// (just before its loan, which zero-fills it, and the pixel write: at 1080p RGB
+    /// 0.4–1.0 ms on this project's VM) and then polls shared memory until the frame
+    /// is sent, at most `max_spin`, so the frame is in hand within microseconds of its
+    /// send and the wake-up ran while the frame was loaned and written. Unlike
     /// [`FrameSubscriber::set_anticipate`] it does not predict: a camera whose frames
     /// come late or irregularly is still met. Costs the receiver the time from a
     /// frame's start to its send in polling CPU (yielding to whatever else is
@@ -629,6 +633,38 @@ mod tests {
         *sample.user_header_mut() = header;
         sample.send().unwrap();
         publ.wakers.notify(&publ.topic).unwrap();
+    }
+
+    /// The making starts before the loan, so a loan that fails must end it: a word
+    /// left odd would make every early receiver poll `max_spin` for nothing on
+    /// each receive.
+    #[test]
+    fn a_frame_whose_loan_fails_is_not_left_in_the_making() {
+        let d = DomainGuard(Domain::load(&format!("ut{}loan", std::process::id()), None).unwrap());
+        let bus = Bus::open(&d, "loan-fail", ServiceId::Tool, 0, Stats::new()).unwrap();
+        let topic = topics::camera_frames("loan");
+        let (f, w, h) = (PixelFormat::Nv12, 2, 2);
+        let len = f.frame_len(w, h, w).unwrap() as usize;
+        let mut publ = bus.frame_publisher(&topic, len).unwrap();
+        // Hold loans until the port refuses one: the next publish's loan fails too.
+        let mut held = Vec::new();
+        while let Ok(sample) = publ.port.loan_slice(len) {
+            held.push(sample);
+            assert!(held.len() < 1024, "the port never refused a loan");
+        }
+        let fill = |hd: &mut FrameHeader, _: &mut [u8]| hd.set_geometry(f, w, h, w);
+        let refused = publ.publish_with(len, fill);
+        assert!(
+            refused.is_err(),
+            "a publish without a loan to take: {refused:?}"
+        );
+        assert!(
+            !publ.making.in_making(),
+            "a failed loan left the frame in the making"
+        );
+        drop(held);
+        assert_eq!(publ.publish_with(len, fill).unwrap(), 1);
+        assert!(!publ.making.in_making());
     }
 
     /// An early receiver asleep between frames wakes for a frame whose publisher

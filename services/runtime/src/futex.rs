@@ -39,10 +39,10 @@
 //! make the wake-up call on every publish (~1 µs each) until the domain is removed.
 //!
 //! **A frame stream's making word.** Frame streams have a second word of the same
-//! kind, `<topic>#making` ([`making_word`]), which a frame publisher makes odd after
-//! its loan and even just before its send: an early receiver
+//! kind, `<topic>#making` ([`making_word`]), which a frame publisher makes odd just
+//! before its loan and even just before its send: an early receiver
 //! ([`crate::FrameSubscriber::set_early_wake`]) sleeps on it and on the topic's
-//! word together (`futex_waitv`) and polls for the frame while the pixels are
+//! word together (`futex_waitv`) and polls for the frame while it is loaned and
 //! written. Its file lives and goes with the topic's.
 
 use std::num::NonZeroU32;
@@ -186,7 +186,7 @@ impl TopicWord {
         Ok(())
     }
 
-    /// A frame publisher's announcement, after its loan, that a frame is in the
+    /// A frame publisher's announcement, before its loan, that a frame is in the
     /// making (the stream's *making* word, [`making_word`]): makes the word odd and
     /// wakes the receivers waiting for it
     /// ([`crate::FrameSubscriber::set_early_wake`]). Follow with

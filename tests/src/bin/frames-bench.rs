@@ -34,7 +34,7 @@
 //!   fresh socket `xfer` phase.
 //!
 //! - `ew`: `xfer` with the iceoryx2 receiver woken when the publisher *starts* the
-//!   frame (after its loan, before the pixel write) and polling until it is sent
+//!   frame (before its loan and pixel write) and polling until it is sent
 //!   (`FrameSubscriber::set_early_wake`, [`ANT_MAX_SPIN`]); compared with a fresh
 //!   socket `xfer` phase. The receiver prints how many frames it polled for and took.
 //!
