@@ -25,6 +25,9 @@
 //!   (`skymesh_runtime::TopicWord`) without the rest of the bus: `iox fx` minus
 //!   skymesh's publisher and subscriber;
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
+//! - `udp blk2`: a second `udp blk` receiver, the comparison's noise floor: with
+//!   `--interleave`, the row `u÷i udp2` is UDP against itself, and how far its
+//!   ratios stray from 1 is how far the host alone moves a ratio in that run;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
 //! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime;
@@ -97,6 +100,10 @@ enum Via {
     /// `recv_blocking` with `Subscriber::set_futex_wake`.
     IoxFutex,
     UdpBlocking,
+    /// A second `udp-blk` receiver, for the comparison's noise floor: `udp-blk` ÷
+    /// `udp-blk2` is the same mechanism against itself, so how far its ratios stray
+    /// from 1 in a run is how far host noise alone moves a ratio.
+    UdpBlockingAgain,
     IoxTokio,
     UdpTokio,
     /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
@@ -120,13 +127,14 @@ enum Via {
 const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
 
 impl Via {
-    const ALL: [Via; 9] = [
+    const ALL: [Via; 10] = [
         Via::IoxBlocking,
         Via::IoxFutex,
         Via::IoxBlockingSub,
         Via::IoxRaw,
         Via::IoxWord,
         Via::UdpBlocking,
+        Via::UdpBlockingAgain,
         Via::IoxTokio,
         Via::UdpTokio,
         Via::IoxAnticipating,
@@ -137,6 +145,7 @@ impl Via {
             Via::IoxBlocking => "iox-blk",
             Via::IoxFutex => "iox-fx",
             Via::UdpBlocking => "udp-blk",
+            Via::UdpBlockingAgain => "udp-blk2",
             Via::IoxTokio => "iox-tok",
             Via::UdpTokio => "udp-tok",
             Via::IoxAnticipating => "iox-ant",
@@ -323,6 +332,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
             ("word", Via::UdpBlocking, Via::IoxWord),
             ("tok", Via::UdpTokio, Via::IoxTokio),
             ("ant", Via::UdpBlocking, Via::IoxAnticipating),
+            ("udp2", Via::UdpBlocking, Via::UdpBlockingAgain),
         ] {
             let find = |v: Via| phases.iter().find(|(w, _, _)| *w == v);
             let (Some((_, pu, u)), Some((_, pi, i))) = (find(udp), find(iox)) else {
@@ -855,7 +865,7 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                 armed.wait(None)?;
             }
         }
-        Via::UdpBlocking => {
+        Via::UdpBlocking | Via::UdpBlockingAgain => {
             let sock = UdpSocket::bind("127.0.0.1:0")?;
             sock.set_read_timeout(Some(IDLE_END))?;
             println!("ready {}", sock.local_addr()?.port());
