@@ -197,7 +197,7 @@ impl Metrics {
         let ticks = span.as_nanos() / period.as_nanos().max(1);
         let n = u64::try_from(ticks.saturating_mul(per_tick as u128)).unwrap_or(u64::MAX);
         if n > 0 {
-            self.broadcast_skipped.get(reason.as_str(), "").add(n);
+            self.broadcast_skipped.add(reason.as_str(), n);
         }
     }
 }

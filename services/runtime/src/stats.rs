@@ -149,6 +149,11 @@ impl CounterFamily {
     pub fn inc(&self, value: &'static str) {
         self.get(value, "").inc();
     }
+
+    /// Adds `n` to the series of a one-label family.
+    pub fn add(&self, value: &'static str, n: u64) {
+        self.get(value, "").add(n);
+    }
 }
 
 /// The registry of one service's series.
