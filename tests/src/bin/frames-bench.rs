@@ -42,6 +42,11 @@
 //! receiver print every frame's latency and anticipation state (stderr);
 //! `FRAMES_BENCH_RX_CPU=1 taskset -c 0 frames-bench` gives the receivers CPU 1 and
 //! the sender CPU 0; `FRAMES_BENCH_RX_RT=10` runs the receivers under `SCHED_FIFO`.
+//! `FRAMES_BENCH_MODES=fx,ew` runs those phases only (and their socket phases).
+//! `FRAMES_BENCH_TX_YIELD=1` makes the iceoryx2 sender yield its CPU
+//! (`sched_yield`) right after each `publish_with`, so a receiver the kernel woke on
+//! the sender's CPU runs before the sender goes to sleep (an experiment, counted in
+//! the publisher's `send` column; docs/benchmarks.md, "Then: the publisher yields").
 //!
 //! Both sides use `CLOCK_MONOTONIC`, shared by the processes of one machine. CPU per
 //! frame is `CLOCK_PROCESS_CPUTIME_ID` over the counted frames on each side. In the
@@ -240,12 +245,20 @@ fn driver(frames: usize) -> Result<()> {
     let only: Option<u32> = std::env::var("FRAMES_BENCH_ONLY")
         .ok()
         .and_then(|v| v.parse().ok());
+    // FRAMES_BENCH_MODES=fx,ew runs those phases only.
+    let modes: Option<Vec<Mode>> = match std::env::var("FRAMES_BENCH_MODES") {
+        Ok(v) => Some(v.split(',').map(Mode::parse).collect::<Result<_>>()?),
+        Err(_) => None,
+    };
     for (w, h) in SIZES {
         if only.is_some_and(|o| o != w) {
             continue;
         }
         let len = (w * h * 3) as usize;
         for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx, Mode::Ew] {
+            if modes.as_ref().is_some_and(|m| !m.contains(&mode)) {
+                continue;
+            }
             let iox = iox_run(w, h, frames, mode)?;
             let uds = uds_run(len, frames, mode.socket())?;
             let (pi, pu) = (iox.p(), uds.p());
@@ -358,6 +371,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     ])?;
     expect_line(&mut out, "ready")?;
     std::thread::sleep(Duration::from_millis(100));
+    let tx_yield = std::env::var_os("FRAMES_BENCH_TX_YIELD").is_some();
     let mut pace = Pacer::new(Rate::Hz(FPS));
     let mut cpu = SendCpu::new(WARMUP);
     let mut loan = Vec::with_capacity(frames);
@@ -377,6 +391,9 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
             pixels.fill(fill_value(k));
             t_written = monotonic_ns();
         })?;
+        if tx_yield {
+            std::thread::yield_now();
+        }
         let t_sent = monotonic_ns();
         if k >= WARMUP {
             loan.push(t_loaned.saturating_sub(t0));
