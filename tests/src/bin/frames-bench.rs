@@ -247,7 +247,12 @@ fn driver(frames: usize) -> Result<()> {
         .and_then(|v| v.parse().ok());
     // FRAMES_BENCH_MODES=fx,ew runs those phases only.
     let modes: Option<Vec<Mode>> = match std::env::var("FRAMES_BENCH_MODES") {
-        Ok(v) => Some(v.split(',').map(Mode::parse).collect::<Result<_>>()?),
+        Ok(v) => Some(
+            v.split(',')
+                .map(Mode::parse)
+                .collect::<Result<_>>()
+                .map_err(|e| anyhow::anyhow!("FRAMES_BENCH_MODES: {e}"))?,
+        ),
         Err(_) => None,
     };
     for (w, h) in SIZES {
