@@ -193,10 +193,11 @@ impl FramePublisher {
         // frame is sent. Announced after the loan, the wake-up had only the pixel
         // write to run in (0.1–0.2 ms at 1080p here) and missed it for 2–30 frames
         // of 400 on its own core; before it, for 0–3, at the cost of polling
-        // through the fill too (docs/benchmarks.md, "Early wake"). A loan that
-        // fails ends the making like every other early return.
-        self.making.begin_making()?;
+        // through the fill too (docs/benchmarks.md, "Early wake"). The guard comes
+        // first: the word is odd from `begin_making`'s first step, so a failed
+        // wake-up in it, a failed loan and every other early return end the making.
         let _making = EndMaking(&self.making);
+        self.making.begin_making()?;
         let mut sample = self
             .port
             .loan_slice(len)

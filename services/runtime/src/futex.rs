@@ -190,7 +190,8 @@ impl TopicWord {
     /// making (the stream's *making* word, [`making_word`]): makes the word odd and
     /// wakes the receivers waiting for it
     /// ([`crate::FrameSubscriber::set_early_wake`]). Follow with
-    /// [`TopicWord::end_making`] whatever becomes of the frame. Two atomic
+    /// [`TopicWord::end_making`] whatever becomes of the frame, this call's error
+    /// included (the word is odd before the wake-up is tried). Two atomic
     /// operations while nobody waits.
     pub(crate) fn begin_making(&self) -> Result<(), IpcError> {
         // Already odd only after a publisher died between begin and end: the word
