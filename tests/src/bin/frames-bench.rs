@@ -242,9 +242,19 @@ fn driver(frames: usize) -> Result<()> {
     let mut iox_p = Vec::new();
     let mut loans = Vec::new();
     // FRAMES_BENCH_ONLY=1920 runs one size (for profiling).
-    let only: Option<u32> = std::env::var("FRAMES_BENCH_ONLY")
-        .ok()
-        .and_then(|v| v.parse().ok());
+    let only: Option<u32> = match std::env::var("FRAMES_BENCH_ONLY") {
+        Ok(v) => Some(
+            v.parse()
+                .map_err(|_| anyhow::anyhow!("FRAMES_BENCH_ONLY: `{v}` is not a frame width"))?,
+        ),
+        Err(_) => None,
+    };
+    if let Some(o) = only {
+        ensure!(
+            SIZES.iter().any(|&(w, _)| w == o),
+            "FRAMES_BENCH_ONLY: no frame size {o} pixels wide (640, 1280 or 1920)"
+        );
+    }
     // FRAMES_BENCH_MODES=fx,ew runs those phases only.
     let modes: Option<Vec<Mode>> = match std::env::var("FRAMES_BENCH_MODES") {
         Ok(v) => Some(
