@@ -208,6 +208,23 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     for name in &settings.disabled {
         tracing::info!(service = %name, "disabled in the config; not started");
     }
+    // Answer /status and /metrics from the first moment: the steps below touch the
+    // domain's files (the dead-node cleanup, our own node) and can take a while on a
+    // loaded machine or after a crash that left many nodes behind; a caller of
+    // `skymesh status` or a health check sees the services as starting meanwhile, not
+    // a silent port. If a step fails, the guard stops the server with us.
+    let http_stop = CancellationToken::new();
+    let http_stop_guard = http_stop.clone().drop_guard();
+    let http_tasks = TaskTracker::new();
+    let server = tokio::spawn(http::serve(
+        listener,
+        http::App {
+            mesh: mesh.clone(),
+            registry,
+        },
+        http_stop.clone(),
+        http_tasks.clone(),
+    ));
 
     // Leftovers of an earlier run that died without cleaning up.
     clean_dead_nodes(&domain, &mesh).await;
@@ -223,17 +240,6 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     monitor::spawn_watchers(&bus, &mesh, rule, &watch_stop, &watchers)
         .context("subscribing to service heartbeats")?;
 
-    let http_stop = CancellationToken::new();
-    let http_tasks = TaskTracker::new();
-    let server = tokio::spawn(http::serve(
-        listener,
-        http::App {
-            mesh: mesh.clone(),
-            registry,
-        },
-        http_stop.clone(),
-        http_tasks.clone(),
-    ));
     if let Some(f) = &status_file {
         write_status_file(f, addr)
             .with_context(|| format!("writing status file {}", f.display()))?;
@@ -393,7 +399,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         tracing::info!(live_nodes = ?live, "other nodes of the domain are alive; leaving its shared memory in place");
     }
 
-    http_stop.cancel();
+    drop(http_stop_guard);
     http_tasks.close();
     let _ = tokio::time::timeout(Duration::from_secs(2), http_tasks.wait()).await;
     if let Err(e) = server.await {

@@ -83,8 +83,23 @@ impl Harness {
         }
     }
 
+    /// `/status`, asked again while the supervisor does not answer, for up to 15 s.
+    /// One ask gives up after `status_cmd::TIMEOUT` (3 s): on a loaded CI machine a
+    /// whole ask once went unanswered at startup, and what these tests check is the
+    /// supervision, not the HTTP server's latency. A supervisor that stays silent
+    /// still fails them, with the last error.
     async fn status(&self) -> Vec<StatusEntry> {
-        status_cmd::fetch(self.addr).await.expect("/status")
+        let start = Instant::now();
+        loop {
+            match status_cmd::fetch(self.addr).await {
+                Ok(rows) => return rows,
+                Err(e) if start.elapsed() < Duration::from_secs(15) => {
+                    eprintln!("/status did not answer yet ({e:#}); asking again");
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+                Err(e) => panic!("/status: {e:#}"),
+            }
+        }
     }
 
     async fn service(&self, name: &str) -> StatusEntry {
