@@ -83,21 +83,30 @@ impl Harness {
         }
     }
 
-    /// `/status`, asked again while the supervisor does not answer, for up to 15 s.
-    /// One ask gives up after `status_cmd::TIMEOUT` (3 s): on a loaded CI machine a
-    /// whole ask once went unanswered at startup, and what these tests check is the
+    /// `/status`, as typed entries (see [`Harness::ask`]).
+    async fn status(&self) -> Vec<StatusEntry> {
+        self.ask("/status", || status_cmd::fetch(self.addr)).await
+    }
+
+    /// `f`, asked again while the supervisor does not answer, for up to 15 s. One ask
+    /// gives up after `status_cmd::TIMEOUT` (3 s): on a loaded CI machine a whole ask
+    /// once went unanswered at startup, and what these tests check is the
     /// supervision, not the HTTP server's latency. A supervisor that stays silent
     /// still fails them, with the last error.
-    async fn status(&self) -> Vec<StatusEntry> {
+    async fn ask<T, F: std::future::Future<Output = anyhow::Result<T>>>(
+        &self,
+        what: &str,
+        f: impl Fn() -> F,
+    ) -> T {
         let start = Instant::now();
         loop {
-            match status_cmd::fetch(self.addr).await {
-                Ok(rows) => return rows,
+            match f().await {
+                Ok(v) => return v,
                 Err(e) if start.elapsed() < Duration::from_secs(15) => {
-                    eprintln!("/status did not answer yet ({e:#}); asking again");
+                    eprintln!("{what} did not answer yet ({e:#}); asking again");
                     tokio::time::sleep(Duration::from_millis(100)).await;
                 }
-                Err(e) => panic!("/status: {e:#}"),
+                Err(e) => panic!("{what}: {e:#}"),
             }
         }
     }
@@ -111,9 +120,9 @@ impl Harness {
     }
 
     async fn metrics(&self) -> String {
-        let (code, body) = status_cmd::http_get(self.addr, "/metrics")
-            .await
-            .expect("/metrics");
+        let (code, body) = self
+            .ask("/metrics", || status_cmd::http_get(self.addr, "/metrics"))
+            .await;
         assert_eq!(code, 200);
         body
     }
