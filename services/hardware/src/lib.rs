@@ -32,8 +32,9 @@ pub mod service;
 use std::process::Stdio;
 use std::time::Duration;
 
+use anyhow::Context as _;
+use skymesh_runtime::timer::Ticker;
 use skymesh_runtime::{Context, IpcError};
-use tokio::time::MissedTickBehavior;
 use tokio_util::task::TaskTracker;
 
 pub use crate::config::{RawConfig, Settings};
@@ -64,9 +65,12 @@ pub async fn run(mut hw: Hardware, ctx: Context) -> anyhow::Result<()> {
     let metrics = hw.metrics().clone();
     let mut ports = ipc::Ports::open(&ctx.bus)?;
     ports.state(hw.state(Now::current()))?;
-    let mut period = tokio::time::interval(STATE_PERIOD);
-    period.set_missed_tick_behavior(MissedTickBehavior::Delay);
-    period.tick().await; // the first tick is immediate: the state was just published
+    // On the machine-wide grid (skymesh_runtime::timer), not tokio's wheel: the
+    // second's state falls on the instant of this process's own heartbeat (and every
+    // other service's), one wake-up for both, where tokio's interval woke the
+    // process twice more a second (its own instant, and the wheel's move of it).
+    let mut period = Ticker::new(STATE_PERIOD).context("creating the state timer")?;
+    period.tick().await?; // the first tick is immediate: the state was just published
     let commands = TaskTracker::new();
     ctx.ready();
     let result: anyhow::Result<()> = loop {
@@ -76,7 +80,10 @@ pub async fn run(mut hw: Hardware, ctx: Context) -> anyhow::Result<()> {
             _ = ctx.shutdown.cancelled() => break Ok(()),
             r = ports.requests.recv() => Wake::Request(r),
             _ = tokio::time::sleep(due.unwrap_or_default()), if due.is_some() => Wake::Due,
-            _ = period.tick() => Wake::Period,
+            r = period.tick() => match r {
+                Ok(_) => Wake::Period,
+                Err(e) => break Err(anyhow::Error::new(e).context("the state timer")),
+            },
         };
         let now = Now::current();
         let step = match wake {
