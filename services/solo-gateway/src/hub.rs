@@ -8,7 +8,9 @@
 use std::net::{IpAddr, SocketAddr};
 use std::time::Duration;
 
+use anyhow::Context as _;
 use skymesh_ipc_types::AppMessage;
+use skymesh_runtime::timer::Ticker;
 use solo_proto::SoloMessage;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
@@ -119,8 +121,12 @@ impl Hub {
         mut events: mpsc::Receiver<Event>,
         shutdown: &CancellationToken,
     ) -> anyhow::Result<()> {
-        let mut tick = tokio::time::interval(self.settings.session_publish);
-        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        // On the machine-wide grid (skymesh_runtime::timer), not tokio's wheel: the
+        // session goes out on the instants of the services' heartbeats, so neither
+        // this process nor the shot engine, which listens to it, wakes for it alone
+        // (tokio's interval cost this process two wake-ups a second of their own).
+        let mut tick =
+            Ticker::new(self.settings.session_publish).context("creating the session timer")?;
         let result = loop {
             let step = tokio::select! {
                 biased;
@@ -143,7 +149,10 @@ impl Hub {
                     Ok(m) => self.on_to_app(&m),
                     Err(e) => Err(e.into()),
                 },
-                _ = tick.tick() => self.publish_session(),
+                r = tick.tick() => match r {
+                    Ok(_) => self.publish_session(),
+                    Err(e) => Err(anyhow::Error::new(e).context("the session timer")),
+                },
             };
             if let Err(e) = step {
                 break Err(e);
