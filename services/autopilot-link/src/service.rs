@@ -19,7 +19,7 @@ use skymesh_ipc_types::{
     FixedStr, GeofenceSet, PayloadState, RefusalReason, VehicleCommand, VehicleState,
     VehicleStatus,
 };
-use skymesh_runtime::timer::grid_at_or_after;
+use skymesh_runtime::timer::until_grid_point;
 use skymesh_runtime::{clock::monotonic_ns, IpcError, Publisher, Subscriber};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
@@ -273,9 +273,7 @@ impl<L: Lifecycle> Service<L> {
             // on (a stalled machine skips the missed ticks): the status goes out on
             // the instants of the services' heartbeats, so its listeners do not
             // wake for it alone.
-            let now_ns = monotonic_ns();
-            let at_ns = grid_at_or_after(now_ns + TICK.as_nanos() as u64 / 2, TICK, Duration::ZERO);
-            self.next_tick = now + Duration::from_nanos(at_ns.saturating_sub(now_ns));
+            self.next_tick = now + until_grid_point(TICK);
             self.write(requests::heartbeat());
             self.publish_status(now)?;
             self.publish_authority()?;

@@ -154,6 +154,20 @@ pub fn grid_at_or_after(t_ns: u64, period: Duration, phase: Duration) -> u64 {
     u64::try_from(at + offset).unwrap_or(u64::MAX)
 }
 
+/// How long from now to the first point of the grid of `period` (phase zero) at
+/// least half a period on: for a once-in-a-while job that should fall on the
+/// instants every other process's ticker shares (a once-a-second status on the
+/// heartbeats' whole seconds). Between half a period and a period and a half.
+pub fn until_grid_point(period: Duration) -> Duration {
+    let now_ns = monotonic_ns();
+    let at_ns = grid_at_or_after(
+        now_ns.saturating_add(nanos(period) / 2),
+        period,
+        Duration::ZERO,
+    );
+    Duration::from_nanos(at_ns.saturating_sub(now_ns))
+}
+
 /// `at` as `CLOCK_MONOTONIC` ns (through one reading of each clock).
 fn monotonic_ns_of(at: Instant) -> u64 {
     let (now, now_ns) = (Instant::now(), monotonic_ns());
@@ -282,6 +296,28 @@ impl Ticker {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn until_grid_point_lands_on_the_grid_half_a_period_on_or_more() {
+        for period in [Duration::from_secs(1), Duration::from_millis(500)] {
+            let before = monotonic_ns();
+            let d = until_grid_point(period);
+            let after = monotonic_ns();
+            assert!(d <= period * 3 / 2, "{d:?} for {period:?}");
+            // The target, read against either clock reading, is a grid point.
+            let lo = before + nanos(d);
+            let hi = after + nanos(d);
+            let at = grid_at_or_after(lo, period, Duration::ZERO);
+            assert!(
+                at <= hi,
+                "{lo}..={hi} holds no point of the {period:?} grid"
+            );
+            assert!(
+                at >= before + nanos(period) / 2,
+                "less than half a period on"
+            );
+        }
+    }
 
     #[tokio::test]
     async fn sleep_until_waits_until_the_deadline_and_not_for_a_past_one() {

@@ -34,7 +34,7 @@ use std::time::Duration;
 
 use skymesh_ipc_types::{SwarmWatch, SWARM_WATCH_LEASE_NS};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::timer::{grid_at_or_after, Ticker};
+use skymesh_runtime::timer::{until_grid_point, Ticker};
 use skymesh_runtime::{CancellationToken, IpcError};
 use tokio::time::Instant;
 
@@ -44,15 +44,6 @@ use crate::metrics::Metrics;
 
 /// The tick period while the queue rests (see the module docs).
 pub const REST_TICK: Duration = Duration::from_secs(1);
-
-/// The first whole second of the machine-wide grid at least half a [`REST_TICK`]
-/// from now: where the next tick at rest falls.
-fn next_rest_tick() -> Instant {
-    let now_ns = monotonic_ns();
-    let half = u64::try_from(REST_TICK.as_nanos() / 2).unwrap_or(u64::MAX);
-    let at_ns = grid_at_or_after(now_ns.saturating_add(half), REST_TICK, Duration::ZERO);
-    Instant::now() + Duration::from_nanos(at_ns.saturating_sub(now_ns))
-}
 
 /// The readers that watch the state: each publisher's (header service, instance)
 /// word that it watches, and when that lapses (monotonic ns).
@@ -144,7 +135,7 @@ pub(crate) async fn run_loop(
         if rest && (ticked || !resting) {
             // After a tick, or on coming to rest: the next tick a rest period on. A
             // command or word that leaves the queue at rest does not move it.
-            interval.skip_to(next_rest_tick());
+            interval.skip_to(Instant::now() + until_grid_point(REST_TICK));
         } else if !rest && resting {
             // At once: a reader that starts watching waits for a fresh state.
             interval.reset_immediately();
