@@ -133,8 +133,9 @@ pub(crate) async fn run_loop(
         }
         let rest = swarm.at_rest() && !watches.any(monotonic_ns());
         if rest && (ticked || !resting) {
-            // After a tick, or on coming to rest: the next tick a rest period on. A
-            // command or word that leaves the queue at rest does not move it.
+            // After a tick, or on coming to rest: the next tick on the first whole
+            // second of the grid at least half a rest period on. A command or word
+            // that leaves the queue at rest does not move it.
             interval.skip_to(Instant::now() + until_grid_point(REST_TICK));
         } else if !rest && resting {
             // At once: a reader that starts watching waits for a fresh state.
