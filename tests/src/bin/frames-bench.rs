@@ -181,6 +181,17 @@ fn pin_receiver() -> Result<()> {
     Ok(())
 }
 
+/// A `NAME=1` switch: unset or `0` is off, `1` on, anything else refused (as the
+/// other knobs refuse what they cannot read).
+fn env_flag(name: &str) -> Result<bool> {
+    match std::env::var(name) {
+        Err(_) => Ok(false),
+        Ok(v) if v == "0" => Ok(false),
+        Ok(v) if v == "1" => Ok(true),
+        Ok(v) => Err(anyhow::anyhow!("{name}: `{v}` is neither 1 nor 0")),
+    }
+}
+
 /// What the sender writes into every pixel of frame `k` (the receiver checks it).
 fn fill_value(k: usize) -> u8 {
     (k % 251) as u8 + 1
@@ -386,7 +397,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     ])?;
     expect_line(&mut out, "ready")?;
     std::thread::sleep(Duration::from_millis(100));
-    let tx_yield = std::env::var_os("FRAMES_BENCH_TX_YIELD").is_some();
+    let tx_yield = env_flag("FRAMES_BENCH_TX_YIELD")?;
     let mut pace = Pacer::new(Rate::Hz(FPS));
     let mut cpu = SendCpu::new(WARMUP);
     let mut loan = Vec::with_capacity(frames);
@@ -446,6 +457,8 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
     if mode == Mode::Ew {
         sub.set_early_wake(ANT_MAX_SPIN)?;
     }
+    // Read once: not an environment lookup per frame in the counted receive CPU.
+    let trace = env_flag("FRAMES_BENCH_TRACE")?;
     let mut tally = Tally::new(frames, WARMUP);
     println!("ready");
     // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
@@ -475,7 +488,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
             Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => check_ends(k, ends)?,
         }
         tally.add(k, t0, t1);
-        if std::env::var_os("FRAMES_BENCH_TRACE").is_some() {
+        if trace {
             if let Some(a) = sub.anticipation() {
                 eprintln!("k {k} stamp {t0} lat {} {a:?}", t1 - t0);
             }
