@@ -111,6 +111,8 @@ pub enum Ready<'a> {
 #[derive(Debug, Clone)]
 pub struct ServiceCli {
     binary: PathBuf,
+    /// The script `binary` interprets, passed before every other argument.
+    script: Option<PathBuf>,
     domain_prefix: String,
     patience: Duration,
 }
@@ -121,8 +123,25 @@ impl ServiceCli {
     pub fn new(binary: impl Into<PathBuf>, domain_prefix: &str) -> Self {
         ServiceCli {
             binary: binary.into(),
+            script: None,
             domain_prefix: domain_prefix.to_string(),
             patience: PATIENCE,
+        }
+    }
+
+    /// A script run by `interpreter` (`/bin/sh`), which is what is executed; the
+    /// script is only read. A script this process has just written must not be
+    /// executed itself: a child another thread forks meanwhile holds the write
+    /// descriptor until its own exec, and the kernel refuses to execute a file open
+    /// for writing (`ETXTBSY`, "Text file busy": a CI run failed on it).
+    pub fn script(
+        interpreter: impl Into<PathBuf>,
+        script: impl Into<PathBuf>,
+        domain_prefix: &str,
+    ) -> Self {
+        ServiceCli {
+            script: Some(script.into()),
+            ..ServiceCli::new(interpreter, domain_prefix)
         }
     }
 
@@ -139,16 +158,17 @@ impl ServiceCli {
 
     /// The binary's file name, for messages.
     fn name(&self) -> String {
-        self.binary
-            .file_name()
+        let path = self.script.as_ref().unwrap_or(&self.binary);
+        path.file_name()
             .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| self.binary.display().to_string())
+            .unwrap_or_else(|| path.display().to_string())
     }
 
     /// Starts the binary with `--config config` and `extra` in a new domain.
     pub fn spawn(&self, config: &Path, extra: &[&str]) -> Running {
         let domain = unique_domain(&self.domain_prefix);
         let child = Command::new(&self.binary)
+            .args(&self.script)
             .arg("--config")
             .arg(config)
             .args(extra)
@@ -357,13 +377,12 @@ mod tests {
         assert!(shipped_config("iceoryx2.toml").is_file());
     }
 
-    /// A "service": a shell script that ignores its arguments.
+    /// A "service": a shell script, run by `/bin/sh` (see [`ServiceCli::script`]:
+    /// these tests write scripts and fork at once, on several threads).
     fn fake_service(dir: &tempfile::TempDir, body: &str) -> ServiceCli {
-        use std::os::unix::fs::PermissionsExt;
         let script = dir.path().join("fake-service");
-        std::fs::write(&script, format!("#!/bin/sh\n{body}\n")).expect("write script");
-        std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).expect("chmod");
-        ServiceCli::new(&script, "tsup")
+        std::fs::write(&script, format!("{body}\n")).expect("write script");
+        ServiceCli::script("/bin/sh", &script, "tsup")
     }
 
     #[tokio::test]
@@ -377,6 +396,31 @@ mod tests {
         assert_eq!(out.status.code(), Some(0), "{}", text(&out));
         assert_eq!(String::from_utf8_lossy(&out.stderr), "started\n");
         assert_eq!(String::from_utf8_lossy(&out.stdout), "done\n");
+    }
+
+    /// Eight tasks on four threads each write fresh scripts and run them at once:
+    /// every fork may catch another thread's script open for writing. Executing the
+    /// scripts themselves failed here with `ETXTBSY` in every try (as one CI run
+    /// did); run by `/bin/sh` they are only read.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+    async fn scripts_written_while_other_threads_fork_run() {
+        let tasks: Vec<_> = (0..8)
+            .map(|t| {
+                tokio::spawn(async move {
+                    for i in 0..25 {
+                        let dir = tempfile::tempdir().expect("temp dir");
+                        let out = fake_service(&dir, &format!("echo {t} {i}"))
+                            .run(Path::new("/unused.toml"), &[])
+                            .await;
+                        assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+                        assert_eq!(String::from_utf8_lossy(&out.stdout), format!("{t} {i}\n"));
+                    }
+                })
+            })
+            .collect();
+        for task in tasks {
+            task.await.expect("a task panicked");
+        }
     }
 
     #[tokio::test]
