@@ -134,7 +134,8 @@ impl DigiView {
 
     /// GETs until `ok` holds for the reply (the gateway answers from the newest
     /// state it has received, which on a loaded machine can trail what this test
-    /// saw on the bus by a frame or two); panics after 3 s.
+    /// saw on the bus by a frame or two, and a stalled check machine longer);
+    /// panics after `PATIENCE`.
     fn get_until(
         &mut self,
         param: ParamType,
@@ -154,11 +155,7 @@ impl DigiView {
                 }
                 return p;
             }
-            assert!(
-                t.elapsed() < Duration::from_secs(3),
-                "{}: still {p:?}",
-                param.name()
-            );
+            assert!(t.elapsed() < PATIENCE, "{}: still {p:?}", param.name());
             std::thread::sleep(Duration::from_millis(50));
         }
     }
