@@ -262,22 +262,25 @@ fn orbit_and_cable_cam_fly_vehicle_sim() {
         );
         leave(&mut app).await;
 
-        // ---- Cable cam: record A here, fly 25 m east, record B, then fly the cable.
-        let a_state = v.now().await;
-        let a = pos(&a_state);
+        // ---- Cable cam: record A where the orbit's end leaves the vehicle at rest, fly
+        // 25 m east, record B, then fly the cable. The ends flown to are the ones the
+        // engine reports it recorded (its newest state when RECORD_POSITION came), each
+        // checked against where this test saw the vehicle: a test's own snapshot taken
+        // while the vehicle still drifts out of the orbit, or up to fly_to's tolerance
+        // from its goal, can lie more than the arrival tolerance from the recorded end
+        // (a run on a loaded machine held at the recorded A for 30 s, 1.5 m from here).
+        let a_state = v
+            .wait_until(Duration::from_secs(30), "at rest after the orbit", |s| {
+                speed(s) < 0.3
+            })
+            .await;
         enter(&mut app, shots::CABLECAM).await;
         app.send(&SoloMessage::RecordPosition).await.unwrap();
-        expect(&mut app, "the first CABLE_CAM_WAYPOINT", |m| {
-            matches!(m, SoloMessage::CableCamWaypoint { .. })
-        })
-        .await;
-        let b = offset(a, 0.0, 25.0);
-        v.fly_to(b, 10.0).await;
+        let a = recorded_end(&mut app, "the first CABLE_CAM_WAYPOINT", pos(&a_state)).await;
+        v.fly_to(offset(a, 0.0, 25.0), 10.0).await;
+        let b_state = v.now().await;
         app.send(&SoloMessage::RecordPosition).await.unwrap();
-        expect(&mut app, "the second CABLE_CAM_WAYPOINT", |m| {
-            matches!(m, SoloMessage::CableCamWaypoint { .. })
-        })
-        .await;
+        let b = recorded_end(&mut app, "the second CABLE_CAM_WAYPOINT", pos(&b_state)).await;
         expect(&mut app, "CABLE_CAM_OPTIONS after the second point", |m| {
             matches!(m, SoloMessage::CableCamOptions { .. })
         })
@@ -293,8 +296,7 @@ fn orbit_and_cable_cam_fly_vehicle_sim() {
             .unwrap();
             let mut worst_off_line = 0.0f64;
             v.wait_until(Duration::from_secs(30), "cable end", |s| {
-                let (n, _) = ne(a, pos(s));
-                worst_off_line = worst_off_line.max(n.abs());
+                worst_off_line = worst_off_line.max(off_line(a, b, pos(s)));
                 let (dn, de) = ne(target, pos(s));
                 dn.hypot(de) < 1.5
             })
@@ -307,6 +309,35 @@ fn orbit_and_cable_cam_fly_vehicle_sim() {
         leave(&mut app).await;
     });
     mesh.stop(Duration::from_secs(10)).unwrap();
+}
+
+/// The end a CABLE_CAM_WAYPOINT reports recorded, which must be where the vehicle
+/// was (`seen`, at rest).
+async fn recorded_end(app: &mut AppClient, what: &str, seen: (f64, f64)) -> (f64, f64) {
+    let SoloMessage::CableCamWaypoint {
+        lat_deg, lon_deg, ..
+    } = expect(app, what, |m| {
+        matches!(m, SoloMessage::CableCamWaypoint { .. })
+    })
+    .await
+    else {
+        unreachable!()
+    };
+    let end = (lat_deg, lon_deg);
+    let (n, e) = ne(seen, end);
+    assert!(
+        n.hypot(e) < 1.5,
+        "{what}: recorded {:.2} m from where the vehicle was",
+        n.hypot(e)
+    );
+    end
+}
+
+/// Horizontal distance of `p` from the line through `a` and `b`, metres.
+fn off_line(a: (f64, f64), b: (f64, f64), p: (f64, f64)) -> f64 {
+    let (bn, be) = ne(a, b);
+    let (pn, pe) = ne(a, p);
+    (bn * pe - be * pn).abs() / bn.hypot(be)
 }
 
 /// Selfie flies near → far → near with the camera on the ROI; follow tracks a
