@@ -268,7 +268,8 @@ fn orbit_and_cable_cam_fly_vehicle_sim() {
         // checked against where this test saw the vehicle: a test's own snapshot taken
         // while the vehicle still drifts out of the orbit, or up to fly_to's tolerance
         // from its goal, can lie more than the arrival tolerance from the recorded end
-        // (a run on a loaded machine held at the recorded A for 30 s, 1.5 m from here).
+        // (a run on a loaded machine held at the recorded A for 30 s, more than 1.5 m
+        // from a snapshot taken at 4 m/s with 3.2 m of braking left).
         let a_state = v
             .wait_until(Duration::from_secs(30), "at rest after the orbit", |s| {
                 speed(s) < 0.3
