@@ -37,7 +37,7 @@ wire_enum! {
 ///
 /// Topic: [`crate::topics::vehicle_authority`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.AuthorityState.v1")]
+#[type_name("skymesh.AuthorityState.v2")]
 #[repr(C)]
 pub struct AuthorityState {
     pub header: SampleHeader,
@@ -52,14 +52,18 @@ pub struct AuthorityState {
     pub payload_holder: u8,
     pub payload_previous: u8,
     pub payload_change: u8,
-    /// 1 while an emergency stop holds the vehicle (safety keeps authority until it releases).
+    /// 1 while an emergency stop holds the vehicle (safety keeps flight authority until
+    /// every engager has released it or an operator/safety `ClearEmergency`).
     pub emergency: u8,
     /// `CLOCK_MONOTONIC` ns of the last flight-authority change.
     pub flight_since_ns: u64,
     /// `CLOCK_MONOTONIC` ns of the last payload-authority change.
     pub payload_since_ns: u64,
+    /// The sources whose emergency stop is in force: bit `1 << source.to_wire()`.
+    pub emergency_sources: u8,
+    pub reserved: [u8; 7],
 }
-crate::assert_layout!(AuthorityState, size = 48, align = 8);
+crate::assert_layout!(AuthorityState, size = 56, align = 8);
 
 impl Default for AuthorityState {
     fn default() -> Self {
@@ -75,6 +79,8 @@ impl Default for AuthorityState {
             emergency: 0,
             flight_since_ns: 0,
             payload_since_ns: 0,
+            emergency_sources: 0,
+            reserved: [0; 7],
         }
     }
 }
@@ -85,6 +91,10 @@ impl AuthorityState {
     }
     pub fn payload(&self) -> Option<CommandSource> {
         CommandSource::try_from(self.payload_holder).ok()
+    }
+    /// Whether `source` has an emergency stop in force.
+    pub fn emergency_by(&self, source: CommandSource) -> bool {
+        self.emergency_sources & (1 << source.to_wire()) != 0
     }
 }
 
@@ -109,6 +119,14 @@ wire_enum! {
         GeofenceUpdated = 8 => "geofence_updated",
         /// A geofence sample was refused (invalid polygon or numbers).
         GeofenceInvalid = 9 => "geofence_invalid",
+        /// One engager withdrew its emergency stop; others may still hold it
+        /// (`AuthorityState::emergency_sources`).
+        EmergencyReleased = 10 => "emergency_released",
+        /// The emergency stop ended: its last engager released it, or an operator or
+        /// safety `ClearEmergency` cleared it (the detail names who).
+        EmergencyCleared = 11 => "emergency_cleared",
+        /// A command was refused because the autopilot flies its own failsafe.
+        FailsafeHeld = 12 => "failsafe_held",
     }
 }
 
@@ -116,7 +134,7 @@ wire_enum! {
 ///
 /// Topic: [`crate::topics::vehicle_arbiter_events`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.ArbiterEvent.v1")]
+#[type_name("skymesh.ArbiterEvent.v2")]
 #[repr(C)]
 pub struct ArbiterEvent {
     pub header: SampleHeader,
@@ -125,7 +143,10 @@ pub struct ArbiterEvent {
     pub kind: u8,
     /// The [`CommandSource`] concerned, or [`NO_HOLDER`].
     pub source: u8,
-    pub reserved: [u8; 5],
+    pub reserved: u8,
+    /// For geofence decisions: the [`GeofenceSet::request_id`] decided (0 = none), so
+    /// the gateway that asked answers its client from the arbiter's decision.
+    pub request_id: u32,
     pub detail: FixedStr<56>,
 }
 crate::assert_layout!(ArbiterEvent, size = 88, align = 8);
@@ -174,14 +195,18 @@ impl Default for FencePolygon {
     }
 }
 
-/// The geofence envelope for one vehicle: every position and velocity setpoint from
-/// every source is checked against it. A new sample replaces the old one entirely;
-/// `enabled = 0` clears it. Inside means: inside at least one keep-in polygon (if
+/// One source's geofence for one vehicle. The arbiter keeps one fence per source and
+/// enforces all of them at once (inside every keep-in, outside every keep-out, the
+/// lowest ceiling, the highest floor). A new sample from a source replaces that
+/// source's fence entirely; `enabled = 0` clears the fence of `target_source`
+/// ([`NO_HOLDER`]: the sender's own; another source's only from safety or operator).
+/// The arbiter answers each sample with a `GeofenceUpdated` or `GeofenceInvalid`
+/// event carrying `request_id`. Inside means: inside at least one keep-in polygon (if
 /// any are given), outside every keep-out polygon, and between floor and ceiling.
 ///
 /// Topic: [`crate::topics::vehicle_geofence`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.GeofenceSet.v1")]
+#[type_name("skymesh.GeofenceSet.v2")]
 #[repr(C)]
 pub struct GeofenceSet {
     pub header: SampleHeader,
@@ -190,18 +215,22 @@ pub struct GeofenceSet {
     pub enabled: u8,
     /// Valid entries of `polygons`.
     pub polygon_count: u8,
-    /// [`CommandSource`] that set it (for logs and audit).
+    /// [`CommandSource`] that set it: the fence belongs to this source.
     pub source: u8,
-    pub reserved: u32,
+    /// Chosen by the sender, echoed in the arbiter's decision event.
+    pub request_id: u32,
     /// Altitude ceiling above home, m (`f32::INFINITY`-free: use a large number for none).
     pub ceiling_m: f32,
     /// Altitude floor above home, m (usually 0 or below).
     pub floor_m: f32,
+    /// For `enabled = 0`: whose fence to clear ([`NO_HOLDER`] = the sender's own).
+    pub target_source: u8,
+    pub reserved: [u8; 7],
     pub polygons: [FencePolygon; MAX_FENCE_POLYGONS],
 }
 crate::assert_layout!(
     GeofenceSet,
-    size = 40 + (8 + 16 * MAX_FENCE_VERTICES) * MAX_FENCE_POLYGONS,
+    size = 48 + (8 + 16 * MAX_FENCE_VERTICES) * MAX_FENCE_POLYGONS,
     align = 8
 );
 
@@ -213,9 +242,11 @@ impl Default for GeofenceSet {
             enabled: 0,
             polygon_count: 0,
             source: NO_HOLDER,
-            reserved: 0,
+            request_id: 0,
             ceiling_m: 120.0,
             floor_m: -10.0,
+            target_source: NO_HOLDER,
+            reserved: [0; 7],
             polygons: [FencePolygon::default(); MAX_FENCE_POLYGONS],
         }
     }

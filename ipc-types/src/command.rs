@@ -66,6 +66,8 @@ wire_enum! {
         CameraCaptureStop = 29 => "camera_capture_stop",
         GimbalRate = 30 => "gimbal_rate",
         CameraFocus = 31 => "camera_focus",
+        ReleaseEmergency = 32 => "release_emergency",
+        ClearEmergency = 33 => "clear_emergency",
     }
 }
 
@@ -172,6 +174,9 @@ wire_enum! {
         InAir = 15 => "in_air",
         /// The source lost authority to a higher-priority source.
         Preempted = 16 => "preempted",
+        /// The autopilot is flying its own failsafe (RTL, LAND, SmartRTL): only a
+        /// pilot on the sticks (manual RC) may change its mode or brake it.
+        AutopilotFailsafe = 17 => "autopilot_failsafe",
     }
 }
 
@@ -221,7 +226,9 @@ impl CommandKind {
             | CommandKind::GoProSet
             | CommandKind::GrabPayloadAuthority
             | CommandKind::ReleasePayloadAuthority => Some(AuthorityDomain::Payload),
-            CommandKind::EmergencyStop => None,
+            CommandKind::EmergencyStop
+            | CommandKind::ReleaseEmergency
+            | CommandKind::ClearEmergency => None,
             _ => Some(AuthorityDomain::Flight),
         }
     }
@@ -339,8 +346,16 @@ pub enum Command {
     /// Stop and hold position now.
     Brake,
     /// Brake and hover now; the safety source takes flight authority and keeps it
-    /// until it releases it explicitly. Does not stop the motors.
+    /// while any source that engaged the stop has not released it
+    /// ([`Command::ReleaseEmergency`]) or until an explicit
+    /// [`Command::ClearEmergency`]. Does not stop the motors.
     EmergencyStop,
+    /// The sender withdraws the emergency stop(s) it engaged. The stop ends when the
+    /// last engager has withdrawn; another source's stop is never lifted by this.
+    ReleaseEmergency,
+    /// Ends the emergency stop whoever engaged it. Only the operator and safety
+    /// sources may send it; the audit names the sender.
+    ClearEmergency,
     /// Take flight authority (granted if no higher-priority source holds it).
     GrabFlightAuthority,
     /// Give flight authority back.
@@ -483,6 +498,8 @@ impl Command {
             Command::Servo { .. } => CommandKind::Servo,
             Command::Brake => CommandKind::Brake,
             Command::EmergencyStop => CommandKind::EmergencyStop,
+            Command::ReleaseEmergency => CommandKind::ReleaseEmergency,
+            Command::ClearEmergency => CommandKind::ClearEmergency,
             Command::GrabFlightAuthority => CommandKind::GrabFlightAuthority,
             Command::ReleaseFlightAuthority => CommandKind::ReleaseFlightAuthority,
             Command::GrabPayloadAuthority => CommandKind::GrabPayloadAuthority,
@@ -670,6 +687,8 @@ impl Command {
             | Command::RecordStop
             | Command::Brake
             | Command::EmergencyStop
+            | Command::ReleaseEmergency
+            | Command::ClearEmergency
             | Command::GrabFlightAuthority
             | Command::ReleaseFlightAuthority
             | Command::GrabPayloadAuthority
@@ -817,6 +836,8 @@ impl VehicleCommand {
             | Command::RecordStop
             | Command::Brake
             | Command::EmergencyStop
+            | Command::ReleaseEmergency
+            | Command::ClearEmergency
             | Command::GrabFlightAuthority
             | Command::ReleaseFlightAuthority
             | Command::GrabPayloadAuthority
@@ -947,6 +968,8 @@ impl VehicleCommand {
             },
             CommandKind::Brake => Command::Brake,
             CommandKind::EmergencyStop => Command::EmergencyStop,
+            CommandKind::ReleaseEmergency => Command::ReleaseEmergency,
+            CommandKind::ClearEmergency => Command::ClearEmergency,
             CommandKind::GrabFlightAuthority => Command::GrabFlightAuthority,
             CommandKind::ReleaseFlightAuthority => Command::ReleaseFlightAuthority,
             CommandKind::GrabPayloadAuthority => Command::GrabPayloadAuthority,
@@ -1120,6 +1143,8 @@ mod tests {
             },
             Command::Brake,
             Command::EmergencyStop,
+            Command::ReleaseEmergency,
+            Command::ClearEmergency,
             Command::GrabFlightAuthority,
             Command::ReleaseFlightAuthority,
             Command::GrabPayloadAuthority,
