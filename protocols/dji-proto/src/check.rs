@@ -2,7 +2,7 @@
 //! value or a [`Reject`] naming the field path (`data.points[0].latitude`), the code
 //! of [`crate::codes`] and a short reason.
 //!
-//! Conventions (the README's "DJI request checks"):
+//! Conventions (docs/protocols.md, "DJI request checks"):
 //! - a JSON `null` counts as absent (a required field that is null is missing);
 //! - fields the method does not define are ignored (forward compatibility: a newer
 //!   cloud may send more);

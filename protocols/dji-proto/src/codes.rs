@@ -1,5 +1,5 @@
 //! Result codes (`data.result`). 0 is success. The DRC codes are the document's
-//! (FACTS.md); the rest are skymesh's, documented in the README's code table:
+//! (FACTS.md); the rest are skymesh's, documented in docs/protocols.md (the DJI code table):
 //!
 //! | code | name | when |
 //! |---|---|---|

@@ -427,7 +427,7 @@ pub fn parse_service(env: &Envelope) -> Result<ServiceRequest, Reject> {
 pub struct DroneControl {
     /// ≥ 0 (seq 0 restarts the count).
     pub seq: i64,
-    /// −17..=17 m/s, positive = LEFT (the document's words; see README).
+    /// −17..=17 m/s, positive = LEFT (the document's words; see docs/protocols.md).
     pub x: f64,
     /// −17..=17 m/s, positive = forward.
     pub y: f64,
