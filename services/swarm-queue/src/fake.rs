@@ -3,10 +3,16 @@
 //! as ArduCopter behind the arbiter would, moves in straight lines at a capped
 //! speed, and publishes `VehicleState` / `VehicleStatus`. Not a flight model (the
 //! real one is vehicle-sim).
+//!
+//! Its arbiter keeps the emergency stop's engagers as the real one does: a stop is
+//! engaged under its sender's source, [`Command::ReleaseEmergency`] withdraws only
+//! the sender's, [`Command::ClearEmergency`] from operator or safety ends every one,
+//! and releasing flight authority never ends it. Geofences are answered with a
+//! `GeofenceUpdated` / `GeofenceInvalid` event carrying the sample's `request_id`.
 
 use skymesh_ipc_types::{
-    AckResult, Command, CommandAck, CommandKind, FixedStr, FlightMode, RefusalReason,
-    VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, ArbiterEvent, ArbiterEventKind, Command, CommandAck, CommandKind, CommandSource,
+    FixedStr, FlightMode, GeofenceSet, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
 };
 
 use crate::core::Swarm;
@@ -34,7 +40,14 @@ pub struct FakeVehicle {
     /// Every command received, in order.
     pub received: Vec<Command>,
     pub link_up: bool,
-    pub emergency: bool,
+    /// The sources whose emergency stop is in force (bit `1 << source`).
+    pub emergency_sources: u8,
+    /// Geofences answered `GeofenceInvalid` (test hook).
+    pub refuse_fences: bool,
+    /// Geofences never answered (test hook).
+    pub ignore_fences: bool,
+    /// Arbiter events not yet delivered.
+    pub events: Vec<ArbiterEvent>,
 }
 
 /// Climb rate, m/s.
@@ -60,7 +73,10 @@ impl FakeVehicle {
             ignore: Vec::new(),
             received: Vec::new(),
             link_up: true,
-            emergency: false,
+            emergency_sources: 0,
+            refuse_fences: false,
+            ignore_fences: false,
+            events: Vec::new(),
         }
     }
 
@@ -72,6 +88,43 @@ impl FakeVehicle {
         self.armed && self.alt_rel() > 0.2
     }
 
+    /// Whether any emergency stop is in force.
+    pub fn emergency(&self) -> bool {
+        self.emergency_sources != 0
+    }
+
+    /// Whether `source`'s emergency stop is in force.
+    pub fn emergency_by(&self, source: CommandSource) -> bool {
+        self.emergency_sources & (1 << source.to_wire()) != 0
+    }
+
+    fn event(&mut self, kind: ArbiterEventKind, source: u8, request_id: u32, detail: &str) {
+        self.events.push(ArbiterEvent {
+            vehicle_id: self.vehicle_id,
+            kind: kind.to_wire(),
+            source,
+            request_id,
+            detail: FixedStr::new(detail),
+            ..ArbiterEvent::default()
+        });
+    }
+
+    /// The arbiter's answer to a geofence sample, queued on [`FakeVehicle::events`]
+    /// (nothing with `ignore_fences`).
+    pub fn handle_geofence(&mut self, g: &GeofenceSet) {
+        if self.ignore_fences {
+            return;
+        }
+        let (kind, detail) = if self.refuse_fences {
+            (ArbiterEventKind::GeofenceInvalid, "test refusal")
+        } else if g.vehicle_id != self.vehicle_id || g.polygons().is_err() {
+            (ArbiterEventKind::GeofenceInvalid, "invalid fence")
+        } else {
+            (ArbiterEventKind::GeofenceUpdated, "fence set")
+        };
+        self.event(kind, g.source, g.request_id, detail);
+    }
+
     /// Executes a command; `None` when it is ignored (no acknowledgement).
     pub fn handle(&mut self, c: &VehicleCommand) -> Option<CommandAck> {
         let cmd = c.command().ok()?;
@@ -80,11 +133,19 @@ impl FakeVehicle {
         if self.ignore.contains(&kind) {
             return None;
         }
-        let safety = c.source == skymesh_ipc_types::CommandSource::Safety.to_wire();
+        let bit = CommandSource::try_from(c.source).map_or(0, |s| 1u8 << s.to_wire());
+        let clearer = [CommandSource::Operator, CommandSource::Safety]
+            .iter()
+            .any(|s| s.to_wire() == c.source);
+        let stop_kinds = [
+            CommandKind::EmergencyStop,
+            CommandKind::ReleaseEmergency,
+            CommandKind::ClearEmergency,
+        ];
         let mut result = Ok(());
         if self.refuse.contains(&kind) {
             result = Err((RefusalReason::Denied, "test refusal"));
-        } else if self.emergency && !safety && kind != CommandKind::EmergencyStop {
+        } else if self.emergency() && !stop_kinds.contains(&kind) {
             result = Err((RefusalReason::Emergency, "emergency stop"));
         } else {
             match cmd {
@@ -129,10 +190,28 @@ impl FakeVehicle {
                 Command::Land => self.mode = FlightMode::Land,
                 Command::Brake => self.target = Some(self.pos),
                 Command::EmergencyStop => {
-                    self.emergency = true;
+                    self.emergency_sources |= bit;
                     self.target = Some(self.pos);
+                    self.event(ArbiterEventKind::EmergencyStop, c.source, 0, "engaged");
                 }
-                Command::ReleaseFlightAuthority if safety => self.emergency = false,
+                Command::ReleaseEmergency => {
+                    if self.emergency_sources & bit == 0 {
+                        result = Err((RefusalReason::Denied, "no emergency stop of its own"));
+                    } else {
+                        self.emergency_sources &= !bit;
+                        self.event(ArbiterEventKind::EmergencyReleased, c.source, 0, "released");
+                        if self.emergency_sources == 0 {
+                            self.event(ArbiterEventKind::EmergencyCleared, c.source, 0, "ended");
+                        }
+                    }
+                }
+                Command::ClearEmergency if !clearer => {
+                    result = Err((RefusalReason::Denied, "only operator or safety clear"))
+                }
+                Command::ClearEmergency if self.emergency_sources != 0 => {
+                    self.emergency_sources = 0;
+                    self.event(ArbiterEventKind::EmergencyCleared, c.source, 0, "cleared");
+                }
                 Command::SetYaw {
                     yaw_deg, relative, ..
                 } => {
@@ -269,7 +348,8 @@ impl FakeFleet {
         }
     }
 
-    /// Delivers `commands` to their vehicles and the acknowledgements to `swarm`.
+    /// Delivers `commands` to their vehicles and the acknowledgements and arbiter
+    /// events to `swarm`.
     pub fn deliver(&mut self, swarm: &mut Swarm, commands: &[VehicleCommand], now_ns: u64) {
         for c in commands {
             let Some(i) = swarm.index_of_vehicle(c.vehicle_id) else {
@@ -278,6 +358,29 @@ impl FakeFleet {
             if let Some(ack) = self.vehicles[i].handle(c) {
                 swarm.handle_ack(i, &ack, now_ns);
             }
+            self.deliver_events(swarm, i, now_ns);
+        }
+    }
+
+    /// Delivers `fences` to their vehicles' arbiters and their answers to `swarm`.
+    pub fn deliver_geofences(
+        &mut self,
+        swarm: &mut Swarm,
+        fences: &[Box<GeofenceSet>],
+        now_ns: u64,
+    ) {
+        for g in fences {
+            let Some(i) = swarm.index_of_vehicle(g.vehicle_id) else {
+                continue;
+            };
+            self.vehicles[i].handle_geofence(g);
+            self.deliver_events(swarm, i, now_ns);
+        }
+    }
+
+    fn deliver_events(&mut self, swarm: &mut Swarm, i: usize, now_ns: u64) {
+        for e in std::mem::take(&mut self.vehicles[i].events) {
+            swarm.handle_event(i, &e, now_ns);
         }
     }
 

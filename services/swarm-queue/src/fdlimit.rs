@@ -1,4 +1,4 @@
-//! File descriptors: a swarm of 250 drones opens about a thousand bus ports (three
+//! File descriptors: a swarm of 250 drones opens over a thousand bus ports (four
 //! subscribers and a publisher per drone, each with its event socket), more than the
 //! usual soft limit of 1024. The soft limit is raised to the hard limit at start.
 

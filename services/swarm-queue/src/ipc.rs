@@ -1,6 +1,8 @@
 //! The swarm queue's bus ports. All iceoryx2 calls stay in the runtime.
 //!
-//! Per drone: `skymesh/vehicle/{id}/{state,status,command_ack}` subscribed and
+//! Per drone: `skymesh/vehicle/{id}/{state,status,command_ack,arbiter_events}`
+//! subscribed (the events answer the geofences the queue sends and say when its
+//! emergency stop ended) and
 //! `skymesh/vehicle/{id}/command` published, opened at start; the geofence
 //! publisher of a vehicle only when the queue first sets its geofence (a
 //! `GeofenceSet` is 4 KiB and every publisher reserves shared memory for its
@@ -9,8 +11,8 @@
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, CommandAck, GeofenceSet, HardwareRequest, SwarmCommand, SwarmReply, SwarmState,
-    SwarmWatch, VehicleCommand, VehicleState, VehicleStatus,
+    topics, ArbiterEvent, CommandAck, GeofenceSet, HardwareRequest, SwarmCommand, SwarmReply,
+    SwarmState, SwarmWatch, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 
@@ -23,6 +25,7 @@ pub struct DronePorts {
     pub state: Subscriber<VehicleState>,
     pub status: Subscriber<VehicleStatus>,
     pub acks: Subscriber<CommandAck>,
+    pub events: Subscriber<ArbiterEvent>,
     pub commands: Publisher<VehicleCommand>,
     /// Opened on first use.
     pub geofence: Option<Publisher<GeofenceSet>>,
@@ -73,6 +76,12 @@ impl Ports {
                         "skymesh/vehicle/*/command_ack",
                     )
                     .with_context(|| format!("opening the command ack topic of vehicle {id}"))?,
+                events: bus
+                    .subscriber_counted_as(
+                        &topics::vehicle_arbiter_events(id),
+                        "skymesh/vehicle/*/arbiter_events",
+                    )
+                    .with_context(|| format!("opening the arbiter events topic of vehicle {id}"))?,
                 commands: bus
                     .publisher_counted_as(&topics::vehicle_command(id), "skymesh/vehicle/*/command")
                     .with_context(|| format!("opening the command topic of vehicle {id}"))?,

@@ -5,7 +5,7 @@
 //! publishes one validated `SwarmCommand` per drone (or for every drone) on
 //! `skymesh/swarm/command`. This service keeps, per drone, a current command and a
 //! FIFO queue, executes them only through `VehicleCommand`s from source
-//! `SwarmQueue` (`Safety` for the emergency stop) on each vehicle's command topic,
+//! `SwarmQueue` (the emergency stop too) on each vehicle's command topic,
 //! answers every command with exactly one `SwarmReply` (success, timeout or refused
 //! with a reason; `CHECK_ALL_IDLE` with one idle state per drone), and publishes
 //! every drone's `SwarmState` at `tick_hz` (pose, target, colour, `DroneState`,
@@ -70,8 +70,8 @@
 //! | `EXT_TEXT` | stored; for `hardware_drone` written to the LCD (line 0, the rest on line 1, which is otherwise cleared) | `Success` |
 //! | `EXT_VEHICLECMD` | no rotating base: the body turns, `Command::SetYaw` (`int1` 1 relative: `f[0]` CCW; 2 absolute: CCW from east); `relative_rotation_deg` records the rotation commanded (relative accumulates, absolute sets); 4 (void) does nothing | after the vehicle's ack; void: `Success` |
 //! | `EXT_RESET_TRACKING_TO_FRAME`, `EXT_VIDEO`, `EXT_VIDEO_CMD`, `EXT_TIMECODE`, `EXT_TIMECODE_ACTIVE` | recorded and logged (GPS/EKF tracking needs no reset; no video player) | `Success` |
-//! | `EMERGENCY_MODE` `int1 ≠ 0` | `Command::EmergencyStop` from source `Safety` (brake and hover, safety takes flight authority), current command and queue cleared ("emergency mode"), flag `EMERGENCY`; motion commands refused "emergency mode" until it ends | after the vehicle's ack |
-//! | `EMERGENCY_MODE` `int1 = 0` | ends an emergency this queue started: `ReleaseFlightAuthority` from `Safety` | after the ack; `Refused` "not in emergency mode" |
+//! | `EMERGENCY_MODE` `int1 ≠ 0` | `Command::EmergencyStop` from the queue's own source `SwarmQueue` (the arbiter brakes, safety takes flight authority, the queue is one of the stop's engagers), current command and queue cleared ("emergency mode"); flag `EMERGENCY` once the arbiter took the stop (its ack, or its `EmergencyStop` event naming `swarm_queue`: a refused stop sets nothing); motion commands refused "emergency mode" while it is in force or being engaged | after the vehicle's ack |
+//! | `EMERGENCY_MODE` `int1 = 0` | `Command::ReleaseEmergency` from `SwarmQueue`: withdraws the queue's own stop only (sent whatever the flag says: the arbiter knows whether one is engaged, also from before a restart); another source's stop (a DJI pilot's) stays, and the vehicle stays stopped until its last engager released or an operator cleared it. Never `ReleaseFlightAuthority`. The flag also drops on the arbiter's `EmergencyReleased` (by the queue) and `EmergencyCleared` events | after the ack (`Refused` with the arbiter's reason when the queue had no stop engaged) |
 //! | `MOTORS_CMD` | 1 → `Arm`, 0 → `Disarm` (the autopilot refuses to disarm in the air) | after the vehicle's ack |
 //! | `SET_MANUAL_TARGET` | replaces the current command (answered `Refused` "replaced by a manual target") with a waypoint to `f[0..3]`, now; the queue stays | as `WAYPOINT` |
 //! | `RESET_HOME_POSITION` | home = the drone's tracked position, then as `SET_HOME_POSITION_COORDINATE` | after the ack; `Refused` without a position |
@@ -80,7 +80,7 @@
 //! | `RESET_ANIM_POSITION` | animation offset = 0 | `Success` |
 //! | `RESET_ANIM_POSITION_TO_DRONE` | animation offset = tracked position − first keyframe (the animation starts where the drone is) | `Success` |
 //! | `SET_CALIBRATION_OFFSET` | `f[0..3]` added to the tracked position (and taken off every target sent) | `Success` |
-//! | `SET_GEOFENCE`, `RECONFIGURE_GEOFENCE` | a keep-in box: published as the vehicle's `GeofenceSet` (one 4-vertex keep-in polygon, floor/ceiling above home) for the arbiter to enforce, and intersected with the bounding box for the queue's own checks | `Success`; `Refused` for an empty box |
+//! | `SET_GEOFENCE`, `RECONFIGURE_GEOFENCE` | a keep-in box: published as the vehicle's `GeofenceSet` (source `SwarmQueue`, a fresh `request_id`; one 4-vertex keep-in polygon, floor/ceiling above home) for the arbiter to enforce — it is the queue's own fence, kept beside other sources' — and, once the arbiter took it, intersected with the bounding box for the queue's own checks | on the arbiter's decision event with that `request_id` (`skymesh/vehicle/{id}/arbiter_events`): `GeofenceUpdated` → `Success`, `GeofenceInvalid` → `Refused` with its reason (the previous box stays); none within 2 s → `Timeout`; `Refused` at once for an empty box |
 //! | `SET_GEOFENCE_POSITION` | the geofence box moved to centre on `f[0..3]` | as above; `Refused` "no geofence set" |
 //! | `COLOR_MODE`, `MANUAL_COLOR_MODE` | `int1 ≠ 0`: manual colours (animations do not change the LEDs); 0: animation colours | `Success` |
 //! | `CTRL_MODE`, `SET_GROUP`, `SET_CLOCK_TIMEOUT` | recorded and logged | `Success` |
@@ -143,7 +143,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 /// every port is open.
 ///
 /// Subscribes to `skymesh/swarm/command` and, per drone,
-/// `skymesh/vehicle/{vehicle_id}/{state,status,command_ack}`; publishes
+/// `skymesh/vehicle/{vehicle_id}/{state,status,command_ack,arbiter_events}`; publishes
 /// `skymesh/swarm/{reply,state}`, `skymesh/vehicle/{vehicle_id}/{command,geofence}`
 /// and (with a `hardware_drone`) `skymesh/hardware/request`.
 pub async fn run_with(

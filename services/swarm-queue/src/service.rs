@@ -165,7 +165,8 @@ fn tick(
     Ok(())
 }
 
-/// Hands the queue every drone's newest state and status and every acknowledgement.
+/// Hands the queue every drone's newest state and status, every acknowledgement and
+/// every arbiter event.
 fn drain_vehicles(swarm: &mut Swarm, ports: &mut Ports, now: u64) -> Result<(), IpcError> {
     for (idx, d) in ports.drones.iter().enumerate() {
         if let Some(s) = d.state.latest()? {
@@ -176,6 +177,9 @@ fn drain_vehicles(swarm: &mut Swarm, ports: &mut Ports, now: u64) -> Result<(), 
         }
         while let Some(a) = d.acks.try_recv()? {
             swarm.handle_ack(idx, &a, now);
+        }
+        while let Some(e) = d.events.try_recv()? {
+            swarm.handle_event(idx, &e, now);
         }
     }
     Ok(())

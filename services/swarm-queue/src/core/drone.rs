@@ -167,6 +167,17 @@ pub struct SideOp {
     pub deadline_ns: u64,
 }
 
+/// A geofence sent to the arbiter whose `GeofenceUpdated` / `GeofenceInvalid` event
+/// (matched by `request_id`) the command's reply waits for.
+#[derive(Debug, Clone)]
+pub struct FenceRequest {
+    pub request_id: u32,
+    pub cmd: SwarmCommand,
+    /// The box the drone's fence becomes once the arbiter took it.
+    pub fence: Aabb,
+    pub deadline_ns: u64,
+}
+
 /// The newest vehicle state, converted once on receipt.
 #[derive(Debug, Clone, Copy)]
 pub struct Pose {
@@ -245,6 +256,8 @@ pub struct Drone {
     pub vehicle_id: u8,
     pub setup_home: Option<[f32; 3]>,
     pub active: bool,
+    /// This queue's own emergency stop is in force at the arbiter (its engagement
+    /// was accepted, and neither released nor cleared since).
     pub emergency: bool,
     pub current: Option<Running>,
     pub queue: VecDeque<Queued>,
@@ -271,6 +284,8 @@ pub struct Drone {
     pub autopilot_home: Option<[f32; 3]>,
     pub pending: VecDeque<Pending>,
     pub side: Vec<SideOp>,
+    /// Geofences waiting for the arbiter's decision.
+    pub fence_requests: Vec<FenceRequest>,
     pub stream: Stream,
 }
 
@@ -310,6 +325,7 @@ impl Drone {
             autopilot_home: None,
             pending: VecDeque::new(),
             side: Vec::new(),
+            fence_requests: Vec::new(),
             stream: Stream::default(),
         }
     }

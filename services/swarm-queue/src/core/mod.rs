@@ -18,10 +18,10 @@ use std::time::Duration;
 
 use skymesh_ipc_types::arbiter::{FencePolygon, MAX_FENCE_VERTICES};
 use skymesh_ipc_types::{
-    swarm_flags, AckResult, Command, CommandAck, CommandKind, CommandSource, FenceKind, FixedStr,
-    FlightMode, GeofenceSet, HardwareOp, HardwareRequest, LcdOp, RefusalReason, SwarmCommand,
-    SwarmCommandKind, SwarmReply, SwarmResult, SwarmState, VehicleCommand, VehicleState,
-    VehicleStatus, ALL_DRONES, SWARM_MAX_DRONES,
+    swarm_flags, AckResult, ArbiterEvent, ArbiterEventKind, Command, CommandAck, CommandKind,
+    CommandSource, FenceKind, FixedStr, FlightMode, GeofenceSet, HardwareOp, HardwareRequest,
+    LcdOp, RefusalReason, SwarmCommand, SwarmCommandKind, SwarmReply, SwarmResult, SwarmState,
+    VehicleCommand, VehicleState, VehicleStatus, ALL_DRONES, SWARM_MAX_DRONES,
 };
 
 use crate::anim::{AnimLibrary, Keyframe};
@@ -29,7 +29,9 @@ use crate::config::{BoxPolicy, Settings};
 use crate::metrics::Metrics;
 use crate::site::{heading_of_yaw, wrap_deg};
 
-pub use drone::{Aabb, Drone, Exec, Pose, Queued, Running, TakeoffStep, LANDING_SLOW_BELOW_M};
+pub use drone::{
+    Aabb, Drone, Exec, FenceRequest, Pose, Queued, Running, TakeoffStep, LANDING_SLOW_BELOW_M,
+};
 use drone::{AnimRun, Owner, Pending, SideOp, MAX_PENDING};
 
 use SwarmCommandKind as K;
@@ -42,6 +44,9 @@ const LED_PERIOD_NS: u64 = 100_000_000;
 const STREAM_SPEED_MARGIN_MPS: f32 = 0.5;
 /// A streamed speed differing less than this from the last one sent is not re-sent.
 const SPEED_RESEND_MPS: f32 = 0.1;
+/// A geofence the arbiter has not decided on within this time is answered
+/// `Timeout` (the arbiter answers at once when it runs; it may not run).
+pub const FENCE_ANSWER_TIMEOUT_NS: u64 = 2_000_000_000;
 
 /// What the queue wants published, besides replies and state.
 #[derive(Debug, Default)]
@@ -79,6 +84,8 @@ pub struct Swarm {
     hw_request_id: u32,
     hw_last: Option<[u8; 3]>,
     hw_last_ns: u64,
+    /// The `GeofenceSet::request_id` of the next fence sent (never 0).
+    next_fence_request: u32,
     /// Set while a command for every drone is applied that is answered once.
     quiet: bool,
 }
@@ -192,6 +199,7 @@ impl Swarm {
             hw_request_id: 1,
             hw_last: None,
             hw_last_ns: 0,
+            next_fence_request: 1,
             quiet: false,
         }
     }
@@ -468,9 +476,8 @@ impl Swarm {
 
     /// A `CommandAck` from drone `idx`'s vehicle.
     pub fn handle_ack(&mut self, idx: usize, ack: &CommandAck, now: u64) {
-        match CommandSource::try_from(ack.source) {
-            Ok(CommandSource::SwarmQueue) | Ok(CommandSource::Safety) => {}
-            _ => return,
+        if ack.source != CommandSource::SwarmQueue.to_wire() {
+            return;
         }
         let d = &mut self.drones[idx];
         if ack.vehicle_id != d.vehicle_id {
@@ -520,11 +527,59 @@ impl Swarm {
                 let d = &mut self.drones[idx];
                 if let Some(pos) = d.side.iter().position(|s| s.token == token) {
                     let op = d.side.remove(pos);
+                    if op.cmd.kind == K::EmergencyMode.to_wire() {
+                        // The arbiter took (or withdrew) this queue's own stop.
+                        d.emergency = op.cmd.int1 != 0;
+                    }
                     let id = d.id;
                     self.success(&op.cmd, id);
                 }
             }
             Owner::Nobody => {}
+        }
+    }
+
+    /// An `ArbiterEvent` of drone `idx`'s vehicle: the decision on a geofence this
+    /// queue sent (matched by `request_id`), and the state of its own emergency stop
+    /// (engaged: also when the stop's ack says it failed to confirm the brake;
+    /// released by this queue; ended by its last engager or an operator's clear).
+    pub fn handle_event(&mut self, idx: usize, e: &ArbiterEvent, _now: u64) {
+        let d = &mut self.drones[idx];
+        if e.vehicle_id != d.vehicle_id {
+            return;
+        }
+        let ours = e.source == CommandSource::SwarmQueue.to_wire();
+        match e.event_kind() {
+            Some(ArbiterEventKind::EmergencyStop) if ours => d.emergency = true,
+            Some(ArbiterEventKind::EmergencyReleased) if ours => d.emergency = false,
+            Some(ArbiterEventKind::EmergencyCleared) => {
+                if d.emergency {
+                    tracing::warn!(drone = d.id, detail = %e.detail.as_str(), "emergency stop ended by the arbiter");
+                }
+                d.emergency = false;
+            }
+            Some(
+                kind @ (ArbiterEventKind::GeofenceUpdated | ArbiterEventKind::GeofenceInvalid),
+            ) if ours && e.request_id != 0 => {
+                let Some(pos) = d
+                    .fence_requests
+                    .iter()
+                    .position(|r| r.request_id == e.request_id)
+                else {
+                    return;
+                };
+                let r = d.fence_requests.remove(pos);
+                let id = d.id;
+                if kind == ArbiterEventKind::GeofenceUpdated {
+                    tracing::info!(drone = id, min = ?r.fence.min, max = ?r.fence.max, "geofence set");
+                    d.fence = Some(r.fence);
+                    self.success(&r.cmd, id);
+                } else {
+                    let why = format!("geofence refused: {}", e.detail.as_str());
+                    self.refuse(&r.cmd, id, &why);
+                }
+            }
+            _ => {}
         }
     }
 
@@ -613,7 +668,7 @@ impl Swarm {
         if needs_active(kind, cmd) && !self.drones[idx].active {
             return self.refuse(cmd, id, "inactive");
         }
-        if moves(kind, cmd) && self.drones[idx].emergency {
+        if moves(kind, cmd) && self.in_emergency(idx) {
             return self.refuse(cmd, id, "emergency mode");
         }
         match kind {
@@ -753,7 +808,7 @@ impl Swarm {
                     min: [cmd.f[4], cmd.f[5], cmd.f[6]],
                     max: [cmd.f[0], cmd.f[1], cmd.f[2]],
                 };
-                self.set_fence(idx, cmd, b);
+                self.set_fence(idx, cmd, b, now);
             }
             K::SetGeofencePosition => match self.drones[idx].fence {
                 Some(f) => {
@@ -763,7 +818,7 @@ impl Swarm {
                         min: [0, 1, 2].map(|i| c[i] - half[i]),
                         max: [0, 1, 2].map(|i| c[i] + half[i]),
                     };
-                    self.set_fence(idx, cmd, b);
+                    self.set_fence(idx, cmd, b, now);
                 }
                 None => self.refuse(cmd, id, "no geofence set"),
             },
@@ -1075,11 +1130,14 @@ impl Swarm {
         self.side_command(idx, cmd, CommandSource::SwarmQueue, &c, now);
     }
 
+    /// `EMERGENCY_MODE`: 1 engages an emergency stop under this queue's own source;
+    /// 0 withdraws it (`ReleaseEmergency`: another source's stop stays, and the
+    /// arbiter, not this queue, knows whether ours is still engaged: it may be from
+    /// before a restart). The drone's flag follows the arbiter's answers.
     fn emergency(&mut self, idx: usize, cmd: &SwarmCommand, now: u64) {
         let id = self.drones[idx].id;
         if cmd.int1 != 0 {
-            tracing::warn!(drone = id, "emergency mode: braking with safety authority");
-            self.drones[idx].emergency = true;
+            tracing::warn!(drone = id, "emergency mode: emergency stop");
             let current = self.drones[idx].current.take();
             let queued: Vec<Queued> = self.drones[idx].queue.drain(..).collect();
             for q in current.map(|r| r.q).into_iter().chain(queued) {
@@ -1088,36 +1146,50 @@ impl Swarm {
             self.side_command(
                 idx,
                 cmd,
-                CommandSource::Safety,
+                CommandSource::SwarmQueue,
                 &Command::EmergencyStop,
                 now,
             );
-        } else if self.drones[idx].emergency {
+        } else {
             tracing::warn!(
                 drone = id,
-                "emergency mode ended: safety releases flight authority"
+                "emergency mode ended: the queue withdraws its emergency stop"
             );
-            self.drones[idx].emergency = false;
             self.side_command(
                 idx,
                 cmd,
-                CommandSource::Safety,
-                &Command::ReleaseFlightAuthority,
+                CommandSource::SwarmQueue,
+                &Command::ReleaseEmergency,
                 now,
             );
-        } else {
-            self.refuse(cmd, id, "not in emergency mode");
         }
     }
 
-    fn set_fence(&mut self, idx: usize, cmd: &SwarmCommand, b: Aabb) {
+    /// The drone's emergency mode: its stop in force, or being engaged.
+    fn in_emergency(&self, idx: usize) -> bool {
+        let d = &self.drones[idx];
+        d.emergency
+            || d.side
+                .iter()
+                .any(|s| s.cmd.kind == K::EmergencyMode.to_wire() && s.cmd.int1 != 0)
+    }
+
+    /// Sends the keep-in box `b` to the arbiter; the reply waits for its decision.
+    fn set_fence(&mut self, idx: usize, cmd: &SwarmCommand, b: Aabb, now: u64) {
         let id = self.drones[idx].id;
         match self.geofence_sample(idx, &b) {
-            Ok(g) => {
-                tracing::info!(drone = id, min = ?b.min, max = ?b.max, "geofence set");
-                self.drones[idx].fence = Some(b);
+            Ok(mut g) => {
+                let request_id = self.next_fence_request;
+                self.next_fence_request = self.next_fence_request.wrapping_add(1).max(1);
+                g.request_id = request_id;
+                tracing::debug!(drone = id, request_id, min = ?b.min, max = ?b.max, "geofence sent");
+                self.drones[idx].fence_requests.push(FenceRequest {
+                    request_id,
+                    cmd: *cmd,
+                    fence: b,
+                    deadline_ns: now + FENCE_ANSWER_TIMEOUT_NS,
+                });
                 self.out.geofences.push(Box::new(g));
-                self.success(cmd, id);
             }
             Err(e) => self.refuse(cmd, id, &e),
         }
@@ -1229,7 +1301,9 @@ impl Swarm {
     /// Then nothing the queue does depends on when it next ticks: a swarm command
     /// ends the rest as it arrives.
     pub fn at_rest(&self) -> bool {
-        self.drones.iter().all(|d| d.idle() && d.side.is_empty())
+        self.drones
+            .iter()
+            .all(|d| d.idle() && d.side.is_empty() && d.fence_requests.is_empty())
             && self.replies.is_empty()
             && self.out.is_empty()
             && self.led_bytes().is_none_or(|b| self.hw_last == Some(b))
@@ -1260,6 +1334,7 @@ impl Swarm {
     }
 
     fn expire_side(&mut self, idx: usize, now: u64) {
+        self.expire_fences(idx, now);
         if self.drones[idx].side.iter().all(|s| s.deadline_ns > now) {
             return;
         }
@@ -1276,6 +1351,30 @@ impl Swarm {
                 SwarmResult::Timeout,
                 0,
                 "no answer from the vehicle",
+            );
+        }
+    }
+
+    /// Geofences the arbiter did not decide on in time: `Timeout` (the drone's
+    /// fence stays what the arbiter last took).
+    fn expire_fences(&mut self, idx: usize, now: u64) {
+        let d = &mut self.drones[idx];
+        if d.fence_requests.iter().all(|r| r.deadline_ns > now) {
+            return;
+        }
+        let id = d.id;
+        let (late, keep): (Vec<FenceRequest>, Vec<FenceRequest>) = d
+            .fence_requests
+            .drain(..)
+            .partition(|r| r.deadline_ns <= now);
+        d.fence_requests = keep;
+        for r in late {
+            self.reply(
+                &r.cmd,
+                id,
+                SwarmResult::Timeout,
+                0,
+                "no geofence decision from the arbiter",
             );
         }
     }

@@ -89,6 +89,8 @@ impl H {
                 break;
             }
             self.fleet.deliver(&mut self.swarm, &out.commands, self.now);
+            self.fleet
+                .deliver_geofences(&mut self.swarm, &out.geofences, self.now);
             self.sent.extend(out.commands);
             self.geofences.extend(out.geofences);
             self.hardware.extend(out.hardware);
@@ -807,6 +809,7 @@ fn a_geofence_goes_to_the_arbiter_and_limits_the_queue() {
     assert_eq!(fence.vehicle_id, 11);
     assert_eq!(fence.enabled, 1);
     assert_eq!(fence.source, CommandSource::SwarmQueue.to_wire());
+    assert_ne!(fence.request_id, 0);
     let rings = fence.polygons().unwrap();
     assert_eq!(rings.len(), 1);
     assert_eq!(rings[0].1.len(), 4);
@@ -835,7 +838,7 @@ fn a_geofence_goes_to_the_arbiter_and_limits_the_queue() {
 }
 
 #[test]
-fn emergency_mode_brakes_with_safety_authority() {
+fn emergency_mode_stops_under_the_queues_own_source_and_withdraws_only_its_own() {
     let mut h = H::new(2);
     h.take_off(1);
     let w = h.waypoint(1, [20.0, 0.0, 3.0]);
@@ -848,7 +851,8 @@ fn emergency_mode_brakes_with_safety_authority() {
     assert_eq!(h.reply(e, 1).unwrap().0, SwarmResult::Success);
     let stop = h.sent.last().unwrap();
     assert_eq!(stop.kind, CommandKind::EmergencyStop.to_wire());
-    assert_eq!(stop.source, CommandSource::Safety.to_wire());
+    assert_eq!(stop.source, CommandSource::SwarmQueue.to_wire());
+    assert!(h.fleet.vehicles[0].emergency_by(CommandSource::SwarmQueue));
     assert!(h.state().drones[0].flags & drone_flags::EMERGENCY != 0);
     let x = h.fleet.vehicles[0].pos[0];
     h.run(1.0);
@@ -866,21 +870,155 @@ fn emergency_mode_brakes_with_safety_authority() {
     // Colour and text still work; the other drone is not affected.
     let other = h.send(2, K::ExtPause, |c| c.f[0] = 0.0);
     assert_eq!(h.reply(other, 2).unwrap().0, SwarmResult::Success);
+    // A DJI pilot stops the same vehicle too.
+    h.fleet.vehicles[0].emergency_sources |= 1 << CommandSource::DjiDrc.to_wire();
+    let before = h.sent.len();
     let end = h.send(1, K::EmergencyMode, |c| c.int1 = 0);
     assert_eq!(h.reply(end, 1).unwrap().0, SwarmResult::Success);
-    assert_eq!(
-        h.sent.last().unwrap().kind,
-        CommandKind::ReleaseFlightAuthority.to_wire()
+    let sent: Vec<_> = h.sent[before..].iter().collect();
+    assert_eq!(sent.len(), 1, "{sent:?}");
+    assert_eq!(sent[0].kind, CommandKind::ReleaseEmergency.to_wire());
+    assert_eq!(sent[0].source, CommandSource::SwarmQueue.to_wire());
+    assert!(
+        h.sent
+            .iter()
+            .all(|c| c.kind != CommandKind::ReleaseFlightAuthority.to_wire()),
+        "never releases authority to end a stop"
     );
     assert!(h.state().drones[0].flags & drone_flags::EMERGENCY == 0);
+    // The pilot's stop holds: the vehicle still refuses to move.
+    let v = &h.fleet.vehicles[0];
+    assert!(!v.emergency_by(CommandSource::SwarmQueue));
+    assert!(v.emergency_by(CommandSource::DjiDrc));
+    let blocked = h.waypoint(1, [0.0, 0.0, 3.0]);
+    assert!(h.run_until(5.0, |h| h.answered(blocked, 1)));
+    let (result, why) = h.reply(blocked, 1).unwrap();
+    assert_eq!(result, SwarmResult::Refused);
+    assert!(why.contains("emergency"), "{why}");
+    // A second end has no stop of the queue's to withdraw: the arbiter's answer.
     let again = h.send(1, K::EmergencyMode, |c| c.int1 = 0);
-    assert_eq!(
-        h.reply(again, 1),
-        Some((SwarmResult::Refused, "not in emergency mode".into()))
-    );
+    assert_eq!(h.reply(again, 1).unwrap().0, SwarmResult::Refused);
+    // Once the pilot's stop is cleared, the drone flies again.
+    h.fleet.vehicles[0].emergency_sources = 0;
     let back = h.waypoint(1, [0.0, 0.0, 3.0]);
     assert!(h.run_until(20.0, |h| h.answered(back, 1)));
     assert_eq!(h.reply(back, 1).unwrap().0, SwarmResult::Success);
+}
+
+#[test]
+fn a_refused_emergency_stop_does_not_set_the_flag() {
+    let mut h = H::new(1);
+    h.take_off(1);
+    h.fleet.vehicles[0].refuse.push(CommandKind::EmergencyStop);
+    let e = h.send(1, K::EmergencyMode, |c| c.int1 = 1);
+    assert_eq!(h.reply(e, 1).unwrap().0, SwarmResult::Refused);
+    assert!(h.state().drones[0].flags & drone_flags::EMERGENCY == 0);
+    let w = h.waypoint(1, [2.0, 0.0, 3.0]);
+    assert!(h.run_until(10.0, |h| h.answered(w, 1)));
+    assert_eq!(h.reply(w, 1).unwrap().0, SwarmResult::Success);
+}
+
+#[test]
+fn an_operator_clear_ends_the_queues_emergency_mode() {
+    let mut h = H::new(1);
+    h.take_off(1);
+    let e = h.send(1, K::EmergencyMode, |c| c.int1 = 1);
+    assert_eq!(h.reply(e, 1).unwrap().0, SwarmResult::Success);
+    let clear =
+        VehicleCommand::new(11, CommandSource::Operator, 900, &Command::ClearEmergency).unwrap();
+    let now = h.now;
+    h.fleet.deliver(&mut h.swarm, &[clear], now);
+    assert!(h.state().drones[0].flags & drone_flags::EMERGENCY == 0);
+    let w = h.waypoint(1, [2.0, 0.0, 3.0]);
+    assert!(h.run_until(10.0, |h| h.answered(w, 1)));
+    assert_eq!(h.reply(w, 1).unwrap().0, SwarmResult::Success);
+}
+
+fn box_fence(h: &mut H, max: [f32; 3]) -> u32 {
+    h.send(1, K::SetGeofence, |c| {
+        c.flags |= swarm_flags::HAS_EXT1;
+        c.f[4..7].copy_from_slice(&[-10.0, -10.0, 0.0]);
+        c.f[..3].copy_from_slice(&max);
+    })
+}
+
+/// Hands the drone's vehicle events as its arbiter would publish them.
+fn arbiter_says(h: &mut H, kind: ArbiterEventKind, request_id: u32) {
+    let e = ArbiterEvent {
+        vehicle_id: 11,
+        kind: kind.to_wire(),
+        source: CommandSource::SwarmQueue.to_wire(),
+        request_id,
+        detail: FixedStr::new("ring crosses itself"),
+        ..ArbiterEvent::default()
+    };
+    let now = h.now;
+    h.swarm.handle_event(0, &e, now);
+    h.pump();
+}
+
+#[test]
+fn a_geofence_is_answered_only_by_the_arbiters_decision_on_it() {
+    let mut h = H::new(1);
+    h.fleet.vehicles[0].ignore_fences = true;
+    let g = box_fence(&mut h, [10.0, 10.0, 20.0]);
+    let sent = h.geofences.last().unwrap().request_id;
+    assert!(!h.answered(g, 1), "no answer before the arbiter's");
+    assert!(!h.swarm.at_rest(), "waiting for the arbiter");
+    // Another request's decision, another source's, and the wrong vehicle: no answer.
+    arbiter_says(&mut h, ArbiterEventKind::GeofenceUpdated, sent + 1);
+    let mut other = ArbiterEvent {
+        vehicle_id: 11,
+        kind: ArbiterEventKind::GeofenceUpdated.to_wire(),
+        source: CommandSource::ShotEngine.to_wire(),
+        request_id: sent,
+        ..ArbiterEvent::default()
+    };
+    let now = h.now;
+    h.swarm.handle_event(0, &other, now);
+    other.source = CommandSource::SwarmQueue.to_wire();
+    other.vehicle_id = 12;
+    h.swarm.handle_event(0, &other, now);
+    h.pump();
+    assert!(!h.answered(g, 1));
+    assert_eq!(h.swarm.drone(0).fence, None);
+    arbiter_says(&mut h, ArbiterEventKind::GeofenceUpdated, sent);
+    assert_eq!(h.reply(g, 1).unwrap().0, SwarmResult::Success);
+    assert!(h.swarm.drone(0).fence.is_some());
+    assert_eq!(h.replies_to(g).len(), 1);
+    // Refused: a failure with the arbiter's reason, and the fence it had stays.
+    let bad = box_fence(&mut h, [30.0, 30.0, 20.0]);
+    let sent_bad = h.geofences.last().unwrap().request_id;
+    assert_ne!(sent_bad, sent);
+    arbiter_says(&mut h, ArbiterEventKind::GeofenceInvalid, sent_bad);
+    let (result, why) = h.reply(bad, 1).unwrap();
+    assert_eq!(result, SwarmResult::Refused);
+    assert!(why.contains("ring crosses"), "{why}");
+    assert_eq!(h.swarm.drone(0).fence.unwrap().max, [10.0, 10.0, 20.0]);
+    // Never answered: a timeout after two seconds, not before.
+    let late = box_fence(&mut h, [20.0, 20.0, 20.0]);
+    h.run(1.8);
+    assert!(!h.answered(late, 1));
+    h.run(0.3);
+    assert_eq!(h.reply(late, 1).unwrap().0, SwarmResult::Timeout);
+    assert_eq!(h.swarm.drone(0).fence.unwrap().max, [10.0, 10.0, 20.0]);
+    assert!(h.swarm.at_rest());
+}
+
+#[test]
+fn a_geofence_the_arbiter_refuses_is_a_failure() {
+    let mut h = H::new(1);
+    h.fleet.vehicles[0].refuse_fences = true;
+    let g = box_fence(&mut h, [10.0, 10.0, 20.0]);
+    let (result, why) = h.reply(g, 1).unwrap();
+    assert_eq!(result, SwarmResult::Refused);
+    assert!(why.contains("test refusal"), "{why}");
+    assert_eq!(h.swarm.drone(0).fence, None);
+    // The queue does not clamp to a fence the arbiter does not enforce.
+    h.take_off(1);
+    let w = h.waypoint(1, [15.0, 0.0, 3.0]);
+    assert_eq!(h.state().drones[0].target, [15.0, 0.0, 3.0]);
+    assert!(h.run_until(20.0, |h| h.answered(w, 1)));
 }
 
 #[test]
