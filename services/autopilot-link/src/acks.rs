@@ -8,6 +8,13 @@
 //! refused with that reason. No answer within the timeout → retransmitted with
 //! `confirmation` + 1, up to the configured retries, then refused `Timeout`.
 //!
+//! A retransmission is not written blindly: [`AckTracker::poll`] hands it back with
+//! the command sample it serves, the service has the arbiter decide that sample
+//! again, and a refusal cancels it ([`AckTracker::cancel`], answered with the
+//! arbiter's reason). An emergency stop or a pre-emption cancels the affected
+//! commands at once ([`AckTracker::cancel_where`]): nothing the stop or the
+//! higher-priority source overrides goes out again.
+//!
 //! GoPro requests ride the same tracker, keyed by GOPRO_COMMAND instead of MAV_CMD
 //! ([`AnswerKey`]): one outstanding per `cmd_id` (a newer one supersedes the older,
 //! `Cancelled`), GOPRO_SET_RESPONSE `SUCCESS` → accepted, `FAILED` → refused
@@ -132,6 +139,8 @@ pub struct AckPolicy {
 #[derive(Debug)]
 struct Pending {
     origin: Origin,
+    /// The command sample, for the arbiter to decide a retransmission again.
+    sample: Option<VehicleCommand>,
     command: MavCommand,
     /// When the command sample was taken in (latency is measured from here).
     received: Instant,
@@ -143,8 +152,13 @@ struct Pending {
 /// Something the caller must do after [`AckTracker::poll`].
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
-    /// Write this (with `confirmation` already incremented) again.
-    Retransmit(MavCommand),
+    /// Write `command` (with `confirmation` already incremented) again, unless the
+    /// arbiter now refuses `sample` (then [`AckTracker::cancel`] it).
+    Retransmit {
+        origin: Origin,
+        sample: Option<VehicleCommand>,
+        command: MavCommand,
+    },
     /// Publish this answer.
     Answer(Answer),
 }
@@ -181,6 +195,29 @@ impl AckTracker {
         received: Instant,
         now: Instant,
     ) -> Option<Answer> {
+        self.track(origin, None, command, received, now)
+    }
+
+    /// [`AckTracker::submit`] for `sample`, kept so that a retransmission can be
+    /// decided again.
+    pub fn submit_sample(
+        &mut self,
+        sample: &VehicleCommand,
+        command: MavCommand,
+        received: Instant,
+        now: Instant,
+    ) -> Option<Answer> {
+        self.track(Origin::of(sample), Some(*sample), command, received, now)
+    }
+
+    fn track(
+        &mut self,
+        origin: Origin,
+        sample: Option<VehicleCommand>,
+        command: MavCommand,
+        received: Instant,
+        now: Instant,
+    ) -> Option<Answer> {
         let key = command.key();
         let superseded = self
             .pending
@@ -204,6 +241,7 @@ impl AckTracker {
         };
         self.pending.push(Pending {
             origin,
+            sample,
             command,
             received,
             deadline: now + self.policy.timeout,
@@ -295,7 +333,11 @@ impl AckTracker {
                 p.retries_left -= 1;
                 p.command.bump_confirmation();
                 p.deadline = now + timeout;
-                actions.push(Action::Retransmit(p.command.clone()));
+                actions.push(Action::Retransmit {
+                    origin: p.origin,
+                    sample: p.sample,
+                    command: p.command.clone(),
+                });
                 return true;
             }
             let detail = match p.command.key() {
@@ -316,6 +358,39 @@ impl AckTracker {
     /// The earliest instant at which [`AckTracker::poll`] has something to do.
     pub fn next_deadline(&self) -> Option<Instant> {
         self.pending.iter().map(|p| p.deadline).min()
+    }
+
+    /// Stops tracking the command of `origin` (its retransmission is not written),
+    /// answering it refused with `reason`. `None` if it is not outstanding.
+    pub fn cancel(
+        &mut self,
+        origin: &Origin,
+        reason: RefusalReason,
+        detail: &str,
+    ) -> Option<Answer> {
+        let i = self.pending.iter().position(|p| p.origin == *origin)?;
+        let p = self.pending.swap_remove(i);
+        Some(Answer::refused(p.origin, reason, detail))
+    }
+
+    /// Cancels every outstanding command whose origin `matches` (an emergency stop:
+    /// every flight command; a pre-emption: the pre-empted source's), answering
+    /// each refused with `reason`; they are not retransmitted.
+    pub fn cancel_where(
+        &mut self,
+        matches: impl Fn(&Origin) -> bool,
+        reason: RefusalReason,
+        detail: &str,
+    ) -> Vec<Answer> {
+        let mut answers = Vec::new();
+        self.pending.retain(|p| {
+            if !matches(&p.origin) {
+                return true;
+            }
+            answers.push(Answer::refused(p.origin, reason, detail));
+            false
+        });
+        answers
     }
 
     /// Answers every outstanding command (link lost, shutting down).
@@ -426,9 +501,15 @@ mod tests {
         t.submit(origin(1), arm(), t0, t0);
         assert!(t.poll(ms(1499)).is_empty());
         let actions = t.poll(ms(1500));
-        let [Action::Retransmit(MavCommand::Long(c))] = actions.as_slice() else {
+        let [Action::Retransmit {
+            origin: o,
+            sample: None,
+            command: MavCommand::Long(c),
+        }] = actions.as_slice()
+        else {
             panic!("{actions:?}")
         };
+        assert_eq!(*o, origin(1));
         assert_eq!(c.confirmation, 1);
         assert_eq!(t.next_deadline(), Some(ms(3000)));
         assert!(t.poll(ms(2999)).is_empty());
@@ -595,5 +676,102 @@ mod tests {
         assert_eq!(rest[0].origin, origin(2));
         assert_eq!(rest[0].reason, RefusalReason::LinkDown);
         assert!(t.is_empty());
+    }
+
+    #[test]
+    fn a_retransmission_carries_its_sample_and_a_cancelled_one_never_goes_out() {
+        let t0 = Instant::now();
+        let ms = |n: u64| t0 + Duration::from_millis(n);
+        let mut t = tracker();
+        let arm_sample = sample(&Command::Arm { force: false }, 1);
+        t.submit_sample(&arm_sample, arm(), t0, t0);
+        let actions = t.poll(ms(1500));
+        let [Action::Retransmit {
+            origin: o,
+            sample: Some(s),
+            ..
+        }] = actions.as_slice()
+        else {
+            panic!("{actions:?}")
+        };
+        assert_eq!((*o, *s), (origin(1), arm_sample));
+        // The service's arbiter refuses it now: cancelled with that reason.
+        let a = t
+            .cancel(&origin(1), RefusalReason::Emergency, "emergency stop")
+            .unwrap();
+        assert_eq!(
+            (a.origin, a.result, a.reason),
+            (origin(1), AckResult::Refused, RefusalReason::Emergency)
+        );
+        assert!(t.is_empty());
+        assert!(
+            t.poll(ms(3000)).is_empty(),
+            "no timeout answer, no second retransmission"
+        );
+        assert_eq!(t.cancel(&origin(1), RefusalReason::Emergency, ""), None);
+        assert_eq!(
+            t.on_ack(ARM, 0, None, ms(3100)),
+            None,
+            "a late ack answers nothing"
+        );
+    }
+
+    #[test]
+    fn cancel_where_answers_the_matching_commands_and_keeps_the_others() {
+        let t0 = Instant::now();
+        let ms = |n: u64| t0 + Duration::from_millis(n);
+        let mut t = tracker();
+        let takeoff = sample(&Command::Takeoff { alt_rel_m: 5.0 }, 2);
+        let servo = sample(
+            &Command::Servo {
+                channel: 9,
+                pwm_us: 1500,
+            },
+            3,
+        );
+        t.submit_sample(&sample(&Command::Arm { force: false }, 1), arm(), t0, t0);
+        t.submit_sample(
+            &takeoff,
+            plan_of(Command::Takeoff { alt_rel_m: 5.0 })
+                .command
+                .unwrap(),
+            t0,
+            t0,
+        );
+        t.submit_sample(
+            &servo,
+            plan_of(Command::Servo {
+                channel: 9,
+                pwm_us: 1500,
+            })
+            .command
+            .unwrap(),
+            t0,
+            t0,
+        );
+        let flight = |o: &Origin| {
+            skymesh_ipc_types::CommandKind::try_from(o.kind)
+                .ok()
+                .and_then(|k| k.authority())
+                == Some(skymesh_ipc_types::AuthorityDomain::Flight)
+        };
+        let mut cancelled = t.cancel_where(flight, RefusalReason::Cancelled, "emergency stop");
+        cancelled.sort_by_key(|a| a.origin.command_id);
+        assert_eq!(
+            cancelled
+                .iter()
+                .map(|a| a.origin.command_id)
+                .collect::<Vec<_>>(),
+            vec![1, 2]
+        );
+        assert!(cancelled
+            .iter()
+            .all(|a| a.reason == RefusalReason::Cancelled && a.detail == "emergency stop"));
+        // Only the servo (payload) is retransmitted.
+        let actions = t.poll(ms(1500));
+        let [Action::Retransmit { origin: o, .. }] = actions.as_slice() else {
+            panic!("{actions:?}")
+        };
+        assert_eq!(o.command_id, 3);
     }
 }

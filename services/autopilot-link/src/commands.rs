@@ -31,7 +31,8 @@
 //! | `CameraFocus { camera, mode, value }` | COMMAND_LONG `SET_CAMERA_FOCUS` p1 = `SET_FOCUS_TYPE` (0 step, 1 continuous, 2 range, 3 metres, 4 auto, 5 auto single, 6 auto continuous), p2 = value (0 for the auto types, which ignore it), p3 = camera id (0 = all), p4 NaN (reserved) | COMMAND_ACK (ArduPilot denies step and metres) |
 //! | `Brake` in GUIDED | SET_POSITION_TARGET_LOCAL_NED zero velocity (stays GUIDED, so setpoints resume at once) | accepted when written |
 //! | `Brake` otherwise | COMMAND_LONG `DO_SET_MODE` BRAKE (17) | COMMAND_ACK |
-//! | `EmergencyStop` | as `Brake`: brake and hover (motors keep running) | as `Brake` |
+//! | `EmergencyStop` | not planned here: driven by the service's stop tracker (`service/stop.rs`): COMMAND_LONG `DO_SET_MODE` BRAKE repeated until a HEARTBEAT reports BRAKE, and zero-velocity setpoints at 10 Hz until the measured speed is < 0.3 m/s; in RTL/LAND/SmartRTL nothing is sent (the failsafe descent is held) | `accepted` when BRAKE is reported or the speed confirms the stop (in RTL/LAND/SmartRTL at once, "failsafe descent held"), else refused `failed` after `stop_confirm_timeout_s` |
+//! | `ReleaseEmergency` / `ClearEmergency` | no MAVLink: decided by the arbiter | — |
 //! | `MotorKill { emergency: false }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0: ArduPilot refuses it in the air | COMMAND_ACK |
 //! | `MotorKill { emergency: true }` | COMMAND_LONG `COMPONENT_ARM_DISARM` p1 = 0, p2 = 21196: motors stop even in flight | COMMAND_ACK |
 //! | `GoProSet { command, value }` | GOPRO_SET_REQUEST to (vehicle, 154), `cmd_id` = command, `value` as given; a command id the dialect has no GOPRO_COMMAND for (17..=31) is refused `unsupported` | GOPRO_SET_RESPONSE with that `cmd_id` from the vehicle's system: SUCCESS → accepted, FAILED → refused `failed`; none within `command_timeout` → refused `timeout` (never retransmitted) |
@@ -299,7 +300,9 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
         Command::GrabFlightAuthority
         | Command::ReleaseFlightAuthority
         | Command::GrabPayloadAuthority
-        | Command::ReleasePayloadAuthority => {
+        | Command::ReleasePayloadAuthority
+        | Command::ReleaseEmergency
+        | Command::ClearEmergency => {
             return Err("authority requests have no MAVLink form; the arbiter decides them")
         }
         Command::SetMode(mode) => {
@@ -555,17 +558,32 @@ pub fn plan(command: &Command, ctx: &PlanContext) -> Result<Plan, &'static str> 
                 value,
             }))
         }
-        Command::Brake | Command::EmergencyStop if ctx.mode == FlightMode::Guided => Plan {
-            command: None,
-            setpoint: Some(velocity_setpoint(t, [0.0; 3], None)),
-        },
-        Command::Brake | Command::EmergencyStop => {
-            let brake = FlightMode::Brake
-                .to_copter_custom_mode()
-                .ok_or("BRAKE has no ArduCopter mode number")?;
-            only(set_mode(t, brake))
+        Command::EmergencyStop => {
+            return Err("an emergency stop is driven by the stop tracker, not planned")
         }
+        Command::Brake if ctx.mode == FlightMode::Guided => Plan {
+            command: None,
+            setpoint: Some(zero_velocity(t)),
+        },
+        Command::Brake => only(brake_mode(t, 0)?),
     })
+}
+
+/// COMMAND_LONG DO_SET_MODE BRAKE; `confirmation` counts the repeats (0 first).
+pub fn brake_mode(t: Target, confirmation: u8) -> Result<MavCommand, &'static str> {
+    let brake = FlightMode::Brake
+        .to_copter_custom_mode()
+        .ok_or("BRAKE has no ArduCopter mode number")?;
+    let mut cmd = set_mode(t, brake);
+    if let MavCommand::Long(c) = &mut cmd {
+        c.confirmation = confirmation;
+    }
+    Ok(cmd)
+}
+
+/// A zero-velocity SET_POSITION_TARGET_LOCAL_NED: hold here (GUIDED).
+pub fn zero_velocity(t: Target) -> MavMessage {
+    velocity_setpoint(t, [0.0; 3], None)
 }
 
 /// Why a command sample was not admitted.
@@ -866,6 +884,25 @@ mod tests {
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
             assert_eq!(c.param2, 17.0);
         }
+        // The stop tracker's frames: BRAKE counting its repeats, and the zero setpoint.
+        let MavCommand::Long(c) = brake_mode(T, 2).unwrap() else {
+            panic!("COMMAND_LONG")
+        };
+        assert_eq!(
+            (c.command, c.param2, c.confirmation),
+            (MavCmd::MAV_CMD_DO_SET_MODE, 17.0, 2)
+        );
+        assert_eq!(
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(match zero_velocity(T) {
+                MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) => s,
+                other => panic!("{other:?}"),
+            }),
+            plan(&Command::Brake, &ctx(FlightMode::Guided))
+                .unwrap()
+                .setpoint
+                .unwrap()
+        );
+        assert!(plan(&Command::EmergencyStop, &ctx(FlightMode::Guided)).is_err());
     }
 
     #[test]

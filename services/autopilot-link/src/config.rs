@@ -162,6 +162,9 @@ pub struct Settings {
     pub command_in_progress_timeout: Duration,
     /// First reconnect delay; doubles per failed attempt up to `reconnect_max`.
     pub reconnect_min: Duration,
+    /// An emergency stop not confirmed by the autopilot (BRAKE reported or the
+    /// vehicle measured stopped) this long after it arrived is answered `failed`.
+    pub stop_confirm_timeout: Duration,
     pub reconnect_max: Duration,
     /// A TCP or serial connection that delivers no MAVLink for this long is reopened.
     pub silence_reconnect: Option<Duration>,
@@ -195,6 +198,7 @@ pub struct RawConfig {
     /// 0 disables.
     pub silence_reconnect_s: f64,
     pub request_data_streams: bool,
+    pub stop_confirm_timeout_s: f64,
     /// Requested telemetry rates, Hz.
     pub attitude_hz: f64,
     pub global_position_hz: f64,
@@ -233,6 +237,7 @@ impl Default for RawConfig {
             attitude_hz: 50.0,
             global_position_hz: 10.0,
             local_position_hz: 5.0,
+            stop_confirm_timeout_s: 5.0,
             sys_status_hz: 2.0,
             battery_status_hz: 2.0,
             gps_raw_hz: 2.0,
@@ -385,6 +390,12 @@ pub struct RawSigning {
 
 impl RawSigning {
     /// `endpoints` are the validated router endpoints the entries must name.
+            stop_confirm_timeout: seconds(
+                "stop_confirm_timeout_s",
+                self.stop_confirm_timeout_s,
+                1.0,
+                30.0,
+            )?,
     fn validate(self, endpoints: &[Endpoint]) -> Result<Option<SigningSettings>, ConfigError> {
         const FIELD: &str = "signing.endpoints";
         let Some(path) = self.key_file else {
@@ -746,6 +757,7 @@ mod tests {
                 std::process::id(),
                 N.fetch_add(1, Ordering::Relaxed)
             ));
+        assert_eq!(shipped.stop_confirm_timeout, Duration::from_secs(5));
             std::fs::write(&path, content).unwrap();
             KeyFile(path)
         }
@@ -955,6 +967,7 @@ mod tests {
                 .gimbal_attitude_hz,
             None,
             "0 = not requested"
+            ("stop_confirm_timeout_s = 0.5", "stop_confirm_timeout_s"),
         );
         assert_eq!(
             parse_str("heartbeat_hz = 0").unwrap().rates.heartbeat_hz,

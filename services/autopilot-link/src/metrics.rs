@@ -63,6 +63,9 @@ pub struct Metrics {
     pub reconnects: Counter,
     /// `skymesh_autopilot_command_latency_seconds`: command sample → COMMAND_ACK.
     pub command_latency: Histogram,
+    /// `skymesh_autopilot_bus_errors_total`: bus samples not taken or not published
+    /// (the service carries on).
+    pub bus_errors: Counter,
     received: CounterFamily,
     sent: CounterFamily,
     commands: CounterFamily,
@@ -76,6 +79,7 @@ impl Metrics {
             heartbeat_age: stats.gauge("skymesh_autopilot_heartbeat_age_seconds", &[]),
             parse_errors: stats.counter("skymesh_autopilot_mavlink_parse_errors_total", &[]),
             reconnects: stats.counter("skymesh_autopilot_reconnects_total", &[]),
+            bus_errors: stats.counter("skymesh_autopilot_bus_errors_total", &[]),
             command_latency: stats.histogram(
                 "skymesh_autopilot_command_latency_seconds",
                 &[],

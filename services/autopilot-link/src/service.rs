@@ -5,10 +5,19 @@
 //! freshness, geofence envelope; wiring of its effects in [`safety`]) → dispatch
 //! ([`commands::plan`] → link writer → [`AckTracker`]) → `CommandAck`.
 //! Gimbal and GoPro telemetry → `PayloadState`, and GoPro answers → [`AckTracker`]:
-//! [`payload`].
+//! [`payload`]. An emergency stop is driven until the autopilot confirms it:
+//! [`stop`]. A retransmission is decided again by the arbiter before it goes out,
+//! and an emergency stop or a pre-emption cancels what it overrides ([`crate::acks`]).
+//!
+//! A bus error (a sample that could not be taken or published) is logged, counted
+//! (`skymesh_autopilot_bus_errors_total`) and survived: the loop goes on, a failing
+//! subscription is retried every [`BUS_RETRY`]. Only a command subscription that
+//! keeps failing for [`BUS_FATAL`], or the link task ending, ends the service with
+//! an error (a non-zero exit: the supervisor restarts it).
 
 mod payload;
 mod safety;
+pub(crate) mod stop;
 pub(crate) mod vision;
 
 use std::collections::HashMap;
@@ -26,7 +35,7 @@ use tokio_util::sync::CancellationToken;
 
 use crate::acks::{AckPolicy, AckTracker, Action, Answer, Origin};
 use crate::arbiter::audit::Audit;
-use crate::arbiter::{Arbiter, Outcome};
+use crate::arbiter::{persist, Arbiter, Effect, Outcome};
 use crate::commands::{self, PlanContext, Target};
 use crate::config::Settings;
 use crate::link::{LinkEvent, LinkWriter};
@@ -48,6 +57,42 @@ const TEXT_EXPLAINS_ACK: Duration = Duration::from_secs(1);
 /// explains it for its next send cycle: a refusal without an explanation waits this
 /// long for one before it is published.
 const EXPLANATION_WAIT: Duration = Duration::from_millis(300);
+/// A subscription whose `recv` failed is tried again after this long (not at once:
+/// a broken port would spin the loop).
+const BUS_RETRY: Duration = Duration::from_millis(100);
+/// The command subscription failing this long without a sample in between is
+/// fatal: the service exits with an error and the supervisor restarts it.
+const BUS_FATAL: Duration = Duration::from_secs(10);
+/// MAV_CMD_DO_SET_MODE: a COMMAND_ACK for it nobody else waits for may answer the
+/// emergency stop's BRAKE.
+const DO_SET_MODE: u32 = mavlink::dialects::ardupilotmega::MavCmd::MAV_CMD_DO_SET_MODE as u32;
+
+/// A subscription's recent failures.
+#[derive(Debug, Default)]
+struct BusHealth {
+    /// The first failure since the last sample.
+    failing_since: Option<Instant>,
+    /// Not polled before this instant.
+    resume_at: Option<Instant>,
+}
+
+impl BusHealth {
+    fn ready(&self, now: Instant) -> bool {
+        self.resume_at.is_none_or(|t| now >= t)
+    }
+
+    fn ok(&mut self) {
+        self.failing_since = None;
+        self.resume_at = None;
+    }
+
+    /// A failure at `now`: returns how long it has been failing.
+    fn failed(&mut self, now: Instant) -> Duration {
+        let since = *self.failing_since.get_or_insert(now);
+        self.resume_at = Some(now + BUS_RETRY);
+        now - since
+    }
+}
 
 /// What woke the event loop.
 enum Wake {
@@ -87,6 +132,10 @@ pub(crate) struct Service<L> {
     lifecycle: L,
     metrics: Metrics,
     arbiter: Arbiter,
+    /// The arbiter's state file ([`crate::arbiter::persist`]).
+    store: persist::Store,
+    /// What restoring the arbiter changed, published once the loop runs.
+    restored: Vec<Effect>,
     audit: Audit,
     /// Commands the arbiter limited that wait for the autopilot's answer, by
     /// (source, command_id): their `Accepted` is published as `Limited` with this detail.
@@ -116,6 +165,12 @@ pub(crate) struct Service<L> {
     started: Instant,
     /// Gimbal protocol v2 for the vision pipeline's virtual cameras.
     vision: Option<vision::Vision>,
+    /// The emergency stop being driven until the autopilot confirms it.
+    stop: stop::StopTracker,
+    /// `position_stamp_ns` of the last velocity the stop tracker was given.
+    stop_fed_stamp: u64,
+    commands_health: BusHealth,
+    geofence_health: BusHealth,
 }
 
 impl<L: Lifecycle> Service<L> {
@@ -128,6 +183,16 @@ impl<L: Lifecycle> Service<L> {
         vision_parts: Option<VisionParts>,
     ) -> Self {
         let now = Instant::now();
+        let settings_stop_timeout = settings.stop_confirm_timeout;
+        // Before the first command: the stops and fences of the last run.
+        let (store, loaded) = persist::Store::open(&settings.state_file, settings.vehicle_id);
+        let (arbiter, restored) = persist::start(
+            settings.arbiter.clone(),
+            loaded,
+            store.path(),
+            settings.vehicle_id,
+            monotonic_ns(),
+        );
         let vision = vision_parts.map(|p| {
             vision::Vision::new(
                 &settings.vision,
@@ -147,7 +212,9 @@ impl<L: Lifecycle> Service<L> {
                 retries: settings.command_retries,
                 in_progress_timeout: settings.command_in_progress_timeout,
             }),
-            arbiter: Arbiter::new(settings.arbiter.clone()),
+            arbiter,
+            store,
+            restored,
             audit,
             limited: HashMap::new(),
             last_state: None,
@@ -166,6 +233,13 @@ impl<L: Lifecycle> Service<L> {
             stream_retries: 0,
             last_attitude: None,
             started: now,
+            stop: stop::StopTracker::new(stop::StopPolicy {
+                confirm_timeout: settings_stop_timeout,
+                ..stop::StopPolicy::DEFAULT
+            }),
+            stop_fed_stamp: 0,
+            commands_health: BusHealth::default(),
+            geofence_health: BusHealth::default(),
         }
     }
 
@@ -185,46 +259,90 @@ impl<L: Lifecycle> Service<L> {
         // The first timer pass publishes the initial (link down) status.
         self.metrics.link_up.set(0.0);
         self.lifecycle.link_changed(false);
+        // The restored stops and fences are in force before the first command.
+        let restored = std::mem::take(&mut self.restored);
+        self.apply(restored)?;
+        self.save_state(false);
         let sleep = tokio::time::sleep(Duration::ZERO);
         tokio::pin!(sleep);
         let result = loop {
-            if let Err(e) = self.on_timers(Instant::now()) {
-                break Err(e);
+            let now = Instant::now();
+            if let Err(e) = self.on_timers(now) {
+                if let Err(fatal) = self.survive(e, "timers") {
+                    break Err(fatal);
+                }
             }
+            let commands_ready = self.commands_health.ready(now);
+            let geofence_ready = self.geofence_health.ready(now);
             sleep
                 .as_mut()
                 .reset(tokio::time::Instant::from_std(self.next_deadline()));
             let wake = tokio::select! {
                 biased;
                 _ = shutdown.cancelled() => break Ok(()),
-                sample = self.ports.commands.recv() => Wake::Command(sample),
-                fence = self.ports.geofence.recv() => Wake::Geofence(fence.map(Box::new)),
+                sample = self.ports.commands.recv(), if commands_ready => Wake::Command(sample),
+                fence = self.ports.geofence.recv(), if geofence_ready => Wake::Geofence(fence.map(Box::new)),
                 event = events.recv() => Wake::Link(event),
                 v = vision::Vision::next(self.vision.as_mut()) => Wake::Vision(v),
                 _ = &mut sleep => Wake::Timer,
             };
             let step = match wake {
-                Wake::Command(Ok(sample)) => self.on_command(sample),
-                Wake::Command(Err(e)) => Err(e.into()),
-                Wake::Geofence(Ok(fence)) => self.on_geofence(&fence),
-                Wake::Geofence(Err(e)) => Err(e.into()),
+                Wake::Command(Ok(sample)) => {
+                    self.commands_health.ok();
+                    self.on_command(sample)
+                }
+                Wake::Command(Err(e)) => {
+                    let failing = self.commands_health.failed(Instant::now());
+                    if failing >= BUS_FATAL {
+                        break Err(anyhow::Error::new(e).context(format!(
+                            "the command subscription failed for {:.0} s",
+                            failing.as_secs_f64()
+                        )));
+                    }
+                    Err(e.into())
+                }
+                Wake::Geofence(Ok(fence)) => {
+                    self.geofence_health.ok();
+                    self.on_geofence(&fence)
+                }
+                Wake::Geofence(Err(e)) => {
+                    self.geofence_health.failed(Instant::now());
+                    Err(e.into())
+                }
                 Wake::Link(Some(event)) => self.on_link_event(event),
-                Wake::Link(None) => Err(anyhow::anyhow!("the link task ended")),
+                Wake::Link(None) => break Err(anyhow::anyhow!("the link task ended")),
                 Wake::Vision(v) => self.on_vision(v),
                 Wake::Timer => Ok(()),
             };
             if let Err(e) = step {
-                break Err(e);
+                if let Err(fatal) = self.survive(e, "event") {
+                    break Err(fatal);
+                }
             }
         };
         let unexplained = std::mem::take(&mut self.unexplained);
-        for answer in unexplained.into_iter().map(|(_, a)| a).chain(
+        let stops = self
+            .stop
+            .end(RefusalReason::Cancelled, "autopilot-link stopping");
+        for answer in unexplained.into_iter().map(|(_, a)| a).chain(stops).chain(
             self.tracker
                 .fail_all(RefusalReason::Cancelled, "autopilot-link stopping"),
         ) {
             let _ = self.answer(answer);
         }
+        self.save_state(result.is_ok());
         result
+    }
+
+    /// A step failed: a bus error is logged and counted and the loop goes on;
+    /// anything else is returned (fatal).
+    fn survive(&mut self, e: anyhow::Error, during: &'static str) -> anyhow::Result<()> {
+        if e.downcast_ref::<IpcError>().is_none() {
+            return Err(e);
+        }
+        self.metrics.bus_errors.inc();
+        tracing::warn!(error = format!("{e:#}"), during, "bus error; carrying on");
+        Ok(())
     }
 
     fn next_deadline(&self) -> Instant {
@@ -236,6 +354,9 @@ impl<L: Lifecycle> Service<L> {
             self.arbiter_deadline(),
             Some(self.payload_deadline()),
             self.vision_deadline(),
+            self.stop.next_deadline(),
+            self.commands_health.resume_at,
+            self.geofence_health.resume_at,
         ]
         .into_iter()
         .flatten()
@@ -250,13 +371,27 @@ impl<L: Lifecycle> Service<L> {
         }
         for action in self.tracker.poll(now) {
             match action {
-                Action::Retransmit(cmd) => {
-                    tracing::debug!(command = %cmd.key(), "no COMMAND_ACK yet; retransmitting");
-                    self.write(cmd.message());
+                Action::Retransmit {
+                    origin,
+                    sample,
+                    command,
+                } => {
+                    if let Some((reason, detail)) = sample.and_then(|s| self.redecide(&s)) {
+                        tracing::info!(command = %command.key(), reason = %reason, detail, "retransmission refused by the arbiter; cancelled");
+                        let detail = format!("not retransmitted: {detail}");
+                        if let Some(answer) = self.tracker.cancel(&origin, reason, &detail) {
+                            self.answer(answer)?;
+                        }
+                        continue;
+                    }
+                    tracing::debug!(command = %command.key(), "no COMMAND_ACK yet; retransmitting");
+                    self.write(command.message());
                 }
                 Action::Answer(answer) => self.answer(answer)?,
             }
         }
+        let actions = self.stop.poll(now);
+        self.run_stop(actions)?;
         if self.unexplained.iter().any(|(t, _)| *t <= now) {
             let (due, waiting) = std::mem::take(&mut self.unexplained)
                 .into_iter()
@@ -312,6 +447,10 @@ impl<L: Lifecycle> Service<L> {
             }
             LinkEvent::Disconnected { reason } => {
                 self.writer = None;
+                self.end_stop(
+                    RefusalReason::LinkDown,
+                    "link lost before the stop was confirmed",
+                )?;
                 for answer in self.tracker.fail_all(
                     RefusalReason::LinkDown,
                     "link lost before the autopilot answered",
@@ -342,6 +481,8 @@ impl<L: Lifecycle> Service<L> {
                     );
                 }
                 if u.heartbeat {
+                    let actions = self.stop.on_heartbeat(now, self.telemetry.flight_mode());
+                    self.run_stop(actions)?;
                     if let Some(change) = self.link.heartbeat(now) {
                         self.link_changed(change, now, "heartbeat")?;
                     }
@@ -376,10 +517,20 @@ impl<L: Lifecycle> Service<L> {
                             self.unexplained.push((now + EXPLANATION_WAIT, a));
                         }
                         Some(a) => self.answer(a)?,
+                        None if command == DO_SET_MODE => {
+                            self.stop.on_mode_ack(now, result, explanation);
+                        }
                         None => {}
                     }
                 }
                 if let Some(state) = u.state {
+                    // A new velocity measurement (not the same one republished with
+                    // the next ATTITUDE) for the emergency stop.
+                    if state.position_valid == 1 && state.position_stamp_ns != self.stop_fed_stamp {
+                        self.stop_fed_stamp = state.position_stamp_ns;
+                        let actions = self.stop.on_velocity(now, state.vel_ned_mps);
+                        self.run_stop(actions)?;
+                    }
                     self.last_attitude = Some(now);
                     self.stream_retries = 0;
                     self.ports.state.publish(state)?;
@@ -408,6 +559,10 @@ impl<L: Lifecycle> Service<L> {
                 );
                 self.metrics.link_up.set(0.0);
                 self.lifecycle.link_changed(false);
+                self.end_stop(
+                    RefusalReason::LinkDown,
+                    "link lost before the stop was confirmed",
+                )?;
                 // Nothing sent before the loss may go out after it: a command still
                 // waiting for its COMMAND_ACK would otherwise be retransmitted.
                 for answer in self.tracker.fail_all(
@@ -495,15 +650,21 @@ impl<L: Lifecycle> Service<L> {
         });
         // Authority changes are published before the answer, so a source that
         // reads its ack finds AuthorityState already saying so.
+        let overridden = overridden(&decision.effects);
         self.apply(decision.effects)?;
-        match decision.outcome {
+        self.cancel_overridden(&overridden)?;
+        let answered = match decision.outcome {
+            Outcome::Execute {
+                command: Command::EmergencyStop,
+                ..
+            } => self.engage_stop(origin, now),
             Outcome::Execute { command, limited } => {
                 if let Some(detail) = limited {
                     self.limited
                         .insert((origin.source, origin.command_id), detail);
                 }
                 self.forward_to_vision(&command)?;
-                self.dispatch(origin, &command, now)
+                self.dispatch(&sample, &command, now)
             }
             Outcome::Done { detail } => self.publish_answer(Answer {
                 detail,
@@ -512,10 +673,124 @@ impl<L: Lifecycle> Service<L> {
             Outcome::Refused { reason, detail } => {
                 self.publish_answer(Answer::refused(origin, reason, detail))
             }
+        };
+        self.persist_after(origin.kind);
+        answered
+    }
+
+    /// An emergency stop the arbiter let through: every flight command still
+    /// waiting for its answer is cancelled (none is retransmitted over the stop),
+    /// then the stop is driven until the autopilot confirms it ([`stop`]).
+    fn engage_stop(&mut self, origin: Origin, now: Instant) -> anyhow::Result<()> {
+        let source =
+            CommandSource::try_from(origin.source).map_or("unknown", CommandSource::as_str);
+        for answer in self.tracker.cancel_where(
+            |o| is_flight(o.kind),
+            RefusalReason::Cancelled,
+            &format!("cancelled by {source}'s emergency stop"),
+        ) {
+            self.answer(answer)?;
+        }
+        let mode = self.telemetry.flight_mode();
+        let joins = self.stop.is_active();
+        tracing::warn!(source, command_id = origin.command_id, mode = %mode, joins, "emergency stop: braking until the autopilot confirms");
+        let actions = self.stop.engage(origin, now, mode);
+        self.run_stop(actions)
+    }
+
+    /// Writes the stop's frames and publishes its answers.
+    fn run_stop(&mut self, actions: Vec<stop::StopAction>) -> anyhow::Result<()> {
+        for action in actions {
+            match action {
+                stop::StopAction::BrakeMode { confirmation } => {
+                    match commands::brake_mode(self.target(), confirmation) {
+                        Ok(cmd) => {
+                            if confirmation > 0 {
+                                tracing::info!(
+                                    confirmation,
+                                    "BRAKE not reported yet; sending DO_SET_MODE BRAKE again"
+                                );
+                            }
+                            self.write(cmd.message());
+                        }
+                        Err(why) => tracing::error!(why, "emergency stop: no BRAKE mode"),
+                    }
+                }
+                stop::StopAction::ZeroSetpoint => {
+                    self.write(commands::zero_velocity(self.target()))
+                }
+                stop::StopAction::Answer(answer) => self.answer(answer)?,
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends the stop's drive (link lost, emergency cleared): nothing more is sent.
+    fn end_stop(&mut self, reason: RefusalReason, detail: &str) -> anyhow::Result<()> {
+        for answer in self.stop.end(reason, detail) {
+            self.answer(answer)?;
+        }
+        Ok(())
+    }
+
+    /// Cancels what the arbiter's effects override: the commands still waiting for
+    /// an answer of a pre-empted source (in that domain), and the stop's drive when
+    /// the emergency ended.
+    fn cancel_overridden(&mut self, overridden: &[Overridden]) -> anyhow::Result<()> {
+        for o in overridden {
+            match *o {
+                Overridden::Preempted { source, by, domain } => {
+                    let detail = format!(
+                        "pre-empted by {}",
+                        by.map_or("nobody", CommandSource::as_str)
+                    );
+                    for answer in self.tracker.cancel_where(
+                        |p| {
+                            p.source == source.to_wire()
+                                && CommandKind::try_from(p.kind)
+                                    .ok()
+                                    .and_then(CommandKind::authority)
+                                    == Some(domain)
+                        },
+                        RefusalReason::Preempted,
+                        &detail,
+                    ) {
+                        self.answer(answer)?;
+                    }
+                }
+                Overridden::EmergencyEnded => {
+                    self.end_stop(
+                        RefusalReason::Cancelled,
+                        "emergency ended before confirmation",
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// What the arbiter would decide about `sample` now, without changing it (a
+    /// retransmission is not a new command: it takes no authority and its age is
+    /// the first decision's business). `Some` if it would refuse it.
+    fn redecide(&self, sample: &VehicleCommand) -> Option<(RefusalReason, String)> {
+        let now_ns = monotonic_ns();
+        let mut again = *sample;
+        again.header.stamp_ns = now_ns;
+        let view = self.vehicle_view(now_ns);
+        let mut dry = self.arbiter.clone();
+        match dry.decide(now_ns, &again, &view).outcome {
+            Outcome::Refused { reason, detail } => Some((reason, detail)),
+            Outcome::Execute { .. } | Outcome::Done { .. } => None,
         }
     }
 
-    fn dispatch(&mut self, origin: Origin, command: &Command, now: Instant) -> anyhow::Result<()> {
+    fn dispatch(
+        &mut self,
+        sample: &VehicleCommand,
+        command: &Command,
+        now: Instant,
+    ) -> anyhow::Result<()> {
+        let origin = Origin::of(sample);
         let ctx = PlanContext {
             target: self.target(),
             mode: self.telemetry.flight_mode(),
@@ -552,7 +827,7 @@ impl<L: Lifecycle> Service<L> {
         match plan.command {
             Some(cmd) => {
                 tracing::debug!(kind = %kind_name(origin.kind), command_id = origin.command_id, answer = %cmd.key(), "command sent");
-                if let Some(superseded) = self.tracker.submit(origin, cmd, now, now) {
+                if let Some(superseded) = self.tracker.submit_sample(sample, cmd, now, now) {
                     self.answer(superseded)?;
                 }
                 Ok(())
@@ -610,11 +885,56 @@ impl<L: Lifecycle> Service<L> {
         if let Some(latency) = a.latency {
             self.metrics.observe_latency(latency);
         }
-        self.ports.acks.publish(ack)?;
+        // A lost answer is counted and logged, not fatal, and does not keep the
+        // answers after it (a stop's, a cancellation's) from going out.
+        if let Err(e) = self.ports.acks.publish(ack) {
+            self.metrics.bus_errors.inc();
+            tracing::warn!(error = %e, kind = %kind_name(o.kind), command_id = o.command_id, "command ack not published");
+        }
         Ok(())
     }
 }
 
 fn kind_name(kind: u8) -> &'static str {
     CommandKind::try_from(kind).map_or("unknown", CommandKind::as_str)
+}
+
+fn is_flight(kind: u8) -> bool {
+    CommandKind::try_from(kind)
+        .ok()
+        .and_then(CommandKind::authority)
+        == Some(skymesh_ipc_types::AuthorityDomain::Flight)
+}
+
+/// What an arbiter decision overrides, besides what it answers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Overridden {
+    /// `source` lost `domain` to `by`: its commands still waiting are cancelled.
+    Preempted {
+        source: CommandSource,
+        by: Option<CommandSource>,
+        domain: skymesh_ipc_types::AuthorityDomain,
+    },
+    /// The emergency stop ended: its drive stops.
+    EmergencyEnded,
+}
+
+fn overridden(effects: &[Effect]) -> Vec<Overridden> {
+    effects
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Authority(c) if c.change == skymesh_ipc_types::AuthorityChange::Preempted => {
+                c.from.map(|source| Overridden::Preempted {
+                    source,
+                    by: c.to,
+                    domain: c.domain,
+                })
+            }
+            Effect::Event {
+                kind: skymesh_ipc_types::ArbiterEventKind::EmergencyCleared,
+                ..
+            } => Some(Overridden::EmergencyEnded),
+            _ => None,
+        })
+        .collect()
 }

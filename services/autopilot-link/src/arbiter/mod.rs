@@ -231,8 +231,9 @@ fn ends_stream(kind: CommandKind) -> bool {
 
 const NS_PER_MS: u64 = 1_000_000;
 
-/// The arbiter of one vehicle.
-#[derive(Debug)]
+/// The arbiter of one vehicle. `Clone`: the service decides a retransmission
+/// again on a copy, which changes nothing here.
+#[derive(Debug, Clone)]
 pub struct Arbiter {
     settings: ArbiterSettings,
     authority: Authority,
