@@ -58,6 +58,7 @@ fn decide(c: &mut Criterion) {
             lon_deg: HOME.1,
             alt_rel_m: 10.0,
             vel_ned_mps: [2.0, 0.0, 0.0],
+            age_s: 0.1,
         }),
     };
     let east_150 = 150.0 / frame.to_local(HOME.0, HOME.1 + 1e-3).y * 1e-3;

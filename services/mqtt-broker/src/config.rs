@@ -33,8 +33,12 @@ pub struct Settings {
     pub connection_timeout: Duration,
     /// How often rumqttd's meters are pushed into the service's metrics.
     pub meters_interval: Duration,
-    /// username → password; empty = no authentication.
-    pub users: BTreeMap<String, String>,
+    /// username → password and topic ACL; empty = anonymous clients (only allowed
+    /// when every listener is on the loopback or TLS requires client certificates).
+    pub users: BTreeMap<String, User>,
+    /// Topic names and subscription filters the broker may know at once (rumqttd
+    /// keeps a log per filter and an entry per topic until it restarts).
+    pub max_topics: usize,
     /// The TLS listener (a terminator forwarding to `listen`), if configured.
     pub tls: Option<TlsSettings>,
 }
@@ -49,9 +53,31 @@ impl fmt::Debug for Settings {
             .field("max_inflight", &self.max_inflight)
             .field("connection_timeout", &self.connection_timeout)
             .field("meters_interval", &self.meters_interval)
-            .field("users", &self.users.keys().collect::<Vec<_>>())
+            .field("users", &self.users)
+            .field("max_topics", &self.max_topics)
             .field("tls", &self.tls)
             .finish()
+    }
+}
+
+/// One validated `[[user]]`: its password and the topic filters it may use.
+#[derive(Clone, PartialEq, Eq)]
+pub struct User {
+    pub password: String,
+    /// A PUBLISH (and the CONNECT's will) is allowed on a topic matching one of these.
+    pub publish: Vec<String>,
+    /// A SUBSCRIBE filter is allowed when every topic it matches is matched by one
+    /// of these (`crate::acl::covers`).
+    pub subscribe: Vec<String>,
+}
+
+impl fmt::Debug for User {
+    /// The password is not printed.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("User")
+            .field("publish", &self.publish)
+            .field("subscribe", &self.subscribe)
+            .finish_non_exhaustive()
     }
 }
 
@@ -61,6 +87,10 @@ impl fmt::Debug for Settings {
 pub struct RawUser {
     pub name: String,
     pub password: String,
+    /// Topic filters the user may publish to; required (`["#"]` = every topic).
+    pub publish: Option<Vec<String>>,
+    /// Topic filters the user may subscribe within; required.
+    pub subscribe: Option<Vec<String>>,
 }
 
 /// `[tls]` as written.
@@ -97,6 +127,8 @@ pub struct RawConfig {
     pub connection_timeout_ms: u32,
     #[serde(default = "d_meters_interval_s")]
     pub meters_interval_s: u32,
+    #[serde(default = "d_max_topics")]
+    pub max_topics: u32,
     #[serde(default)]
     pub user: Vec<RawUser>,
     #[serde(default)]
@@ -120,6 +152,34 @@ fn d_connection_timeout_ms() -> u32 {
 }
 fn d_meters_interval_s() -> u32 {
     1
+}
+fn d_max_topics() -> u32 {
+    256
+}
+
+/// The topic filters of `user[i].<key>`, each checked ([`crate::acl::valid_filter`]).
+fn acl_list(field: &str, list: Option<Vec<String>>) -> Result<Vec<String>, ConfigError> {
+    let Some(list) = list else {
+        return Err(ConfigError::invalid(
+            field,
+            "required: the topic filters this user may use, e.g. \
+             [\"thing/product/+/services_reply\"] ([\"#\"] = every topic, [] = none)",
+        ));
+    };
+    for (j, f) in list.iter().enumerate() {
+        if let Err(why) = crate::acl::valid_filter(f) {
+            return Err(ConfigError::invalid(
+                format!("{field}[{j}]"),
+                format!("`{f}` is not an MQTT topic filter: {why}"),
+            ));
+        }
+    }
+    Ok(list)
+}
+
+/// Clients elsewhere can reach `addr`.
+fn reachable_from_elsewhere(addr: SocketAddr) -> bool {
+    !addr.ip().is_loopback()
 }
 
 impl ServiceConfig for RawConfig {
@@ -149,6 +209,7 @@ impl ServiceConfig for RawConfig {
             u32::from(u16::MAX),
         )?;
         let meters_s = in_range("meters_interval_s", self.meters_interval_s, 1, 60)?;
+        let max_topics = in_range("max_topics", self.max_topics, 1, 1_000_000)?;
         let mut users = BTreeMap::new();
         let mut seen = HashSet::new();
         for (i, u) in self.user.into_iter().enumerate() {
@@ -171,12 +232,46 @@ impl ServiceConfig for RawConfig {
                     format!("user `{}` is listed twice", u.name),
                 ));
             }
-            users.insert(u.name, u.password);
+            let publish = acl_list(&format!("{field}.publish"), u.publish)?;
+            let subscribe = acl_list(&format!("{field}.subscribe"), u.subscribe)?;
+            users.insert(
+                u.name,
+                User {
+                    password: u.password,
+                    publish,
+                    subscribe,
+                },
+            );
         }
         let tls = match self.tls {
             None => None,
             Some(raw) => Some(tls(raw, listen)?),
         };
+        // Anonymous clients drive the DJI gateway at DRC priority: only local ones.
+        if users.is_empty() && reachable_from_elsewhere(listen) {
+            return Err(ConfigError::invalid(
+                "listen",
+                format!(
+                    "{listen} is reachable from other hosts and no [[user]] is configured: \
+                     anyone who reaches it could publish DJI commands. Configure [[user]]s \
+                     (each with publish/subscribe topic filters) or listen on 127.0.0.1"
+                ),
+            ));
+        }
+        if let Some(t) = &tls {
+            if users.is_empty() && t.client_ca_file.is_none() && reachable_from_elsewhere(t.listen)
+            {
+                return Err(ConfigError::invalid(
+                    "tls.listen",
+                    format!(
+                        "{} is reachable from other hosts and neither [[user]]s nor \
+                         tls.client_ca_file (client certificates) are configured: anyone who \
+                         reaches it could publish DJI commands",
+                        t.listen
+                    ),
+                ));
+            }
+        }
         Ok(Settings {
             tls,
             listen,
@@ -186,6 +281,7 @@ impl ServiceConfig for RawConfig {
             connection_timeout: Duration::from_millis(u64::from(timeout_ms)),
             meters_interval: Duration::from_secs(u64::from(meters_s)),
             users,
+            max_topics: max_topics as usize,
         })
     }
 }
@@ -261,14 +357,22 @@ mod tests {
         assert_eq!(s.max_inflight, 100);
         assert_eq!(s.connection_timeout, Duration::from_secs(5));
         assert!(s.users.is_empty());
+        assert_eq!(s.max_topics, 256);
         assert_eq!(s.tls, None, "TLS is off unless [tls] is configured");
     }
 
     #[test]
     fn users_are_read_and_passwords_not_printed() {
-        let s = parse::<RawConfig>("[[user]]\nname = \"cloud\"\npassword = \"secret\"\n", "t")
-            .expect("users");
-        assert_eq!(s.users.get("cloud").map(String::as_str), Some("secret"));
+        let s = parse::<RawConfig>(
+            "[[user]]\nname = \"cloud\"\npassword = \"secret\"\n\
+             publish = [\"thing/product/+/services\"]\nsubscribe = [\"thing/product/#\"]\n",
+            "t",
+        )
+        .expect("users");
+        let cloud = s.users.get("cloud").expect("cloud");
+        assert_eq!(cloud.password, "secret");
+        assert_eq!(cloud.publish, ["thing/product/+/services"]);
+        assert_eq!(cloud.subscribe, ["thing/product/#"]);
         assert!(!format!("{s:?}").contains("secret"));
     }
 
@@ -283,17 +387,88 @@ mod tests {
             ("max_inflight = 70000", "max_inflight"),
             ("connection_timeout_ms = 70000", "connection_timeout_ms"),
             ("meters_interval_s = 0", "meters_interval_s"),
+            ("max_topics = 0", "max_topics"),
             ("[[user]]\nname = \"\"\npassword = \"p\"", "user[0].name"),
             ("[[user]]\nname = \"a\"\npassword = \"\"", "user[0].password"),
             (
-                "[[user]]\nname = \"a\"\npassword = \"p\"\n[[user]]\nname = \"a\"\npassword = \"q\"",
+                "[[user]]\nname = \"a\"\npassword = \"p\"\npublish = []\nsubscribe = []\n\
+                 [[user]]\nname = \"a\"\npassword = \"q\"",
                 "user[1].name",
             ),
+            (
+                "[[user]]\nname = \"a\"\npassword = \"p\"\nsubscribe = []",
+                "user[0].publish",
+            ),
+            (
+                "[[user]]\nname = \"a\"\npassword = \"p\"\npublish = []",
+                "user[0].subscribe",
+            ),
+            (
+                "[[user]]\nname = \"a\"\npassword = \"p\"\npublish = [\"a/#/b\"]\nsubscribe = []",
+                "user[0].publish[0]",
+            ),
+            (
+                "[[user]]\nname = \"a\"\npassword = \"p\"\npublish = []\nsubscribe = [\"ok\", \"a+\"]",
+                "user[0].subscribe[1]",
+            ),
+            // Anonymous clients only on the loopback.
+            ("listen = \"0.0.0.0:1883\"", "listen"),
+            ("listen = \"192.168.1.5:1883\"", "listen"),
+            ("listen = \"[::]:1883\"", "listen"),
         ] {
             let e = parse::<RawConfig>(text, "t").expect_err(text);
             assert!(e.to_string().contains(field), "{text}: {e}");
         }
+        let e = parse::<RawConfig>("listen = \"0.0.0.0:1883\"", "t").expect_err("anonymous");
+        assert!(e.to_string().contains("no [[user]]"), "{e}");
         let e = parse::<RawConfig>("bogus = 1", "t").expect_err("unknown key");
         assert!(matches!(e, ConfigError::Parse { .. }), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod exposure_tests {
+    use super::*;
+    use skymesh_runtime::config::parse;
+
+    #[test]
+    fn a_reachable_listener_with_users_is_accepted() {
+        let s = parse::<RawConfig>(
+            "listen = \"0.0.0.0:1883\"\n[[user]]\nname = \"u\"\npassword = \"p\"\n\
+             publish = [\"#\"]\nsubscribe = [\"#\"]\n",
+            "t",
+        )
+        .expect("users make it safe");
+        assert_eq!(s.users.len(), 1);
+        parse::<RawConfig>("listen = \"[::1]:1883\"", "t").expect("loopback v6");
+    }
+
+    /// The DJI ACL documented in the shipped config parses, and gives the gateway
+    /// its side of the six topics and the cloud the other.
+    #[test]
+    fn the_documented_dji_acl_parses() {
+        let start = DEFAULT_CONFIG_TOML
+            .find("# [[user]]\n# name = \"dji-gateway\"")
+            .expect("the example is in the shipped config");
+        let example: String = DEFAULT_CONFIG_TOML[start..]
+            .lines()
+            .take_while(|l| l.starts_with('#'))
+            .map(|l| format!("{}\n", l.trim_start_matches('#').trim_start()))
+            .collect();
+        let s = parse::<RawConfig>(&example, "example").expect("the example parses");
+        let gw = &s.users["dji-gateway"];
+        let cloud = &s.users["cloud"];
+        for t in ["services_reply", "events", "drc/up"] {
+            let topic = format!("thing/product/SN1/{t}");
+            assert!(crate::acl::any_matches(&gw.publish, &topic), "{topic}");
+            assert!(!crate::acl::any_matches(&cloud.publish, &topic), "{topic}");
+            assert!(crate::acl::any_covers(&cloud.subscribe, &topic), "{topic}");
+        }
+        for t in ["services", "events_reply", "drc/down"] {
+            let topic = format!("thing/product/SN1/{t}");
+            assert!(crate::acl::any_matches(&cloud.publish, &topic), "{topic}");
+            assert!(!crate::acl::any_matches(&gw.publish, &topic), "{topic}");
+            assert!(crate::acl::any_covers(&gw.subscribe, &topic), "{topic}");
+        }
     }
 }

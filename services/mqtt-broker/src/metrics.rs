@@ -6,8 +6,10 @@
 //! which something was published, so the connection and subscription gauges are
 //! refreshed when there is traffic and keep their last value while the broker is
 //! idle. rumqttd has no per-connection events in its public API (its alerts only
-//! report cursor jumps and bad publishes, counted in `skymesh_mqtt_alerts_total`),
-//! so refused logins and oversized packets are not counted here; rumqttd logs them.
+//! report cursor jumps and bad publishes, counted in `skymesh_mqtt_alerts_total`);
+//! refused logins, ACL refusals, the topic cap and bad packets are counted by the
+//! gate (`skymesh_mqtt_refused_total{reason}`, `skymesh_mqtt_topics`, see
+//! [`crate::gate`]).
 
 use rumqttd::{Alert, Meter};
 use skymesh_runtime::{Counter, CounterFamily, Gauge, Stats};

@@ -1,5 +1,5 @@
-//! The optional TLS listener: a TLS terminator in this service that forwards each
-//! decrypted connection to rumqttd's plain listener on the loopback.
+//! The optional TLS listener: a TLS terminator in this service that hands each
+//! decrypted connection to the gate ([`crate::gate`]), which forwards it to rumqttd.
 //!
 //! Why not rumqttd's own `use-rustls` feature: rumqttd 0.20 performs the TLS
 //! handshake inside its accept loop without a timeout (one client that opens a TCP
@@ -13,7 +13,7 @@
 //! the one the DJI gateway already uses.
 
 use std::io::{BufRead, Cursor};
-use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
+use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -176,20 +176,6 @@ fn client_verifier(
         })
 }
 
-/// Where the terminator forwards: rumqttd's plain listener, through the loopback
-/// when it listens on every address.
-pub fn upstream_of(listen: SocketAddr) -> SocketAddr {
-    match listen.ip() {
-        IpAddr::V4(ip) if ip.is_unspecified() => {
-            SocketAddr::new(Ipv4Addr::LOCALHOST.into(), listen.port())
-        }
-        IpAddr::V6(ip) if ip.is_unspecified() => {
-            SocketAddr::new(Ipv6Addr::LOCALHOST.into(), listen.port())
-        }
-        _ => listen,
-    }
-}
-
 /// Why a TLS connection was refused (label `reason`, a closed set).
 pub mod reason {
     /// `max_connections` TLS connections are open (or in their handshake).
@@ -204,16 +190,13 @@ pub mod reason {
     pub const CLIENT_ALERT: &str = "client_alert";
     /// Any other handshake failure (no common version or cipher, connection closed).
     pub const HANDSHAKE: &str = "handshake";
-    /// rumqttd's plain listener could not be reached.
-    pub const UPSTREAM: &str = "upstream";
-    pub const ALL: [&str; 7] = [
+    pub const ALL: [&str; 6] = [
         TOO_MANY,
         TIMEOUT,
         NOT_TLS,
         CLIENT_CERTIFICATE,
         CLIENT_ALERT,
         HANDSHAKE,
-        UPSTREAM,
     ];
 }
 
@@ -286,8 +269,8 @@ impl Refusals {
 #[derive(Clone)]
 pub struct Terminator {
     pub acceptor: TlsAcceptor,
-    /// rumqttd's plain listener.
-    pub upstream: SocketAddr,
+    /// Where each connection goes once its handshake is done.
+    pub gate: Arc<crate::gate::Gate>,
     pub handshake_timeout: Duration,
     pub max_connections: usize,
 }
@@ -295,7 +278,7 @@ pub struct Terminator {
 impl std::fmt::Debug for Terminator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Terminator")
-            .field("upstream", &self.upstream)
+            .field("gate", &self.gate)
             .field("handshake_timeout", &self.handshake_timeout)
             .field("max_connections", &self.max_connections)
             .finish_non_exhaustive()
@@ -303,7 +286,7 @@ impl std::fmt::Debug for Terminator {
 }
 
 /// Accepts TLS connections on `listener` until `shutdown`, each forwarded to
-/// `upstream` once its handshake is done. Open connections outlive the shutdown
+/// the gate once its handshake is done. Open connections outlive the shutdown
 /// (as rumqttd's do: they end with the process).
 pub async fn serve(
     listener: TcpListener,
@@ -363,7 +346,7 @@ async fn connection(
     refusals: &Refusals,
     metrics: &TlsMetrics,
 ) {
-    let mut tls = match tokio::time::timeout(t.handshake_timeout, t.acceptor.accept(stream)).await {
+    let tls = match tokio::time::timeout(t.handshake_timeout, t.acceptor.accept(stream)).await {
         Err(_) => {
             refusals.record(
                 peer,
@@ -378,26 +361,9 @@ async fn connection(
         }
         Ok(Ok(s)) => s,
     };
-    let mut up = match TcpStream::connect(t.upstream).await {
-        Ok(s) => s,
-        Err(e) => {
-            refusals.record(
-                peer,
-                reason::UPSTREAM,
-                &format_args!("cannot reach the broker on {}: {e}", t.upstream),
-            );
-            return;
-        }
-    };
     metrics.accepted.inc();
-    tracing::debug!(%peer, "TLS connection forwarded to the broker");
-    match tokio::io::copy_bidirectional(&mut tls, &mut up).await {
-        Ok((sent, received)) => {
-            tracing::debug!(%peer, sent, received, "TLS connection closed")
-        }
-        // A connection reset by either side ends it; not a refusal.
-        Err(e) => tracing::debug!(%peer, error = %e, "TLS connection ended"),
-    }
+    tracing::debug!(%peer, "TLS connection handed to the gate");
+    t.gate.client(tls, peer).await;
 }
 
 #[cfg(test)]
@@ -410,14 +376,6 @@ mod tests {
         r.sort_unstable();
         r.dedup();
         assert_eq!(r.len(), reason::ALL.len());
-    }
-
-    #[test]
-    fn unspecified_listeners_are_reached_through_the_loopback() {
-        let a = |s: &str| s.parse::<SocketAddr>().unwrap();
-        assert_eq!(upstream_of(a("0.0.0.0:1883")), a("127.0.0.1:1883"));
-        assert_eq!(upstream_of(a("[::]:1883")), a("[::1]:1883"));
-        assert_eq!(upstream_of(a("10.0.0.5:1883")), a("10.0.0.5:1883"));
     }
 
     #[test]

@@ -116,8 +116,7 @@ fn tls_client(
     AsyncClient::new(o, 16)
 }
 
-/// Polls until CONNACK (retrying while the broker behind the terminator is not
-/// listening yet: the terminator then closes the connection, counted `upstream`).
+/// Polls until CONNACK (retrying while the listener is not accepting yet).
 async fn connected(
     addr: SocketAddr,
     id: &str,
@@ -159,7 +158,12 @@ async fn refused(
 
 #[tokio::test]
 async fn a_client_trusting_the_ca_subscribes_and_receives_and_logins_still_apply() {
-    let broker = start("[[user]]\nname = \"cloud\"\npassword = \"s3cret\"", "").await;
+    let broker = start(
+        "[[user]]\nname = \"cloud\"\npassword = \"s3cret\"\n\
+         publish = [\"skymesh/tls/#\"]\nsubscribe = [\"skymesh/tls/#\"]",
+        "",
+    )
+    .await;
     let login = Some(("cloud", "s3cret"));
     let (sub, mut sub_ev) = connected(broker.tls, "sub", login, client_tls("ca.pem", false)).await;
     sub.subscribe("skymesh/tls/#", QoS::AtLeastOnce)
@@ -182,7 +186,7 @@ async fn a_client_trusting_the_ca_subscribes_and_receives_and_logins_still_apply
         .await;
 
     // The broker's logins apply behind the terminator (the handshake succeeds, the
-    // CONNECT is refused by rumqttd).
+    // CONNECT is refused by the gate).
     let e = refused(
         broker.tls,
         "wrong-password",
@@ -361,6 +365,8 @@ async fn check_config_reads_and_matches_the_tls_files() {
             ),
             "tls.client_ca_file",
         ),
+        // Reachable from elsewhere with neither logins nor client certificates.
+        (tls(&cert, &key, "listen = \"0.0.0.0:8883\""), "tls.listen"),
     ];
     for (toml, field) in &cases {
         broker_cli().expect_config_error(toml, field).await;

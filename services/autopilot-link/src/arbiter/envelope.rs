@@ -42,20 +42,22 @@ impl Arbiter {
                     note = Some(format!("yaw rate max {:.0} deg/s", s.max_yaw_rate_dps));
                 }
                 let mut fence_limit = None;
-                if let Some(fence) = &self.fence {
+                if !self.fence.is_empty() {
                     match vehicle.position {
                         Some(k) => {
-                            let pos = fence.frame.to_local(k.lat_deg, k.lon_deg);
-                            let (out, why) = fence.limit_velocity(
-                                &self.envelope,
-                                pos,
-                                k.alt_rel_m,
-                                k.vel_ned_mps,
-                                v,
-                                &mut self.scratch,
-                            );
-                            v = out;
-                            fence_limit = why.map(|w| w.to_string());
+                            for fence in self.fence.fences() {
+                                let pos = fence.frame.to_local(k.lat_deg, k.lon_deg);
+                                let (out, why) = fence.limit_velocity(
+                                    &self.envelope,
+                                    pos,
+                                    k.alt_rel_m,
+                                    k.vel_ned_mps,
+                                    v,
+                                    &mut self.scratch,
+                                );
+                                v = out;
+                                fence_limit = fence_limit.or(why.map(|w| w.to_string()));
+                            }
                         }
                         None if v.iter().any(|x| *x != 0.0) => {
                             v = [0.0; 3];
@@ -93,7 +95,7 @@ impl Arbiter {
                 if speed != speed_mps {
                     note = Some(format!("speed max {:.1} m/s", s.max_horizontal_speed_mps));
                 }
-                if let Some(fence) = &self.fence {
+                for fence in self.fence.fences() {
                     if !fence.altitude_ok(alt_rel_m) {
                         return Err(format!(
                             "target alt {alt_rel_m:.1} m outside {:.1}..{:.1} m",
@@ -131,7 +133,7 @@ impl Arbiter {
                 ))
             }
             Command::Takeoff { alt_rel_m } => {
-                if let Some(fence) = &self.fence {
+                for fence in self.fence.fences() {
                     if alt_rel_m > fence.ceiling_m {
                         return Err(format!(
                             "takeoff to {alt_rel_m:.1} m above ceiling {:.1} m",

@@ -384,3 +384,6 @@ impl Fence {
         (out, limit)
     }
 }
+
+/// A position fix older than this (s) is not trusted to move toward a boundary.
+pub const MAX_FIX_AGE_S: f32 = 0.5;

@@ -28,6 +28,7 @@ pub mod audit;
 pub mod authority;
 mod envelope;
 pub mod freshness;
+pub mod fence_stack;
 pub mod geofence;
 #[cfg(test)]
 mod geofence_tests;
@@ -41,12 +42,13 @@ use std::time::Duration;
 
 use skymesh_ipc_types::{
     AckResult, ArbiterEventKind, AuthorityDomain, Command, CommandKind, CommandSource, FlightMode,
-    GeofenceSet, RefusalReason, VehicleCommand, VehicleState,
+    RefusalReason, VehicleCommand, VehicleState,
 };
 
 use authority::{Authority, Change, Claim};
 use freshness::{Freshness, FreshnessPolicy, Streams};
-use geofence::{Envelope, Fence};
+use fence_stack::FenceStack;
+use geofence::Envelope;
 
 /// The arbiter's configuration (validated in [`crate::config`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -81,6 +83,10 @@ pub struct Kinematics {
     pub lon_deg: f64,
     pub alt_rel_m: f32,
     pub vel_ned_mps: [f32; 3],
+    /// How old the position fix is when the arbiter decides, s: the geofence adds it
+    /// to the response time and refuses motion toward a boundary beyond
+    /// [`geofence::MAX_FIX_AGE_S`].
+    pub age_s: f32,
 }
 
 /// What the arbiter knows about the vehicle when it decides.
@@ -119,6 +125,7 @@ impl VehicleView {
                 lon_deg: s.lon_deg,
                 alt_rel_m: s.alt_rel_m,
                 vel_ned_mps: s.vel_ned_mps,
+                age_s: now_ns.saturating_sub(s.position_stamp_ns) as f32 * 1e-9,
             });
         VehicleView {
             armed,
@@ -162,6 +169,14 @@ pub enum Effect {
     Event {
         kind: ArbiterEventKind,
         source: Option<CommandSource>,
+        detail: String,
+    },
+    /// A geofence decision ([`Arbiter::set_geofence`]): an `ArbiterEvent` that echoes
+    /// the `GeofenceSet`'s `request_id`.
+    Fence {
+        kind: ArbiterEventKind,
+        source: Option<CommandSource>,
+        request_id: u32,
         detail: String,
     },
     /// `source`'s setpoint stream stopped while moving: brake to a hover.
@@ -240,9 +255,8 @@ pub struct Arbiter {
     policy: FreshnessPolicy,
     streams: Streams,
     envelope: Envelope,
-    fence: Option<Fence>,
-    /// Who set the current fence: a lower-priority source may not replace it.
-    fence_source: Option<CommandSource>,
+    /// One fence per source, all enforced ([`fence_stack`]).
+    fence: FenceStack,
     /// The last velocity setpoint was reduced by the fence (events on the edges only).
     fence_limiting: bool,
     link_up: bool,
@@ -271,8 +285,7 @@ impl Arbiter {
                 response_s: settings.fence_response_s.into(),
             },
             settings,
-            fence: None,
-            fence_source: None,
+            fence: FenceStack::default(),
             fence_limiting: false,
             link_up: false,
             scratch: Vec::with_capacity(32),
@@ -281,10 +294,6 @@ impl Arbiter {
 
     pub fn authority(&self) -> &Authority {
         &self.authority
-    }
-
-    pub fn fence(&self) -> Option<&Fence> {
-        self.fence.as_ref()
     }
 
     /// Decides one command sample at `now_ns`.
@@ -502,62 +511,5 @@ impl Arbiter {
             detail: "autopilot link down; commands refused".to_string(),
         });
         effects
-    }
-
-    /// A `GeofenceSet` arrived. Invalid samples (bad numbers, another vehicle, an
-    /// unknown source, or a source that does not outrank or equal the one that set
-    /// the current fence) are refused and the current fence is kept.
-    pub fn set_geofence(&mut self, set: &GeofenceSet, vehicle_id: u8) -> Vec<Effect> {
-        let source = CommandSource::try_from(set.source).ok();
-        let event = |kind, detail: String| {
-            vec![Effect::Event {
-                kind,
-                source,
-                detail,
-            }]
-        };
-        if set.vehicle_id != vehicle_id {
-            return event(
-                ArbiterEventKind::GeofenceInvalid,
-                format!("fence for vehicle {}", set.vehicle_id),
-            );
-        }
-        let Some(source) = source else {
-            return event(
-                ArbiterEventKind::GeofenceInvalid,
-                format!("unknown source {}", set.source),
-            );
-        };
-        if let Some(owner) = self.fence_source.filter(|_| self.fence.is_some()) {
-            if source.priority() < owner.priority() {
-                return event(
-                    ArbiterEventKind::GeofenceInvalid,
-                    format!("current fence set by {owner}, which outranks {source}"),
-                );
-            }
-        }
-        match Fence::compile(set) {
-            Err(e) => event(ArbiterEventKind::GeofenceInvalid, e.to_string()),
-            Ok(None) => {
-                self.fence = None;
-                self.fence_source = None;
-                self.fence_limiting = false;
-                event(
-                    ArbiterEventKind::GeofenceUpdated,
-                    format!("fence cleared by {source}"),
-                )
-            }
-            Ok(Some(fence)) => {
-                let detail = format!(
-                    "{} polygons, {:.1}..{:.1} m, by {source}",
-                    fence.polygons.len(),
-                    fence.floor_m,
-                    fence.ceiling_m
-                );
-                self.fence = Some(fence);
-                self.fence_source = Some(source);
-                event(ArbiterEventKind::GeofenceUpdated, detail)
-            }
-        }
     }
 }

@@ -1,7 +1,7 @@
 //! Decisions of [`super::Arbiter`], with explicit times: no sleeping.
 
 use super::*;
-use skymesh_ipc_types::{AuthorityChange, FenceKind};
+use skymesh_ipc_types::{AuthorityChange, FenceKind, GeofenceSet};
 use CommandSource::*;
 
 const MS: u64 = 1_000_000;
@@ -42,6 +42,7 @@ pub(super) fn flying(north: f64, east: f64, vel_ned_mps: [f32; 3]) -> VehicleVie
             lon_deg: HOME.1 + east / unit.y * 1e-3,
             alt_rel_m: 10.0,
             vel_ned_mps,
+            age_s: 0.0,
         }),
     }
 }
@@ -412,7 +413,7 @@ fn event_kinds(effects: &[Effect]) -> Vec<ArbiterEventKind> {
     effects
         .iter()
         .filter_map(|e| match e {
-            Effect::Event { kind, .. } => Some(*kind),
+            Effect::Event { kind, .. } | Effect::Fence { kind, .. } => Some(*kind),
             _ => None,
         })
         .collect()
@@ -510,13 +511,18 @@ fn fence_updates_are_validated_and_owned() {
         event_kinds(&a.set_geofence(&fence_set(Operator, 10.0, None), 2)),
         [ArbiterEventKind::GeofenceInvalid]
     );
+    // Vision's own 10 m fence is added to the operator's, not in its place.
     let fx = a.set_geofence(&fence_set(Vision, 10.0, None), 1);
-    assert_eq!(
-        event_kinds(&fx),
-        [ArbiterEventKind::GeofenceInvalid],
-        "operator's fence"
-    );
+    assert_eq!(event_kinds(&fx), [ArbiterEventKind::GeofenceUpdated]);
     let v = flying(0.0, 0.0, [0.0; 3]);
+    let d = a.decide(S, &sample(Operator, goto_ne(30.0, 0.0, 10.0), S), &v);
+    assert_eq!(refusal(&d).0, RefusalReason::Geofence, "outside vision's");
+    let own = GeofenceSet {
+        vehicle_id: 1,
+        source: Vision.to_wire(),
+        ..Default::default()
+    };
+    a.set_geofence(&own, 1);
     let d = a.decide(S, &sample(Operator, goto_ne(30.0, 0.0, 10.0), S), &v);
     assert_eq!(
         d.result(),
@@ -526,13 +532,14 @@ fn fence_updates_are_validated_and_owned() {
     let clear = GeofenceSet {
         vehicle_id: 1,
         source: Safety.to_wire(),
+        target_source: Operator.to_wire(),
         ..Default::default()
     };
     assert_eq!(
         event_kinds(&a.set_geofence(&clear, 1)),
         [ArbiterEventKind::GeofenceUpdated]
     );
-    assert!(a.fence().is_none());
+    assert!(a.fence().is_empty());
 }
 
 #[test]

@@ -115,6 +115,27 @@ impl<L: Lifecycle> Service<L> {
                     }
                     self.publish_event(kind, source, &detail)?;
                 }
+                Effect::Fence {
+                    kind,
+                    source,
+                    request_id,
+                    detail,
+                } => {
+                    let src = name(source);
+                    if kind == ArbiterEventKind::GeofenceInvalid {
+                        tracing::warn!(event = %kind, source = src, request_id, detail, "geofence");
+                    } else {
+                        tracing::info!(event = %kind, source = src, request_id, detail, "geofence");
+                    }
+                    self.ports.events.publish(ArbiterEvent {
+                        vehicle_id: self.settings.vehicle_id,
+                        kind: kind.to_wire(),
+                        source: source.map_or(NO_HOLDER, CommandSource::to_wire),
+                        request_id,
+                        detail: FixedStr::new(&detail),
+                        ..ArbiterEvent::default()
+                    })?;
+                }
                 Effect::StaleBrake { source } => self.stale_brake(source)?,
             }
         }
