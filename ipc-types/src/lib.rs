@@ -62,9 +62,9 @@ pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
 pub use vision::{
     CropMode, SttMode, SttState, TargetingMode, VirtualCamState, VisionControl, VisionControlKind,
-    VisionDetection, VisionOrigin, VisionReply, VisionResult, VisionState, VisionStreamState,
-    LOCK_PITCH, LOCK_ROLL, LOCK_YAW, VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
-    VISION_MAX_STREAMS,
+    VisionDemand, VisionDetection, VisionOrigin, VisionReply, VisionResult, VisionState,
+    VisionStreamState, LOCK_PITCH, LOCK_ROLL, LOCK_YAW, VISION_DEMAND_LEASE_NS, VISION_MAX_CAMS,
+    VISION_MAX_DETECTIONS, VISION_MAX_MODELS, VISION_MAX_STREAMS,
 };
 
 /// Declares a checked integer-backed enum: the wire holds the integer, the code sees

@@ -278,6 +278,12 @@ pub fn vision_reply() -> Topic {
     Topic::new("skymesh/vision/reply".into(), TopicQos::EVENTS)
 }
 
+/// [`crate::VisionDemand`]: consumers' word that they use the vision pipeline's
+/// output now (latest value per publisher).
+pub fn vision_demand() -> Topic {
+    Topic::new("skymesh/vision/demand".into(), TopicQos::SHARED_STATE)
+}
+
 /// The vision pipeline's rendered output of stream `stream` (virtual camera views and
 /// detection overlay), [`crate::FrameHeader`] + RGB24 pixels like the camera's frames.
 pub fn vision_output(stream: &str) -> Topic {

@@ -483,6 +483,32 @@ crate::assert_layout!(VisionReply, size = 24 + 8 + 8 + 96, align = 8);
 
 crate::impl_sample!(VisionReply);
 
+/// A consumer's word that it uses the vision pipeline's output now (its state,
+/// detections, virtual cameras): the DigiView gateway says so while a client is
+/// connected, tools and tests while they read. The pipeline processes frames only
+/// while some word says `wanted` (or its output frames have a subscriber, a capture
+/// runs, a control came recently, or its config says `always_on`); it keeps each
+/// publisher's (header `service`, `instance`) newest word for [`VISION_DEMAND_LEASE_NS`],
+/// so a word is renewed every second and a dead publisher's lapses. A word that says
+/// `wanted` resumes the pipeline at once.
+///
+/// Topic: [`crate::topics::vision_demand`] (latest value per publisher).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("skymesh.VisionDemand.v1")]
+#[repr(C)]
+pub struct VisionDemand {
+    pub header: SampleHeader,
+    /// 1: the output is used now; 0: not any more.
+    pub wanted: u8,
+    pub reserved: [u8; 7],
+}
+crate::assert_layout!(VisionDemand, size = 24 + 8, align = 8);
+
+/// How long a [`VisionDemand`] that says `wanted` holds without being renewed.
+pub const VISION_DEMAND_LEASE_NS: u64 = 3_000_000_000;
+
+crate::impl_sample!(VisionDemand);
+
 impl VisionReply {
     pub fn result(&self) -> VisionResult {
         VisionResult::try_from(self.result).unwrap_or(VisionResult::Invalid)

@@ -401,6 +401,9 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
         swarm: true,
         vision: true,
         camera_extra: camera_config(),
+        // Frames flow with no DigiView client: the recovery checks read the
+        // pipeline's state on the bus.
+        vision_extra: "always_on = true\n".into(),
         attitude_hz: 25.0,
         // The commanding gateway stays dead longer than the freshness limit, so the
         // arbiter's brake is what stops the vehicle (a faster restart can resume the

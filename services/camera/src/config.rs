@@ -32,6 +32,8 @@ pub struct RawConfig {
     #[serde(default = "d_format")]
     format: String,
     #[serde(default)]
+    always_on: bool,
+    #[serde(default)]
     lens: RawLens,
     #[serde(default)]
     mount: RawMount,
@@ -268,6 +270,9 @@ pub struct Settings {
     pub height: u32,
     pub fps: u32,
     pub format: PixelFormat,
+    /// Make frames even while nobody subscribes to them (a real camera feeding a
+    /// recorder); otherwise frames are made only while the frame topic has a reader.
+    pub always_on: bool,
     pub intrinsics: Intrinsics,
     pub mount: Mount,
     pub synthetic: SyntheticSettings,
@@ -532,6 +537,7 @@ impl ServiceConfig for RawConfig {
             height,
             fps,
             format,
+            always_on: self.always_on,
             intrinsics,
             mount,
             synthetic: SyntheticSettings {

@@ -31,7 +31,7 @@ use crate::metrics::{Metrics, Skip};
 use crate::pose::PoseTracker;
 use crate::y4m::{Chroma, Y4mReader};
 use crate::yuv::Converter;
-use crate::{stamp_now, Ticker};
+use crate::{stamp_now, Demand, Ticker};
 
 /// What the next tick gets from the file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -139,6 +139,7 @@ pub(crate) async fn run(
     let mut warn = WarnLimiter::default();
     let mut finished = false;
     let mut frame_seq = 0u64;
+    let mut demand = Demand::new(settings.always_on);
     ctx.ready();
     while ticker.tick(&ctx, &metrics).await?.is_some() {
         let (vehicle, payload) = ports.inputs()?;
@@ -148,7 +149,8 @@ pub(crate) async fn run(
         if let Some(p) = payload {
             tracker.update_payload(&p);
         }
-        if finished {
+        // Idle, the file is not read: playback pauses while nobody watches.
+        if finished || !demand.wanted(&ports, &metrics) {
             continue;
         }
         let began = std::time::Instant::now();

@@ -43,6 +43,12 @@ impl Ports {
         })
     }
 
+    /// How many subscribers the frame topic has now (the vision pipeline only while
+    /// it has a consumer of its own; tools, tests).
+    pub fn readers(&self) -> usize {
+        self.frames.subscribers()
+    }
+
     /// The newest vehicle state and payload state received since the last call.
     pub fn inputs(&self) -> Result<(Option<VehicleState>, Option<PayloadState>), IpcError> {
         Ok((self.vehicle.latest()?, self.payload.latest()?))

@@ -15,6 +15,12 @@
 //! When a frame takes longer than a frame period the missed ticks are skipped and
 //! counted (`skymesh_camera_frames_skipped_total{reason="late"}`).
 //!
+//! **On demand.** Frames are made only while the frame topic has a subscriber (the
+//! vision pipeline subscribes only while its own output is used; tools and tests),
+//! or always with `always_on` ([`Demand`]). Idle, each tick only reads the vehicle's
+//! pose and the topic's subscriber count (shared memory, no system call), so a new
+//! reader gets its first frame within a frame period.
+//!
 //! The frame header's `pose.attitude_q` is the **camera mount → NED** quaternion
 //! (x along the optical axis, y image right, z image down), not the vehicle's
 //! attitude (as `ipc-types/src/frame.rs` defines it); the vehicle heading is in
@@ -100,6 +106,39 @@ impl Ticker {
     }
 }
 
+/// Whether frames are made now: while the frame topic has a reader, or always with
+/// `always_on`. Changes are logged and exported (`skymesh_camera_active`).
+#[derive(Debug)]
+pub(crate) struct Demand {
+    always_on: bool,
+    active: Option<bool>,
+}
+
+impl Demand {
+    pub fn new(always_on: bool) -> Self {
+        Demand {
+            always_on,
+            active: None,
+        }
+    }
+
+    /// Whether to make a frame at this tick.
+    pub fn wanted(&mut self, ports: &Ports, metrics: &Metrics) -> bool {
+        let readers = ports.readers();
+        let now = self.always_on || readers > 0;
+        if self.active != Some(now) {
+            metrics.active.set(if now { 1.0 } else { 0.0 });
+            if now {
+                tracing::info!(readers, always_on = self.always_on, "making frames");
+            } else {
+                tracing::info!("no reader of the frames: idle until one subscribes");
+            }
+            self.active = Some(now);
+        }
+        now
+    }
+}
+
 /// The capture times of a frame taken now.
 pub(crate) fn stamp_now(seq: u64) -> FrameStamp {
     FrameStamp {
@@ -136,6 +175,7 @@ async fn run_synthetic(
     let start = Instant::now();
     let mut frame_seq = 0u64;
     let mut warn = WarnLimiter::default();
+    let mut demand = Demand::new(source.settings().always_on);
     ctx.ready();
     while let Some(tick) = ticker.tick(&ctx, &metrics).await? {
         let (vehicle, payload) = ports.inputs()?;
@@ -144,6 +184,9 @@ async fn run_synthetic(
         }
         if let Some(p) = payload {
             source.update_payload(&p);
+        }
+        if !demand.wanted(&ports, &metrics) {
+            continue;
         }
         if source.pose().is_err() {
             metrics.skipped(Skip::NoPose, 1);

@@ -7,9 +7,10 @@
 //! | `skymesh_camera_render_seconds` | | time to render (synthetic) or convert (file) and publish one frame |
 //! | `skymesh_camera_file_errors_total` | | Y4M file read errors (truncated or corrupt frame, I/O): handled as the end of the file |
 //! | `skymesh_camera_file_rewinds_total` | | times a Y4M file source started again from its first frame (`loop = true`) |
+//! | `skymesh_camera_active` | | 1 while frames are made (the frame topic has a subscriber, or `always_on`), 0 while the camera idles |
 
 use skymesh_runtime::stats::LATENCY_BOUNDS_S;
-use skymesh_runtime::{Counter, Histogram, Stats};
+use skymesh_runtime::{Counter, Gauge, Histogram, Stats};
 
 /// Why a frame tick produced no frame (label `reason`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,6 +30,7 @@ pub struct Metrics {
     pub render_seconds: Histogram,
     pub file_errors: Counter,
     pub file_rewinds: Counter,
+    pub active: Gauge,
 }
 
 impl Metrics {
@@ -47,6 +49,7 @@ impl Metrics {
             ),
             file_errors: stats.counter("skymesh_camera_file_errors_total", &[]),
             file_rewinds: stats.counter("skymesh_camera_file_rewinds_total", &[]),
+            active: stats.gauge("skymesh_camera_active", &[]),
         }
     }
 

@@ -1,5 +1,6 @@
 //! The camera service in-process on the real bus (its own iceoryx2 domain): frames
-//! reach a `FrameSubscriber` with a consistent header, and the truth matches them.
+//! reach a `FrameSubscriber` with a consistent header, and the truth matches them;
+//! frames are made only while the frame topic has a subscriber (or `always_on`).
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
@@ -228,4 +229,65 @@ async fn without_a_vehicle_the_camera_waits_unless_an_origin_is_set() {
     shutdown.cancel();
     task.await.expect("join").expect("run");
     assert!(frames.try_recv_with(|_, _| ()).expect("receive").is_none());
+}
+
+/// Frames are made only while somebody subscribes: none before, the first within
+/// two frame periods of a subscription, none after it is dropped; `always_on`
+/// makes them without a subscriber.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_are_made_only_for_a_subscriber() {
+    for always_on in [false, true] {
+        // A configured origin: frames need no vehicle.
+        let settings = settings(&[
+            ("# origin = {", "origin = {"),
+            ("always_on = false", &format!("always_on = {always_on}")),
+        ]);
+        let period = Duration::from_secs_f64(1.0 / f64::from(settings.fps));
+        let domain = unique_domain();
+        let stats = Stats::new();
+        let bus = Bus::open(&domain, "camera", ServiceId::Camera, 0, stats.clone()).expect("bus");
+        let tool =
+            Bus::open(&domain, "viewer", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+        let shutdown = CancellationToken::new();
+        let ctx = Context::new(bus, shutdown.clone(), stats.clone(), "camera");
+        let task = tokio::spawn(run(settings, ctx));
+        let published = || {
+            stats
+                .value("skymesh_camera_frames_published_total", "")
+                .unwrap_or(0.0)
+        };
+
+        tokio::time::sleep(period * 10).await;
+        let active = stats.value("skymesh_camera_active", "");
+        if always_on {
+            assert!(published() >= 5.0, "always_on: {} frames", published());
+            assert_eq!(active, Some(1.0));
+        } else {
+            assert_eq!(published(), 0.0, "frames without a subscriber");
+            assert_eq!(active, Some(0.0));
+
+            let mut frames = tool
+                .frame_subscriber(&topics::camera_frames("main"))
+                .expect("frame subscriber");
+            let t = std::time::Instant::now();
+            let got = tokio::time::timeout(PATIENCE, frames.recv_with(|h, _| h.frame_seq))
+                .await
+                .expect("no frame for the subscriber")
+                .expect("frame");
+            let first = t.elapsed();
+            eprintln!("camera: first frame {first:?} after the subscription (period {period:?})");
+            assert_eq!(got, 1);
+            assert!(first < period * 2 + Duration::from_millis(100), "first frame after {first:?}");
+            assert_eq!(stats.value("skymesh_camera_active", ""), Some(1.0));
+
+            drop(frames);
+            tokio::time::sleep(period * 3).await;
+            let stopped = published();
+            tokio::time::sleep(period * 10).await;
+            assert_eq!(published(), stopped, "frames after the subscriber left");
+            assert_eq!(stats.value("skymesh_camera_active", ""), Some(0.0));
+        }
+        shutdown.cancel();
+        task.await.expect("join").expect("clean stop");
+    }
 }

@@ -5,6 +5,11 @@
 //! | `skymesh/vision/state` | subscribe (latest value) | `VisionState` | [`BusTask`] → a `watch` every session reads |
 //! | `skymesh/vision/control` | publish | `VisionControl` (`DigiViewSet`) | [`BusTask`], for [`BusHandle::set`] |
 //! | `skymesh/vision/reply` | subscribe | `VisionReply` | [`BusTask`], routed to the waiting session by `request_id` |
+//! | `skymesh/vision/demand` | publish | `VisionDemand` | [`BusTask`]: `wanted` while a client is connected (renewed every second), so the pipeline (and the camera) work only then |
+//!
+//! Read your writes: the pipeline publishes the state that contains a SET's change
+//! before its reply, and the bus task takes that state before it hands the reply on,
+//! so a GET after the ACKNOWLEDGEMENT reads the new value.
 //!
 //! Sessions never touch the bus: they read the newest state from the `watch` and
 //! send SETs through a channel with a oneshot for the answer. Other requesters
@@ -18,7 +23,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use digiview_proto::DATA_LEN;
 use skymesh_ipc_types::{
-    topics, VisionControl, VisionControlKind, VisionOrigin, VisionReply, VisionState,
+    topics, VisionControl, VisionControlKind, VisionDemand, VisionOrigin, VisionReply, VisionState,
 };
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -27,6 +32,9 @@ use tokio_util::sync::CancellationToken;
 
 /// SETs queued for the bus task.
 const CALL_QUEUE: usize = 256;
+/// How often the demand word is renewed while a client is connected (the pipeline
+/// keeps it for `VISION_DEMAND_LEASE_NS`, 3 s).
+const DEMAND_RENEW: Duration = Duration::from_secs(1);
 
 /// The newest `VisionState` and when it arrived.
 #[derive(Debug)]
@@ -57,9 +65,24 @@ pub enum SetError {
 pub struct BusHandle {
     state: watch::Receiver<Option<Arc<Latest>>>,
     calls: mpsc::Sender<SetCall>,
+    clients: Arc<watch::Sender<usize>>,
 }
 
 impl BusHandle {
+    /// Waits up to `timeout` for the pipeline's first state; true once there is one.
+    pub async fn first_state(&self, timeout: Duration) -> bool {
+        let mut rx = self.state.clone();
+        let got = tokio::time::timeout(timeout, rx.wait_for(|s| s.is_some()))
+            .await
+            .is_ok_and(|r| r.is_ok());
+        got
+    }
+
+    /// Sets the number of connected clients (the demand word follows it).
+    pub fn set_clients(&self, n: usize) {
+        self.clients.send_replace(n);
+    }
+
     /// The newest state if it is younger than `max_age` (else the pipeline is down).
     pub fn fresh_state(&self, max_age: Duration) -> Option<Arc<Latest>> {
         self.state
@@ -96,6 +119,8 @@ impl BusHandle {
 #[derive(Debug)]
 pub struct BusTask {
     control: Publisher<VisionControl>,
+    demand: Publisher<VisionDemand>,
+    clients: watch::Receiver<usize>,
     states: Subscriber<VisionState>,
     replies: Subscriber<VisionReply>,
     calls: mpsc::Receiver<SetCall>,
@@ -111,10 +136,15 @@ impl BusTask {
     pub fn open(bus: &Bus) -> anyhow::Result<(BusTask, BusHandle)> {
         let (state_tx, state_rx) = watch::channel(None);
         let (calls_tx, calls_rx) = mpsc::channel(CALL_QUEUE);
+        let (clients_tx, clients_rx) = watch::channel(0);
         let task = BusTask {
             control: bus
                 .publisher::<VisionControl>(&topics::vision_control())
                 .context("opening the vision_control topic")?,
+            demand: bus
+                .publisher::<VisionDemand>(&topics::vision_demand())
+                .context("opening the vision_demand topic")?,
+            clients: clients_rx,
             states: bus
                 .subscriber::<VisionState>(&topics::vision_state())
                 .context("opening the vision_state topic")?,
@@ -131,6 +161,7 @@ impl BusTask {
             BusHandle {
                 state: state_rx,
                 calls: calls_tx,
+                clients: Arc::new(clients_tx),
             },
         ))
     }
@@ -139,6 +170,8 @@ impl BusTask {
     pub async fn run(self, stop: CancellationToken) -> Result<(), IpcError> {
         let BusTask {
             mut control,
+            mut demand,
+            mut clients,
             mut states,
             mut replies,
             mut calls,
@@ -146,16 +179,58 @@ impl BusTask {
             mut pending,
             mut last_request,
         } = self;
-        loop {
+        let mut wanted = false;
+        let mut renew = tokio::time::interval(DEMAND_RENEW);
+        renew.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let word = |demand: &mut Publisher<VisionDemand>, wanted: bool| {
+            demand.publish(VisionDemand {
+                wanted: u8::from(wanted),
+                ..VisionDemand::default()
+            })
+        };
+        let result = loop {
             tokio::select! {
                 biased;
-                _ = stop.cancelled() => return Ok(()),
+                _ = stop.cancelled() => break Ok(()),
                 state = states.recv() => {
-                    let state = Box::new(state?);
+                    let state = match state {
+                        Ok(s) => Box::new(s),
+                        Err(e) => break Err(e),
+                    };
                     state_tx.send_replace(Some(Arc::new(Latest { state, received: Instant::now() })));
                 }
+                Ok(()) = clients.changed() => {
+                    let now = *clients.borrow_and_update() > 0;
+                    if now != wanted {
+                        wanted = now;
+                        if let Err(e) = word(&mut demand, wanted) {
+                            break Err(e);
+                        }
+                        renew.reset();
+                    }
+                }
+                _ = renew.tick(), if wanted => {
+                    if let Err(e) = word(&mut demand, true) {
+                        break Err(e);
+                    }
+                }
                 reply = replies.recv() => {
-                    let reply = reply?;
+                    let reply = match reply {
+                        Ok(r) => r,
+                        Err(e) => break Err(e),
+                    };
+                    // The pipeline published the state that contains this reply's
+                    // change before the reply: take it first (read your writes).
+                    match states.latest() {
+                        Ok(Some(state)) => {
+                            state_tx.send_replace(Some(Arc::new(Latest {
+                                state: Box::new(state),
+                                received: Instant::now(),
+                            })));
+                        }
+                        Ok(None) => {}
+                        Err(e) => break Err(e),
+                    }
                     let ours = reply.origin == VisionOrigin::DigiView.to_wire()
                         && reply.kind == VisionControlKind::DigiViewSet.to_wire();
                     if let Some(tx) = ours.then(|| pending.remove(&reply.request_id)).flatten() {
@@ -165,7 +240,7 @@ impl BusTask {
                 }
                 call = calls.recv() => {
                     // The gateway holds a sender in every handle; None only at the end.
-                    let Some(call) = call else { return Ok(()) };
+                    let Some(call) = call else { break Ok(()) };
                     pending.retain(|_, tx| !tx.is_closed());
                     last_request = last_request.wrapping_add(1).max(1);
                     let request = VisionControl {
@@ -176,10 +251,17 @@ impl BusTask {
                         data: call.data,
                         ..VisionControl::default()
                     };
-                    control.publish(request)?;
+                    if let Err(e) = control.publish(request) {
+                        break Err(e);
+                    }
                     pending.insert(last_request, call.answer);
                 }
             }
+        };
+        // The pipeline need not wait for the lease to lapse.
+        if wanted {
+            let _ = word(&mut demand, false);
         }
+        result
     }
 }

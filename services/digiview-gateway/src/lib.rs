@@ -63,8 +63,9 @@ pub async fn bind(settings: &Settings) -> anyhow::Result<TcpListener> {
 }
 
 /// Runs the gateway on an already-bound listener until `ctx.shutdown` is cancelled
-/// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once its bus
-/// ports exist.
+/// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once the
+/// pipeline's state is in (a GET can be answered), or after `state_timeout` without
+/// it (GETs are then answered UNKNOWN until it comes).
 pub async fn run(settings: Settings, listener: TcpListener, ctx: Context) -> anyhow::Result<()> {
     let addr = listener.local_addr().context("reading the bound address")?;
     let (bus_task, bus) = ipc::BusTask::open(&ctx.bus)?;
@@ -78,6 +79,24 @@ pub async fn run(settings: Settings, listener: TcpListener, ctx: Context) -> any
         max_clients = settings.max_clients,
         "digiview-gateway serving DigiView clients"
     );
+    // Ready means able to serve: a new subscriber gets the pipeline's state with
+    // the pipeline's next publication (within its 1 s period).
+    let waited = std::time::Instant::now();
+    let have_state = tokio::select! {
+        _ = ctx.shutdown.cancelled() => true,
+        ok = bus.first_state(settings.state_timeout) => ok,
+    };
+    if have_state {
+        tracing::debug!(
+            waited_ms = waited.elapsed().as_millis() as u64,
+            "vision state received"
+        );
+    } else {
+        tracing::info!(
+            waited_ms = waited.elapsed().as_millis() as u64,
+            "no VisionState from the vision pipeline yet: serving, GETs are answered UNKNOWN until it comes"
+        );
+    }
     ctx.ready();
     let settings = Arc::new(settings);
     let slots = Arc::new(Semaphore::new(settings.max_clients));
@@ -128,12 +147,15 @@ pub async fn run(settings: Settings, listener: TcpListener, ctx: Context) -> any
                 let max = settings.max_clients;
                 tracing::info!(%peer, client = last_client, may_set, "DigiView client connected");
                 metrics.clients.set((max - slots.available_permits()) as f64);
+                bus.set_clients(max - slots.available_permits());
+                let bus = bus.clone();
                 tracker.spawn(async move {
                     let client = sctx.client;
                     let end = session::run(stream, sctx, cancel).await;
                     drop(permit);
                     metrics.disconnect(end.reason());
                     metrics.clients.set((max - slots.available_permits()) as f64);
+                    bus.set_clients(max - slots.available_permits());
                     tracing::info!(%peer, client, reason = %end, "DigiView client disconnected");
                 });
             }

@@ -59,7 +59,7 @@ enum Wake {
 /// its bus ports exist and the first state is published.
 ///
 /// One task owns the devices: requests are answered in order (everything pending is
-/// handled per wake-up, then the state is published once); the loop sleeps until
+/// handled per wake-up, the state is published once, then the replies); the loop sleeps until
 /// the next scheduled operation or the next second, whichever comes first.
 pub async fn run(mut hw: Hardware, ctx: Context) -> anyhow::Result<()> {
     let metrics = hw.metrics().clone();
@@ -89,16 +89,23 @@ pub async fn run(mut hw: Hardware, ctx: Context) -> anyhow::Result<()> {
         let step = match wake {
             Wake::Request(first) => first.and_then(|first| {
                 let mut changed = false;
+                let mut replies = Vec::new();
                 let mut next = Some(first);
                 while let Some(req) = next {
                     let answer = hw.handle(&req, now);
-                    ports.reply(answer.reply)?;
+                    replies.push(answer.reply);
                     changed |= answer.changed;
                     run_effects(answer.effects, &metrics, &commands);
                     next = ports.requests.try_recv()?;
                 }
+                // The state before the replies: whoever holds a reply can read the
+                // state that contains its change (a query right after it is answered
+                // from that state, not the one before).
                 if changed {
                     ports.state(hw.state(now))?;
+                }
+                for reply in replies {
+                    ports.reply(reply)?;
                 }
                 Ok(())
             }),

@@ -58,6 +58,7 @@ pub fn refused_reason(reason: Option<RefusalReason>) -> &'static str {
         Some(RefusalReason::Emergency) => "refused_emergency",
         Some(RefusalReason::InAir) => "refused_in_air",
         Some(RefusalReason::Preempted) => "refused_preempted",
+        Some(RefusalReason::AutopilotFailsafe) => "refused_autopilot_failsafe",
         None => "refused_unknown",
     }
 }

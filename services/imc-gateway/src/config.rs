@@ -51,7 +51,8 @@ pub struct Settings {
     pub announce_interval: Duration,
     /// A peer silent for this long gets no more heartbeats.
     pub peer_timeout: Duration,
-    /// A hardware request unanswered for this long is dropped.
+    /// A hardware request unanswered for this long is dropped; also the longest
+    /// wait at start for the hardware state before the gateway reports ready.
     pub hardware_timeout: Duration,
     pub actuators: Actuators,
     /// IMC button id → skymesh button.

@@ -142,6 +142,21 @@ async fn execute(
     Ok(())
 }
 
+/// Hands the engine the newest hardware state, if one is pending: before a query is
+/// answered and before a hardware reply is handled, so a query right after a change
+/// is answered from the state that contains it (the hardware service publishes its
+/// state before its replies).
+fn refresh_hardware(ports: &Ports, engine: &mut Engine) -> anyhow::Result<()> {
+    if let Some(s) = ports
+        .hardware_state
+        .latest()
+        .context("receiving the hardware state")?
+    {
+        engine.on_hardware_state(s);
+    }
+    Ok(())
+}
+
 /// Hands the engine the newest vehicle state and status. They are read only when a
 /// datagram or a tick may use them (teleoperation, remote actions, Announce), so the
 /// loop does not wake for every VehicleState (50 Hz) while idle.
@@ -198,8 +213,8 @@ fn warn_about_allowed_peers(settings: &Settings, local: SocketAddr) {
 }
 
 /// Runs the gateway on an already-bound socket until `ctx.shutdown` is cancelled
-/// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once its bus
-/// ports exist.
+/// (then `Ok`) or the bus fails (then `Err`). Marks the service ready once the
+/// hardware service's state is in (or `hardware_timeout` passed without it).
 pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow::Result<()> {
     let local = socket.local_addr().context("reading the bound address")?;
     let mut ports = Ports::open(&ctx.bus, settings.vehicle_id)?;
@@ -224,8 +239,31 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
         "imc-gateway serving IMC over UDP"
     );
     warn_about_allowed_peers(&settings, local);
+    let hardware_wait = settings.hardware_timeout;
     let mut engine = Engine::new(settings, local, ports.origin, Instant::now());
     metrics.peers.set(engine.peer_count() as f64);
+    // Ready means able to serve: power channel, LED and GPIO queries are answered from
+    // the hardware service's state, which a new subscriber receives only with the
+    // service's next publication (up to its 1 s period later). Wait for it, at most
+    // `hardware_timeout`; without it the gateway serves anyway (those queries are
+    // dropped as no_hardware_state, logged) rather than stay down with the hardware.
+    let started = Instant::now();
+    tokio::select! {
+        _ = ctx.shutdown.cancelled() => {
+            tracing::info!("imc-gateway stopped before it was ready");
+            return Ok(());
+        }
+        r = tokio::time::timeout(hardware_wait, ports.hardware_state.recv()) => match r {
+            Ok(state) => {
+                engine.on_hardware_state(state.context("receiving the hardware state")?);
+                tracing::debug!(waited_ms = started.elapsed().as_millis() as u64, "hardware state received");
+            }
+            Err(_) => tracing::info!(
+                waited_ms = hardware_wait.as_millis() as u64,
+                "no hardware state yet: serving without it (hardware queries are dropped until it comes)"
+            ),
+        },
+    }
     ctx.ready();
 
     let mut buf = vec![0u8; RECV_BUFFER];
@@ -241,6 +279,7 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
             r = socket.recv_from(&mut buf) => match r {
                 Ok((n, from)) => {
                     refresh_vehicle(&ports, &mut engine)?;
+                    refresh_hardware(&ports, &mut engine)?;
                     engine.on_datagram(from, &buf[..n], Instant::now(), &mut out);
                 }
                 // Unconnected UDP sockets report little; nothing here is the peer's fault
@@ -252,6 +291,7 @@ pub async fn run(settings: Settings, socket: UdpSocket, ctx: Context) -> anyhow:
             },
             r = ports.hardware_replies.recv() => {
                 let reply = r.context("receiving hardware replies")?;
+                refresh_hardware(&ports, &mut engine)?;
                 engine.on_hardware_reply(&reply, Instant::now(), &mut out);
             }
             r = ports.hardware_state.recv() => {

@@ -93,6 +93,7 @@ impl Bus {
         let origin = self.origin();
         Ok(FramePublisher {
             port,
+            pubsub,
             wakers,
             making,
             seq: 0,
@@ -140,6 +141,8 @@ impl Bus {
 /// Publishes frames of one stream, written in place in shared memory.
 pub struct FramePublisher {
     port: iceoryx2::port::publisher::Publisher<Svc, [u8], FrameHeader>,
+    /// The topic's service, for its subscriber count.
+    pubsub: FramePortFactory,
     wakers: Wakers,
     /// The stream's making word: odd from just before a frame's loan until its send, for
     /// the receivers that wake then ([`FrameSubscriber::set_early_wake`]).
@@ -232,6 +235,13 @@ impl FramePublisher {
         self.wakers.notify(&self.topic)?;
         self.published.inc();
         Ok(seq)
+    }
+
+    /// How many subscribers the topic has now, in every process: a producer whose
+    /// frames nobody reads need not make them (the camera renders only while this is
+    /// above zero). Reads the service's shared-memory port table; no system call.
+    pub fn subscribers(&self) -> usize {
+        self.pubsub.dynamic_config().number_of_subscribers()
     }
 
     /// The largest frame this publisher accepts, in bytes.

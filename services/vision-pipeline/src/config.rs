@@ -21,6 +21,10 @@ pub struct RawConfig {
     #[serde(default = "d_thermal")]
     thermal_zone: String,
     #[serde(default)]
+    always_on: bool,
+    #[serde(default = "d_control_hold")]
+    control_hold_s: f64,
+    #[serde(default)]
     capture: RawCapture,
     #[serde(default)]
     ai: RawAi,
@@ -127,6 +131,10 @@ struct RawStream {
     fov_deg: f64,
 }
 
+fn d_control_hold() -> f64 {
+    10.0
+}
+
 fn d_vehicle() -> u8 {
     1
 }
@@ -203,6 +211,11 @@ pub struct StreamSettings {
 pub struct Settings {
     pub vehicle_id: u8,
     pub thermal: ThermalSource,
+    /// Process frames even while nothing uses the output.
+    pub always_on: bool,
+    /// A control keeps the pipeline processing for this long (a ground station
+    /// steering a virtual camera, a DigiView SET).
+    pub control_hold: std::time::Duration,
     pub capture: CaptureSettings,
     pub ai_enabled: bool,
     pub scan_model: String,
@@ -397,9 +410,17 @@ impl ServiceConfig for RawConfig {
             });
         }
 
+        let hold = in_range(
+            "control_hold_s",
+            finite("control_hold_s", self.control_hold_s)?,
+            0.0,
+            3600.0,
+        )?;
         Ok(Settings {
             vehicle_id: self.vehicle_id,
             thermal,
+            always_on: self.always_on,
+            control_hold: std::time::Duration::from_secs_f64(hold),
             capture: CaptureSettings {
                 dir,
                 format,

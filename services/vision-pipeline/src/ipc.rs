@@ -2,7 +2,8 @@
 //!
 //! | topic | direction | type |
 //! |---|---|---|
-//! | `skymesh/camera/{stream}/frames` | subscribe | frames: `FrameHeader` + pixels, read in place |
+//! | `skymesh/camera/{stream}/frames` | subscribe, only while the output is used | frames: `FrameHeader` + pixels, read in place |
+//! | `skymesh/vision/demand` | subscribe | `VisionDemand` (consumers' word that they use the output) |
 //! | `skymesh/vehicle/{id}/state` | subscribe | `VehicleState` (body attitude, height above home) |
 //! | `skymesh/vision/control` | subscribe | `VisionControl` |
 //! | `skymesh/vision/reply` | publish | `VisionReply` (one per control) |
@@ -11,7 +12,7 @@
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, VehicleState, VisionControl, VisionReply, VisionState, MAX_FRAME_LEN,
+    topics, VehicleState, VisionControl, VisionDemand, VisionReply, VisionState, MAX_FRAME_LEN,
 };
 use skymesh_runtime::{Bus, FramePublisher, FrameSubscriber, IpcError, Publisher, Subscriber};
 
@@ -20,15 +21,20 @@ use crate::config::Settings;
 /// One stream's frame ports.
 #[derive(Debug)]
 pub struct StreamPorts {
-    pub frames: FrameSubscriber,
+    name: String,
+    /// Open only while the pipeline's output is used: the camera renders only while
+    /// its frame topic has a subscriber.
+    pub frames: Option<FrameSubscriber>,
     pub output: FramePublisher,
 }
 
 #[derive(Debug)]
 pub struct Ports {
+    bus: Bus,
     pub streams: Vec<StreamPorts>,
     pub vehicle: Subscriber<VehicleState>,
     pub control: Subscriber<VisionControl>,
+    pub demand: Subscriber<VisionDemand>,
     pub sinks: Sinks,
 }
 
@@ -45,9 +51,8 @@ impl Ports {
         let mut streams = Vec::with_capacity(s.streams.len());
         for st in &s.streams {
             streams.push(StreamPorts {
-                frames: bus
-                    .frame_subscriber(&topics::camera_frames(&st.name))
-                    .with_context(|| format!("opening the camera frames of `{}`", st.name))?,
+                name: st.name.clone(),
+                frames: None,
                 // Sized for the largest output VIDEO_OUTPUT may ask for, so a SET
                 // never needs a new publisher.
                 output: bus
@@ -56,6 +61,7 @@ impl Ports {
             });
         }
         Ok(Ports {
+            bus: bus.clone(),
             streams,
             vehicle: bus
                 .subscriber(&topics::vehicle_state(s.vehicle_id))
@@ -63,6 +69,9 @@ impl Ports {
             control: bus
                 .subscriber(&topics::vision_control())
                 .context("opening the vision control topic")?,
+            demand: bus
+                .subscriber(&topics::vision_demand())
+                .context("opening the vision demand topic")?,
             sinks: Sinks {
                 reply: bus
                     .publisher(&topics::vision_reply())
@@ -72,6 +81,38 @@ impl Ports {
                     .context("opening the vision state topic")?,
             },
         })
+    }
+}
+
+impl Ports {
+    /// Opens (`on`) or closes every stream's frame subscriber; true if any changed.
+    pub fn set_reading(&mut self, on: bool) -> anyhow::Result<bool> {
+        let mut changed = false;
+        for st in &mut self.streams {
+            match (on, st.frames.is_some()) {
+                (true, false) => {
+                    st.frames = Some(
+                        self.bus
+                            .frame_subscriber(&topics::camera_frames(&st.name))
+                            .with_context(|| {
+                                format!("opening the camera frames of `{}`", st.name)
+                            })?,
+                    );
+                    changed = true;
+                }
+                (false, true) => {
+                    st.frames = None;
+                    changed = true;
+                }
+                _ => {}
+            }
+        }
+        Ok(changed)
+    }
+
+    /// Subscribers of any stream's output frames (a video consumer).
+    pub fn output_readers(&self) -> usize {
+        self.streams.iter().map(|s| s.output.subscribers()).sum()
     }
 }
 

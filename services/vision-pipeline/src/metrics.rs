@@ -3,7 +3,8 @@
 //! | series | labels | meaning |
 //! |---|---|---|
 //! | `skymesh_vision_frames_processed_total` | stream | frames turned into an output frame and a state |
-//! | `skymesh_vision_frames_dropped_total` | stream | frames skipped because a newer one was queued |
+//! | `skymesh_vision_frames_dropped_total` | stream | frames skipped because a newer one was queued, or older than a second when read (the topic's last frame on resuming) |
+//! | `skymesh_vision_active` | | 1 while frames are read (the output is used), 0 while the pipeline idles |
 //! | `skymesh_vision_frames_bad_total` | stream, reason | frames not usable: `intrinsics`, `pose`, `work_image`, `render`, `publish` |
 //! | `skymesh_vision_process_seconds` | stream | one frame: detection to published output and state |
 //! | `skymesh_vision_latency_seconds` | stream | capture (`capture_mono_ns`) to published state |
@@ -42,6 +43,7 @@ pub struct Metrics {
     pub streams: Vec<StreamMetrics>,
     pub detections: Gauge,
     pub capture_errors: Counter,
+    pub active: Gauge,
     controls: CounterFamily,
 }
 
@@ -82,6 +84,7 @@ impl Metrics {
             streams,
             detections: stats.gauge("skymesh_vision_detections", &[]),
             capture_errors: stats.counter("skymesh_vision_capture_errors_total", &[]),
+            active: stats.gauge("skymesh_vision_active", &[]),
             controls: CounterFamily::new(
                 stats,
                 "skymesh_vision_controls_total",

@@ -12,6 +12,18 @@
 //! shared memory. The output frame is rendered in place into its shared-memory loan
 //! and the state is written in place.
 //!
+//! **On demand.** Frames are read only while the output is used ([`Demand`]): a
+//! consumer's `VisionDemand` word (the DigiView gateway while a client is connected),
+//! a subscriber of an output frame topic, a capture or recording, a control within
+//! `control_hold`, or `always_on`. Idle, the frame subscribers are closed (so the
+//! camera, which renders only for subscribers, idles too); controls are still answered
+//! and the state published every second (SYSTEM_STATUS 0, idle). A demand word or a
+//! control reopens them at once; the camera's next tick renders for them.
+//!
+//! **Read your writes.** Every control's effect is in a published state before its
+//! reply: the controls of one wake-up are applied, the state published, then the
+//! replies, so a requester that got its reply reads the new values.
+//!
 //! Per frame: work image → (AI) scan, track, verify → geolocate every track → STT →
 //! aim the active virtual cameras → layout → render the output → capture hooks →
 //! state. Frames whose intrinsics or pose are unusable are counted (`reason`) and
@@ -22,8 +34,8 @@ use std::time::{Duration, Instant};
 use nalgebra::{Point2, UnitQuaternion};
 use skymesh_ipc_types::{
     CameraIntrinsics, FixedStr, FrameHeader, LensModel, PixelFormat, SttState, VehicleState,
-    VisionControl, VisionControlKind, VisionDetection, VisionReply, VisionResult, VisionState,
-    VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
+    VisionControl, VisionControlKind, VisionDemand, VisionDetection, VisionReply, VisionResult,
+    VisionState, VISION_DEMAND_LEASE_NS, VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
 };
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Context, FrameError, FramePublisher, WarnLimiter};
@@ -47,6 +59,59 @@ const FRESH: Duration = Duration::from_secs(1);
 /// The state is published at least this often.
 const IDLE_PERIOD: Duration = Duration::from_secs(1);
 
+/// Idle, how often the pipeline looks whether its output is used by what sends no
+/// word (an output-frame subscriber, a lapsed demand, the end of a control's hold);
+/// a demand word or a control resumes it at once.
+const DEMAND_POLL: Duration = Duration::from_millis(50);
+
+/// Why the pipeline reads frames now.
+#[derive(Debug, Default)]
+struct Demand {
+    /// Each publisher's (header service, instance) word that it wants the output,
+    /// and when that lapses (monotonic ns).
+    words: Vec<((u16, u16), u64)>,
+    last_control: Option<Instant>,
+}
+
+impl Demand {
+    /// A publisher's newest word, received at `now_ns`.
+    fn word(&mut self, w: &VisionDemand, now_ns: u64) {
+        let key = (w.header.service, w.header.instance);
+        self.words.retain(|(k, _)| *k != key);
+        if w.wanted != 0 {
+            self.words
+                .push((key, now_ns.saturating_add(VISION_DEMAND_LEASE_NS)));
+        }
+    }
+
+    /// Whether any word wants the output at `now_ns` (lapsed words are forgotten).
+    fn words(&mut self, now_ns: u64) -> bool {
+        self.words.retain(|&(_, until)| until > now_ns);
+        !self.words.is_empty()
+    }
+
+    /// What wants the output now, if anything (for the log).
+    fn why(&mut self, p: &Pipeline, output_readers: usize) -> Option<&'static str> {
+        let now = Instant::now();
+        if p.settings.always_on {
+            Some("always_on")
+        } else if self.words(monotonic_ns()) {
+            Some("demand")
+        } else if output_readers > 0 {
+            Some("output_reader")
+        } else if p.capturing() {
+            Some("capture")
+        } else if self
+            .last_control
+            .is_some_and(|t| now.saturating_duration_since(t) < p.settings.control_hold)
+        {
+            Some("control")
+        } else {
+            None
+        }
+    }
+}
+
 /// Runs until `ctx.shutdown` is cancelled (then `Ok`) or the bus fails.
 pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
     let mut ports = Ports::open(&ctx.bus, &settings)?;
@@ -61,29 +126,44 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         track_model = %pipeline.params.track_model,
         captures = ?pipeline.settings.capture.dir,
         thermal = ?pipeline.thermometer.path(),
-        "vision pipeline reading skymesh/camera/{{stream}}/frames, publishing skymesh/vision/state and skymesh/vision/{{stream}}/output"
+        always_on = pipeline.settings.always_on,
+        "vision pipeline reading skymesh/camera/{{stream}}/frames while its output is used, publishing skymesh/vision/state and skymesh/vision/{{stream}}/output"
     );
-    let mut tick = tokio::time::interval(IDLE_PERIOD);
+    let mut tick = tokio::time::interval(DEMAND_POLL);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    ctx.ready();
+    let mut demand = Demand::default();
+    pipeline.metrics.active.set(0.0);
     pipeline.publish_state(&mut ports.sinks)?;
+    ctx.ready();
     loop {
         let event = tokio::select! {
             _ = ctx.shutdown.cancelled() => break,
             c = ports.control.recv_with(|c| *c) => Event::Control(c?),
+            d = ports.demand.recv() => Event::Demand(d?),
             (i, r) = next_frame(&mut ports.streams) => { r?; Event::Frame(i) }
             _ = tick.tick() => Event::Tick,
         };
         if let Some(v) = ports.vehicle.latest()? {
             pipeline.vehicle = Some(v);
         }
+        let mut replies = Vec::new();
         match event {
             Event::Control(c) => {
-                pipeline.control(&c, &mut ports.sinks)?;
+                demand.last_control = Some(Instant::now());
+                replies.push(pipeline.control(&c));
+            }
+            Event::Demand(d) => {
+                demand.word(&d, monotonic_ns());
+                while let Some(d) = ports.demand.try_recv()? {
+                    demand.word(&d, monotonic_ns());
+                }
             }
             Event::Frame(i) => {
-                let StreamPorts { frames, output } = &mut ports.streams[i];
+                let StreamPorts { frames, output, .. } = &mut ports.streams[i];
                 let sinks = &mut ports.sinks;
+                let Some(frames) = frames.as_mut() else {
+                    continue;
+                };
                 // Tens of milliseconds of CPU (seconds in a debug build on a loaded
                 // machine): off the async worker, so the heartbeat task, which may sit
                 // in this worker's LIFO slot where no other worker can steal it,
@@ -108,7 +188,29 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         }
         // Controls that arrived meanwhile are answered before the next frame.
         while let Some(c) = ports.control.try_recv()? {
-            pipeline.control(&c, &mut ports.sinks)?;
+            demand.last_control = Some(Instant::now());
+            replies.push(pipeline.control(&c));
+        }
+        if !replies.is_empty() {
+            // The state that contains the changes, then the replies.
+            pipeline.publish_state(&mut ports.sinks)?;
+            for r in replies {
+                ports.sinks.reply(r)?;
+            }
+        }
+        let why = demand.why(&pipeline, ports.output_readers());
+        if ports.set_reading(why.is_some())? {
+            pipeline
+                .metrics
+                .active
+                .set(if why.is_some() { 1.0 } else { 0.0 });
+            match why {
+                Some(why) => tracing::info!(why, "output used: reading frames"),
+                None => {
+                    tracing::info!("output not used: idle until it is");
+                    pipeline.publish_state(&mut ports.sinks)?;
+                }
+            }
         }
     }
     for s in &mut pipeline.streams {
@@ -126,17 +228,23 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 
 enum Event {
     Control(VisionControl),
+    Demand(VisionDemand),
     Frame(usize),
     Tick,
 }
 
-/// Waits until a frame of any stream is pending (it is then read in place).
+/// Waits until a frame of any stream that is read is pending (it is then read in
+/// place); never while no stream is read.
 async fn next_frame(streams: &mut [StreamPorts]) -> (usize, Result<(), FrameError>) {
-    match streams {
-        [a] => (0, a.frames.ready().await),
-        [a, b, ..] => tokio::select! {
-            r = a.frames.ready() => (0, r),
-            r = b.frames.ready() => (1, r),
+    let mut open = streams
+        .iter_mut()
+        .enumerate()
+        .filter_map(|(i, s)| s.frames.as_mut().map(|f| (i, f)));
+    match (open.next(), open.next()) {
+        (Some((i, a)), None) => (i, a.ready().await),
+        (Some((i, a)), Some((j, b))) => tokio::select! {
+            r = a.ready() => (i, r),
+            r = b.ready() => (j, r),
         },
         _ => std::future::pending().await,
     }
@@ -270,8 +378,15 @@ impl Pipeline {
 
     // ---------------------------------------------------------------- controls
 
-    fn control(&mut self, c: &VisionControl, ports: &mut Sinks) -> anyhow::Result<()> {
+    /// Applies one control; returns its reply (published once the state that
+    /// contains the change is).
+    fn control(&mut self, c: &VisionControl) -> VisionReply {
         let outcome = self.params.apply(c).and_then(|effect| self.effect(effect));
+        // The layout follows VIDEO_OUTPUT at once, not at the next frame: the state
+        // published with the reply shows the views the SET asked for.
+        for (s, p) in self.streams.iter_mut().zip(&self.params.streams) {
+            s.layout = layout::compute(p.layout_mode, p.overlay_mode, p.out_width, p.out_height);
+        }
         let (result, message) = match outcome {
             Ok(()) => (VisionResult::Applied, String::new()),
             Err(r) => (r.result, r.message),
@@ -288,15 +403,21 @@ impl Pipeline {
                 "control applied"
             );
         }
-        ports.reply(VisionReply {
+        VisionReply {
             request_id: c.request_id,
             result: result.to_wire(),
             kind: c.kind,
             origin: c.origin,
             message: FixedStr::new(&message),
             ..VisionReply::default()
-        })?;
-        Ok(())
+        }
+    }
+
+    /// A capture is running or asked for (it needs frames).
+    fn capturing(&self) -> bool {
+        self.streams
+            .iter()
+            .any(|s| s.pending_image || s.capturer.as_ref().is_some_and(|c| c.recording()))
     }
 
     fn effect(&mut self, effect: Effect) -> Result<(), Refusal> {
@@ -531,6 +652,14 @@ impl Pipeline {
         sinks: &mut Sinks,
     ) -> anyhow::Result<()> {
         let began = Instant::now();
+        // A frame the camera made before the pipeline (re)subscribed (the topic's
+        // history) is not news: skipped, counted dropped.
+        let age_ns = monotonic_ns().saturating_sub(header.capture_mono_ns);
+        if header.capture_mono_ns > 0 && age_ns > FRESH.as_nanos() as u64 {
+            self.streams[i].frames_dropped += 1;
+            self.metrics.streams[i].dropped.inc();
+            return Ok(());
+        }
         let model = match CameraModel::from_header(header) {
             Ok(m) => m,
             Err(e) => {

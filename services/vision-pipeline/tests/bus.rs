@@ -1,7 +1,9 @@
 //! The pipeline in-process on the real bus (its own iceoryx2 domain), fed synthetic
 //! frames rendered by the camera's renderer at 50 m looking down with known targets:
 //! detections match the truth, VIDEO_OUTPUT resizes the output, CAM_TARGETING aims a
-//! view at a target, every control is answered and garbage is Invalid.
+//! view at a target, every control is answered and garbage is Invalid; the pipeline
+//! reads frames only while its output is used, and publishes the state that contains
+//! a control's change before the control's reply.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
@@ -9,8 +11,8 @@ use std::time::Duration;
 use digiview_proto::{CamTargeting, Param, ParamType, StreamName, VideoOutput};
 use skymesh_camera::synthetic::{FrameStamp, Synthetic};
 use skymesh_ipc_types::{
-    topics, SceneTruth, ServiceId, VehicleState, VisionControl, VisionControlKind, VisionOrigin,
-    VisionReply, VisionResult, VisionState, MAX_FRAME_LEN,
+    topics, SceneTruth, ServiceId, VehicleState, VisionControl, VisionControlKind, VisionDemand,
+    VisionOrigin, VisionReply, VisionResult, VisionState, MAX_FRAME_LEN,
 };
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::ipc::DomainGuard;
@@ -355,4 +357,188 @@ async fn detections_views_and_controls_on_the_bus() {
             .unwrap_or(0.0)
             >= 3.0
     );
+}
+
+/// Polls `f` every millisecond until it holds; the time it took, or `None` after `limit`.
+async fn until(limit: Duration, mut f: impl FnMut() -> bool) -> Option<Duration> {
+    let t = std::time::Instant::now();
+    while t.elapsed() < limit {
+        if f() {
+            return Some(t.elapsed());
+        }
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    None
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_are_read_only_on_demand_and_replies_follow_their_state() {
+    let domain = unique_domain();
+    let stats = Stats::new();
+    let bus = Bus::open(
+        &domain,
+        "vision",
+        ServiceId::VisionPipeline,
+        0,
+        stats.clone(),
+    )
+    .expect("bus");
+    let tool = Bus::open(&domain, "tool", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+    let mut frames = tool
+        .frame_publisher(&topics::camera_frames("main"), MAX_FRAME_LEN)
+        .expect("frame publisher");
+    let mut vehicle_pub = tool
+        .publisher::<VehicleState>(&topics::vehicle_state(1))
+        .expect("vehicle publisher");
+    let mut control = tool
+        .publisher::<VisionControl>(&topics::vision_control())
+        .expect("control publisher");
+    let mut demand = tool
+        .publisher::<VisionDemand>(&topics::vision_demand())
+        .expect("demand publisher");
+    let mut replies = tool
+        .subscriber::<VisionReply>(&topics::vision_reply())
+        .expect("reply subscriber");
+    let state_sub = tool
+        .subscriber::<VisionState>(&topics::vision_state())
+        .expect("state subscriber");
+
+    let settings = edit::<skymesh_vision_pipeline::RawConfig>(&[
+        ("thermal_zone = \"auto\"", "thermal_zone = \"none\""),
+        ("control_hold_s = 10.0", "control_hold_s = 0.0"),
+        ("width = 1280", "width = 640"),
+        ("height = 720", "height = 480"),
+    ]);
+    let shutdown = CancellationToken::new();
+    let ctx = Context::new(bus, shutdown.clone(), stats.clone(), "vision");
+    let task = tokio::spawn(skymesh_vision_pipeline::run(settings, ctx));
+
+    let mut cam = camera();
+    let v = vehicle();
+    cam.update_vehicle(&v);
+    let mut seq = 0u64;
+    let mut feed = |frames: &mut skymesh_runtime::FramePublisher| {
+        seq += 1;
+        let stamp = FrameStamp {
+            seq,
+            mono_ns: monotonic_ns(),
+            unix_ns: 1,
+        };
+        frames
+            .publish_with(640 * 480 * 3, |h, px| {
+                cam.render(0.0, stamp, h, px).expect("a pose");
+            })
+            .expect("publish frame");
+    };
+    let processed = || {
+        stats
+            .value("skymesh_vision_frames_processed_total", "stream=main")
+            .unwrap_or(0.0)
+    };
+
+    // 1. Nothing uses the output: the frames have no reader, none is processed, and
+    // the state says idle.
+    let first = until(PATIENCE, || state_sub.latest().expect("state").is_some()).await;
+    assert!(first.is_some(), "no state from the idle pipeline");
+    vehicle_pub.publish(v).expect("publish vehicle");
+    for _ in 0..5 {
+        feed(&mut frames);
+        tokio::time::sleep(Duration::from_millis(60)).await;
+    }
+    assert_eq!(
+        frames.subscribers(),
+        0,
+        "idle, the pipeline reads no frames"
+    );
+    assert_eq!(processed(), 0.0);
+    assert_eq!(stats.value("skymesh_vision_active", ""), Some(0.0));
+
+    // 2. A consumer's word: the frames get a reader at once, frames are processed.
+    let wanted = |wanted| VisionDemand {
+        wanted,
+        ..VisionDemand::default()
+    };
+    demand.publish(wanted(1)).expect("demand");
+    let resumed = until(PATIENCE, || frames.subscribers() == 1)
+        .await
+        .expect("the pipeline never subscribed to the frames");
+    eprintln!("vision: frames subscribed {resumed:?} after the demand word");
+    assert!(
+        resumed < Duration::from_millis(200),
+        "resumed after {resumed:?}"
+    );
+    let deadline = std::time::Instant::now() + PATIENCE;
+    while processed() < 2.0 {
+        assert!(std::time::Instant::now() < deadline, "no frame processed");
+        vehicle_pub.publish(v).expect("publish vehicle");
+        feed(&mut frames);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let st = state_sub.latest().expect("state").expect("a state");
+    assert_eq!(st.status, 1, "running while used");
+
+    // 3. Read your writes: once the reply is in, the state that contains the change
+    // is already there (published before the reply).
+    for (i, (yaw, pitch)) in [(1.5, -0.5), (-1.0, -0.25), (0.5, -1.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let id = 500 + i as u64;
+        let aim = Param::CamTargeting(CamTargeting {
+            stream: StreamName::new("main").unwrap(),
+            cam: 0,
+            mode: 0,
+            yaw,
+            pitch,
+            ..Default::default()
+        });
+        control.publish(set(id, &aim)).expect("publish control");
+        let reply = loop {
+            let r = replies
+                .recv_timeout(PATIENCE)
+                .await
+                .expect("reply")
+                .expect("a reply");
+            if r.request_id == id {
+                break r;
+            }
+        };
+        assert_eq!(reply.result(), VisionResult::Applied);
+        let st = state_sub
+            .latest()
+            .expect("state")
+            .expect("the state before the reply");
+        let c = st.streams[0].cams[0];
+        assert!(
+            (f64::from(c.yaw_rad) - yaw).abs() < 1e-6
+                && (f64::from(c.pitch_rad) - pitch).abs() < 1e-6,
+            "the state after the reply still has {c:?}"
+        );
+    }
+
+    // 4. The word withdrawn: the reader goes at once.
+    demand.publish(wanted(0)).expect("demand");
+    let idle = until(PATIENCE, || frames.subscribers() == 0)
+        .await
+        .expect("the pipeline kept reading");
+    assert!(idle < Duration::from_millis(200), "idle after {idle:?}");
+    assert_eq!(stats.value("skymesh_vision_active", ""), Some(0.0));
+
+    // 5. A word never renewed (its publisher died) lapses after the lease.
+    demand.publish(wanted(1)).expect("demand");
+    until(PATIENCE, || frames.subscribers() == 1)
+        .await
+        .expect("resumed");
+    let t = std::time::Instant::now();
+    until(PATIENCE, || frames.subscribers() == 0)
+        .await
+        .expect("the lapsed word kept the pipeline reading");
+    let lapsed = t.elapsed();
+    assert!(
+        lapsed > Duration::from_millis(2500) && lapsed < Duration::from_millis(4500),
+        "lapsed after {lapsed:?} (lease 3 s)"
+    );
+
+    shutdown.cancel();
+    task.await.expect("join").expect("clean stop");
 }

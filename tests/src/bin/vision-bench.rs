@@ -75,8 +75,9 @@ fn main() -> Result<()> {
              [lens]\nmodel = \"pinhole\"\nhfov_deg = 90.0\n\
              [mount]\nuse_gimbal = false\npitch_deg = -90.0\n{tables}"
         ),
+        // Every frame processed with no consumer attached: the pipeline's full rate.
         vision_extra:
-            "[[streams]]\nname = \"main\"\nwidth = 1280\nheight = 720\nlayout = 0\noverlay = 2\n"
+            "always_on = true\n[[streams]]\nname = \"main\"\nwidth = 1280\nheight = 720\nlayout = 0\noverlay = 2\n"
                 .into(),
         ..Default::default()
     })?;
