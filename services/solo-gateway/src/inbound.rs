@@ -12,6 +12,14 @@
 //! SHOTMANAGER_ERROR naming the limit, and counted `too_large_for_bus`. Whether the
 //! polygons make a usable fence is the shot engine's decision (gateways translate,
 //! engines decide): it answers everything that is forwarded.
+//!
+//! A geofence request that does not decode (GEOFENCE_SET_DATA: bad JSON, `coord`,
+//! `subCoord` and `type` of different lengths, a bad coordinate or type;
+//! GEOFENCE_UPDATE_POLY: wrong length, bad action or coordinate) is not dropped
+//! silently like other malformed frames: the app waits for a GEOFENCE_SET_ACK, so
+//! the gateway answers GEOFENCE_SET_ACK {0, false} and a SHOTMANAGER_ERROR saying
+//! why, and counts it under its malformed kind. Nothing reaches the engine, whose
+//! fence is unchanged.
 
 use bytes::{Bytes, BytesMut};
 use skymesh_ipc_types::{AppGeofence, APP_VALUE_CAPACITY};
@@ -29,10 +37,13 @@ pub enum Verdict {
     Geofence(Box<AppGeofence>),
     /// Drop it: count `kind`, log `reason`.
     Drop { kind: Malformed, reason: String },
-    /// Valid, but longer than the bus carries: count `too_large_for_bus` and write
-    /// `replies` to the app instead (each one whole TLV frame).
+    /// Not forwarded but answered: count `kind` (`too_large_for_bus`: valid but
+    /// longer than the bus carries; a malformed kind: a geofence request that does
+    /// not decode), log `reason` and write `replies` to the app (each one whole TLV
+    /// frame).
     Answer {
-        message: SoloMessage,
+        msg_type: u32,
+        kind: Malformed,
         reason: String,
         replies: Vec<SoloMessage>,
     },
@@ -42,6 +53,7 @@ pub enum Verdict {
 pub fn check(frame: &RawFrame) -> Verdict {
     let message = match SoloMessage::decode(frame.msg_type, &frame.value) {
         Ok(m) => m,
+        Err(e) if is_geofence_request(frame.msg_type) => return bad_geofence(frame.msg_type, &e),
         Err(e) => {
             return Verdict::Drop {
                 kind: Malformed::from_decode(&e),
@@ -157,6 +169,32 @@ pub fn magnitudes(m: &SoloMessage) -> Result<(), String> {
     }
 }
 
+/// The app's geofence requests, each answered with a GEOFENCE_SET_ACK.
+fn is_geofence_request(msg_type: u32) -> bool {
+    matches!(
+        msg_type,
+        solo_proto::ids::GEOFENCE_SET_DATA | solo_proto::ids::GEOFENCE_UPDATE_POLY
+    )
+}
+
+/// A geofence request that does not decode: answered negatively, never dropped.
+fn bad_geofence(msg_type: u32, e: &solo_proto::DecodeError) -> Verdict {
+    Verdict::Answer {
+        msg_type,
+        kind: Malformed::from_decode(e),
+        reason: e.to_string(),
+        replies: vec![
+            SoloMessage::GeofenceSetAck {
+                count: 0,
+                valid: false,
+            },
+            SoloMessage::ShotManagerError(format!(
+                "skymesh: geofence not set: {e}. The vehicle's geofence is unchanged."
+            )),
+        ],
+    }
+}
+
 /// GEOFENCE_SET_DATA → one `AppGeofence`, or the answer when it cannot be carried.
 fn geofence(data: &GeofenceData, message: &SoloMessage) -> Verdict {
     let polygons = data
@@ -167,7 +205,8 @@ fn geofence(data: &GeofenceData, message: &SoloMessage) -> Verdict {
     match AppGeofence::new(0, polygons) {
         Ok(fence) => Verdict::Geofence(Box::new(fence)),
         Err(e) => Verdict::Answer {
-            message: message.clone(),
+            msg_type: message.msg_type(),
+            kind: Malformed::TooLargeForBus,
             reason: format!("geofence_set_data: {e}"),
             replies: vec![
                 SoloMessage::GeofenceSetAck {
@@ -193,7 +232,8 @@ fn too_large(message: SoloMessage, len: usize) -> Verdict {
         message.name()
     ))];
     Verdict::Answer {
-        message,
+        msg_type: message.msg_type(),
+        kind: Malformed::TooLargeForBus,
         reason,
         replies,
     }
@@ -340,6 +380,69 @@ mod tests {
                 other => panic!("{other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn a_malformed_geofence_request_is_answered_not_dropped() {
+        let fence_json = |json: &str| raw(ids::GEOFENCE_SET_DATA, json.as_bytes());
+        let a = [37.0, -122.0];
+        let b = [37.001, -122.0];
+        let c = [37.0, -122.001];
+        let tri = format!("[{a:?},{b:?},{c:?}]");
+        let frames = [
+            // coord and subCoord of different lengths (issue 43 item 5).
+            (
+                fence_json(&format!(
+                    r#"{{"coord":[{tri},{tri}],"subCoord":[{tri}],"type":[0,1]}}"#
+                )),
+                Malformed::InvalidValue,
+                "different sizes",
+            ),
+            (fence_json("{\"coord\":"), Malformed::InvalidValue, "JSON"),
+            (
+                fence_json(&format!(
+                    r#"{{"coord":[{tri}],"subCoord":[{tri}],"type":[7]}}"#
+                )),
+                Malformed::InvalidValue,
+                "type[0]",
+            ),
+            (
+                raw(ids::GEOFENCE_UPDATE_POLY, &[0, 0, 0]),
+                Malformed::WrongLength,
+                "bytes",
+            ),
+        ];
+        for (frame, want_kind, why) in frames {
+            match check(&frame) {
+                Verdict::Answer {
+                    msg_type,
+                    kind,
+                    reason,
+                    replies,
+                } => {
+                    assert_eq!(msg_type, frame.msg_type);
+                    assert_eq!(kind, want_kind, "{reason}");
+                    assert!(reason.contains(why), "{reason}");
+                    assert_eq!(
+                        replies[0],
+                        SoloMessage::GeofenceSetAck {
+                            count: 0,
+                            valid: false
+                        }
+                    );
+                    assert!(
+                        matches!(&replies[1], SoloMessage::ShotManagerError(t) if t.contains(why)),
+                        "{replies:?}"
+                    );
+                }
+                other => panic!("{why}: {other:?}"),
+            }
+        }
+        // Other malformed frames are still dropped.
+        assert_eq!(
+            kind(check(&raw(ids::SET_CURRENT_SHOT, &[1, 0, 0]))),
+            Malformed::WrongLength
+        );
     }
 
     #[test]

@@ -143,13 +143,15 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
             }
             Verdict::Drop { kind, reason } => ctx.drops.record(kind, ctx.peer, &reason),
             Verdict::Answer {
-                message,
+                msg_type,
+                kind,
                 reason,
                 replies,
             } => {
-                metrics.message(Direction::In, message.msg_type());
-                ctx.drops
-                    .record(Malformed::TooLargeForBus, ctx.peer, &reason);
+                if kind == Malformed::TooLargeForBus {
+                    metrics.message(Direction::In, msg_type);
+                }
+                ctx.drops.record(kind, ctx.peer, &reason);
                 for reply in replies {
                     let out = Outgoing {
                         msg_type: reply.msg_type(),

@@ -176,6 +176,62 @@ async fn a_geofence_too_large_for_the_bus_is_answered_and_counted() {
     gw.stop().await;
 }
 
+#[tokio::test]
+async fn a_geofence_whose_coord_and_subcoord_differ_in_length_is_answered_invalid() {
+    let mut gw = Gateway::start().await;
+    let mut app = AppClient::connect(gw.tcp).await.expect("connect");
+    gw.wait_connected(1).await;
+    let square = [
+        [37.873_391_778_8, -122.301_244_403_2],
+        [37.873_425_469_3, -122.300_884_203_8],
+        [37.872_895_782_9, -122.300_712_401_1],
+        [37.872_942_621_2, -122.301_244_403_2],
+    ];
+    // Two polygons, one sub-polygon: what the codec refuses (issue 43 item 5: it was
+    // dropped without an answer and the app waited forever).
+    let json =
+        format!(r#"{{"coord":[{square:?},{square:?}],"subCoord":[{square:?}],"type":[0,1]}}"#);
+    app.send_raw(&frame(ids::GEOFENCE_SET_DATA, json.as_bytes()))
+        .await
+        .expect("send");
+    assert_eq!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false
+        })
+    );
+    match app.recv(PATIENCE).await {
+        Some(SoloMessage::ShotManagerError(text)) => {
+            assert!(text.contains("different sizes"), "{text}");
+        }
+        other => panic!("expected SHOTMANAGER_ERROR, got {other:?}"),
+    }
+    gw.wait_malformed("invalid_value", 1.0).await;
+    // A malformed vertex update is answered the same way.
+    app.send_raw(&frame(ids::GEOFENCE_UPDATE_POLY, &[9; 37]))
+        .await
+        .expect("send");
+    assert_eq!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false
+        })
+    );
+    assert!(matches!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::ShotManagerError(_))
+    ));
+    // Nothing of them went on the bus; the connection works on.
+    app.send(&SoloMessage::SetCurrentShot(1))
+        .await
+        .expect("send");
+    assert_eq!(gw.next_from_app().await.msg_type, ids::SET_CURRENT_SHOT);
+    assert!(gw.geofence.try_recv().expect("app_geofence").is_none());
+    gw.stop().await;
+}
+
 /// `value` with the 4 bytes at `at` replaced by `v`.
 fn with_f32(m: &SoloMessage, at: usize, v: f32) -> Vec<u8> {
     let mut value = value_of(m);
