@@ -6,10 +6,12 @@
 
 use std::fmt;
 use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
 use skymesh_runtime::config::{in_range, socket_addr};
+use skymesh_runtime::ipc::{DEFAULT_DOMAIN, DOMAIN_ENV};
 use skymesh_runtime::{ConfigError, ServiceConfig};
 
 use crate::arbiter::ArbiterSettings;
@@ -160,11 +162,11 @@ pub struct Settings {
     pub command_retries: u8,
     /// After MAV_RESULT_IN_PROGRESS, wait this long for the final answer.
     pub command_in_progress_timeout: Duration,
-    /// First reconnect delay; doubles per failed attempt up to `reconnect_max`.
-    pub reconnect_min: Duration,
     /// An emergency stop not confirmed by the autopilot (BRAKE reported or the
     /// vehicle measured stopped) this long after it arrived is answered `failed`.
     pub stop_confirm_timeout: Duration,
+    /// First reconnect delay; doubles per failed attempt up to `reconnect_max`.
+    pub reconnect_min: Duration,
     pub reconnect_max: Duration,
     /// A TCP or serial connection that delivers no MAVLink for this long is reopened.
     pub silence_reconnect: Option<Duration>,
@@ -173,6 +175,9 @@ pub struct Settings {
     pub request_data_streams: bool,
     /// The command arbiter.
     pub arbiter: ArbiterSettings,
+    /// The arbiter's state file (emergency stops and fences survive a restart;
+    /// [`crate::arbiter::persist`]).
+    pub state_file: PathBuf,
     /// Gimbal protocol v2 for the vision pipeline's virtual cameras.
     pub vision: VisionSettings,
     /// MAVLink 2 message signing on some endpoints; `None` = no signing.
@@ -193,12 +198,12 @@ pub struct RawConfig {
     pub command_timeout_s: f64,
     pub command_retries: i64,
     pub command_in_progress_timeout_s: f64,
+    pub stop_confirm_timeout_s: f64,
     pub reconnect_min_s: f64,
     pub reconnect_max_s: f64,
     /// 0 disables.
     pub silence_reconnect_s: f64,
     pub request_data_streams: bool,
-    pub stop_confirm_timeout_s: f64,
     /// Requested telemetry rates, Hz.
     pub attitude_hz: f64,
     pub global_position_hz: f64,
@@ -211,6 +216,8 @@ pub struct RawConfig {
     pub gimbal_attitude_hz: f64,
     /// 0 = not requested.
     pub heartbeat_hz: f64,
+    /// Empty → [`default_state_file`].
+    pub state_file: String,
     /// `[arbiter]`: authority, freshness, geofence envelope, limits.
     pub arbiter: RawArbiter,
     /// `[vision]`: the virtual cameras as MAVLink gimbals.
@@ -230,6 +237,7 @@ impl Default for RawConfig {
             command_timeout_s: 1.5,
             command_retries: 1,
             command_in_progress_timeout_s: 30.0,
+            stop_confirm_timeout_s: 5.0,
             reconnect_min_s: 0.5,
             reconnect_max_s: 5.0,
             silence_reconnect_s: 10.0,
@@ -237,13 +245,13 @@ impl Default for RawConfig {
             attitude_hz: 50.0,
             global_position_hz: 10.0,
             local_position_hz: 5.0,
-            stop_confirm_timeout_s: 5.0,
             sys_status_hz: 2.0,
             battery_status_hz: 2.0,
             gps_raw_hz: 2.0,
             ekf_status_hz: 2.0,
             gimbal_attitude_hz: 10.0,
             heartbeat_hz: 5.0,
+            state_file: String::new(),
             arbiter: RawArbiter::default(),
             vision: RawVision::default(),
             signing: RawSigning::default(),
@@ -306,6 +314,42 @@ fn mav_id(field: &str, value: i64) -> Result<u8, ConfigError> {
     Ok(in_range(field, value, 1, 255)? as u8)
 }
 
+/// Where the arbiter's state lives when `state_file` is empty:
+/// `autopilot-link-<vehicle_id>.json` under systemd's `STATE_DIRECTORY` (its first
+/// entry), else under `/tmp/skymesh-<domain>/` (writable without root).
+pub fn default_state_file(
+    state_directory: Option<&str>,
+    domain: Option<&str>,
+    vehicle_id: u8,
+) -> PathBuf {
+    let name = format!("autopilot-link-{vehicle_id}.json");
+    if let Some(dir) = state_directory
+        .and_then(|d| d.split(':').next())
+        .filter(|d| !d.is_empty())
+    {
+        return Path::new(dir).join(name);
+    }
+    let domain = domain.filter(|d| !d.is_empty()).unwrap_or(DEFAULT_DOMAIN);
+    PathBuf::from(format!("/tmp/skymesh-{domain}")).join(name)
+}
+
+fn state_file(raw: &str, vehicle_id: u8) -> Result<PathBuf, ConfigError> {
+    let path = if raw.trim().is_empty() {
+        let state_directory = std::env::var("STATE_DIRECTORY").ok();
+        let domain = std::env::var(DOMAIN_ENV).ok();
+        default_state_file(state_directory.as_deref(), domain.as_deref(), vehicle_id)
+    } else {
+        PathBuf::from(raw.trim())
+    };
+    if path.file_name().is_none() {
+        return Err(ConfigError::invalid(
+            "state_file",
+            format!("`{}` does not name a file", path.display()),
+        ));
+    }
+    Ok(path)
+}
+
 impl ServiceConfig for RawConfig {
     type Settings = Settings;
     const DEFAULT_TOML: &'static str = include_str!("../../../deploy/autopilot-link.toml");
@@ -346,6 +390,12 @@ impl ServiceConfig for RawConfig {
                 1.0,
                 600.0,
             )?,
+            stop_confirm_timeout: seconds(
+                "stop_confirm_timeout_s",
+                self.stop_confirm_timeout_s,
+                1.0,
+                30.0,
+            )?,
             reconnect_min,
             reconnect_max,
             silence_reconnect,
@@ -372,6 +422,7 @@ impl ServiceConfig for RawConfig {
             },
             request_data_streams: self.request_data_streams,
             arbiter: self.arbiter.validate()?,
+            state_file: state_file(&self.state_file, vehicle_id)?,
             vision: self.vision.validate()?,
             signing,
         })
@@ -390,12 +441,6 @@ pub struct RawSigning {
 
 impl RawSigning {
     /// `endpoints` are the validated router endpoints the entries must name.
-            stop_confirm_timeout: seconds(
-                "stop_confirm_timeout_s",
-                self.stop_confirm_timeout_s,
-                1.0,
-                30.0,
-            )?,
     fn validate(self, endpoints: &[Endpoint]) -> Result<Option<SigningSettings>, ConfigError> {
         const FIELD: &str = "signing.endpoints";
         let Some(path) = self.key_file else {
@@ -527,6 +572,8 @@ pub struct RawArbiter {
     pub in_air_speed_mps: f64,
     /// Servo channels (1..=32) a `Servo` command may drive in the air.
     pub servo_channels_in_flight: Vec<i64>,
+    pub max_home_move_m: f64,
+    pub max_home_alt_change_m: f64,
 }
 
 impl Default for RawArbiter {
@@ -547,6 +594,8 @@ impl Default for RawArbiter {
             in_air_alt_m: 0.5,
             in_air_speed_mps: 0.5,
             servo_channels_in_flight: Vec::new(),
+            max_home_move_m: 50.0,
+            max_home_alt_change_m: 1.0,
         }
     }
 }
@@ -625,6 +674,18 @@ impl RawArbiter {
             in_air_alt_m: number("arbiter.in_air_alt_m", self.in_air_alt_m, 0.1, 10.0)?,
             in_air_speed_mps: number("arbiter.in_air_speed_mps", self.in_air_speed_mps, 0.1, 10.0)?,
             servo_channels_in_flight: servo_channels(&self.servo_channels_in_flight)?,
+            max_home_move_m: number(
+                "arbiter.max_home_move_m",
+                self.max_home_move_m,
+                0.0,
+                10_000.0,
+            )?,
+            max_home_alt_change_m: number(
+                "arbiter.max_home_alt_change_m",
+                self.max_home_alt_change_m,
+                0.0,
+                100.0,
+            )?,
         })
     }
 }
@@ -696,6 +757,7 @@ mod tests {
         );
         assert_eq!(shipped.system_id, shipped.vehicle_id);
         assert_eq!(shipped.command_timeout, Duration::from_millis(1500));
+        assert_eq!(shipped.stop_confirm_timeout, Duration::from_secs(5));
         assert_eq!(shipped.rates.attitude_hz, 50.0);
         assert_eq!(shipped.rates.gimbal_attitude_hz, Some(10.0));
         assert_eq!(shipped.rates.heartbeat_hz, Some(5.0));
@@ -757,7 +819,6 @@ mod tests {
                 std::process::id(),
                 N.fetch_add(1, Ordering::Relaxed)
             ));
-        assert_eq!(shipped.stop_confirm_timeout, Duration::from_secs(5));
             std::fs::write(&path, content).unwrap();
             KeyFile(path)
         }
@@ -906,6 +967,7 @@ mod tests {
             ("link_timeout_s = 0.1", "link_timeout_s"),
             ("command_timeout_s = nan", "command_timeout_s"),
             ("command_retries = 9", "command_retries"),
+            ("stop_confirm_timeout_s = 0.5", "stop_confirm_timeout_s"),
             (
                 "reconnect_min_s = 2.0\nreconnect_max_s = 1.0",
                 "reconnect_max_s",
@@ -967,7 +1029,6 @@ mod tests {
                 .gimbal_attitude_hz,
             None,
             "0 = not requested"
-            ("stop_confirm_timeout_s = 0.5", "stop_confirm_timeout_s"),
         );
         assert_eq!(
             parse_str("heartbeat_hz = 0").unwrap().rates.heartbeat_hz,

@@ -9,7 +9,12 @@
 //! - `skymesh_arbiter_authority_holder{vehicle,source}` — 1 for the flight-authority
 //!   holder, 0 for every source that held it before.
 //! - `skymesh_arbiter_stale_brakes_total{source}` — brakes because the source's
-//!   setpoint stream stopped.
+//!   setpoint stream stopped (or its position target lost authority).
+//! - `skymesh_arbiter_emergency_ends_total{source}` — emergency stops ended by that
+//!   source: its `ReleaseEmergency` as the last engager, or its `ClearEmergency`
+//!   whoever engaged them (on use).
+//! - `skymesh_arbiter_state_file_errors_total` — failed writes of the state file
+//!   (on use).
 //!
 //! Log levels: refusals `warn`, other decisions `info`; a setpoint stream (tens of
 //! Hz) logs at `info`/`warn` only when its outcome changes and at `debug` otherwise.
@@ -41,6 +46,11 @@ pub struct Audit {
     stale_brakes: HashMap<CommandSource, Counter>,
     /// Outcome of the last setpoint per source (wire value as index).
     last_setpoint: [Option<(AckResult, RefusalReason)>; CommandSource::ALL.len()],
+    /// `skymesh_arbiter_emergency_ends_total{source}`: stops ended by that source
+    /// (registered on use).
+    clears: HashMap<CommandSource, Counter>,
+    /// `skymesh_arbiter_state_file_errors_total` (registered on use).
+    state_file_errors: Option<Counter>,
 }
 
 fn source_name(raw: u8) -> &'static str {
@@ -56,6 +66,8 @@ impl Audit {
             holders: Vec::new(),
             stale_brakes: HashMap::new(),
             last_setpoint: [None; CommandSource::ALL.len()],
+            clears: HashMap::new(),
+            state_file_errors: None,
         }
     }
 
@@ -149,6 +161,31 @@ impl Audit {
                     &[("source", source.as_str())],
                 )
             })
+            .inc();
+    }
+
+    /// `by` ended the emergency stop (the last engager released it, or a
+    /// `ClearEmergency` whoever engaged it): counted and logged at `warn` with the
+    /// arbiter's detail (who cleared, who had engaged).
+    pub fn emergency_cleared(&mut self, by: CommandSource, detail: &str) {
+        let stats = &self.stats;
+        self.clears
+            .entry(by)
+            .or_insert_with(|| {
+                stats.counter(
+                    "skymesh_arbiter_emergency_ends_total",
+                    &[("source", by.as_str())],
+                )
+            })
+            .inc();
+        tracing::warn!(source = by.as_str(), detail, "emergency stop ended");
+    }
+
+    /// The state file could not be written.
+    pub fn state_file_error(&mut self) {
+        let stats = &self.stats;
+        self.state_file_errors
+            .get_or_insert_with(|| stats.counter("skymesh_arbiter_state_file_errors_total", &[]))
             .inc();
     }
 }

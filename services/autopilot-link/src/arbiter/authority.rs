@@ -9,8 +9,14 @@
 //! - The holder keeps it while it is heard from: any command or grab of that domain
 //!   within the quiet timeout (re-sending the grab is the keep-alive of a source that
 //!   has nothing to command). Silence for the timeout → nobody holds it (`Timeout`).
-//! - An emergency stop gives flight authority to the safety source until safety
-//!   releases it; no timeout applies meanwhile.
+//! - An emergency stop is owned by its engagers: each source that sends one is
+//!   recorded (with the command id of its first stop; one engagement per source).
+//!   While any engagement is in force the safety source holds flight authority, no
+//!   timeout applies, and releasing authority (safety's included) changes nothing.
+//!   [`Authority::release_emergency`] withdraws the sender's own engagement; the stop
+//!   ends when the last one is withdrawn, or at once on
+//!   [`Authority::clear_emergency`] (the arbiter admits that only from operator or
+//!   safety). Either way flight authority is then released (`Released`).
 //! - Autopilot link lost → nobody holds either authority (`LinkLost`), except that an
 //!   emergency stop stays in force.
 
@@ -88,8 +94,30 @@ pub struct Change {
 pub struct Authority {
     flight: Slot,
     payload: Slot,
-    emergency: bool,
+    /// The emergency stop's engagers: the command id of each source's first stop
+    /// (index = source wire value). In force while any is set.
+    engagers: [Option<u32>; CommandSource::ALL.len()],
     timeout_ns: u64,
+}
+
+/// One source's emergency stop in force.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Engagement {
+    pub source: CommandSource,
+    /// The id of the source's first stop command.
+    pub command_id: u32,
+}
+
+/// What [`Authority::release_emergency`] did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Released {
+    /// The sender had no stop in force; nothing changed.
+    NotEngaged,
+    /// The sender's stop is withdrawn; these sources still hold the vehicle.
+    Remaining(Vec<CommandSource>),
+    /// The sender was the last engager: the stop ended and safety's flight
+    /// authority was released.
+    Ended(Change),
 }
 
 impl Authority {
@@ -97,7 +125,7 @@ impl Authority {
         Authority {
             flight: Slot::default(),
             payload: Slot::default(),
-            emergency: false,
+            engagers: [None; CommandSource::ALL.len()],
             timeout_ns,
         }
     }
@@ -117,7 +145,26 @@ impl Authority {
     }
 
     pub fn in_emergency(&self) -> bool {
-        self.emergency
+        self.engagers.iter().any(Option::is_some)
+    }
+
+    /// The stops in force, in source wire order.
+    pub fn engagements(&self) -> Vec<Engagement> {
+        CommandSource::ALL
+            .iter()
+            .filter_map(|&source| {
+                self.engagers[usize::from(source.to_wire())]
+                    .map(|command_id| Engagement { source, command_id })
+            })
+            .collect()
+    }
+
+    /// The engagers as a bitmask (`1 << source.to_wire()`).
+    pub fn emergency_sources(&self) -> u8 {
+        CommandSource::ALL
+            .iter()
+            .filter(|s| self.engagers[usize::from(s.to_wire())].is_some())
+            .fold(0, |m, s| m | 1 << s.to_wire())
     }
 
     pub fn claim(&self, domain: AuthorityDomain, source: CommandSource) -> Claim {
@@ -163,27 +210,34 @@ impl Authority {
         }
     }
 
-    /// `source` gives `domain` back. `None` if it did not hold it. The safety
-    /// source releasing flight authority also ends an emergency stop.
+    /// `source` gives `domain` back. `None` if it did not hold it, and for flight
+    /// authority during an emergency stop: safety keeps it until the stop ends
+    /// (releasing authority never ends a stop).
     pub fn release(
         &mut self,
         domain: AuthorityDomain,
         source: CommandSource,
         now_ns: u64,
     ) -> Option<Change> {
-        if self.slot(domain).holder != Some(source) {
+        if self.slot(domain).holder != Some(source)
+            || (domain == AuthorityDomain::Flight && self.in_emergency())
+        {
             return None;
-        }
-        if domain == AuthorityDomain::Flight {
-            self.emergency = false;
         }
         Some(self.transfer(domain, None, AuthorityChange::Released, now_ns))
     }
 
-    /// Emergency stop: safety takes flight authority and keeps it until it releases.
-    pub fn emergency(&mut self, now_ns: u64) -> Option<Change> {
-        let already = self.emergency && self.flight.holder == Some(CommandSource::Safety);
-        self.emergency = true;
+    /// `source` engages an emergency stop (`command_id`: its stop command; a source
+    /// already engaged keeps its first id): safety takes flight authority and keeps
+    /// it while any engagement is in force.
+    pub fn emergency(
+        &mut self,
+        source: CommandSource,
+        command_id: u32,
+        now_ns: u64,
+    ) -> Option<Change> {
+        let already = self.in_emergency() && self.flight.holder == Some(CommandSource::Safety);
+        self.engagers[usize::from(source.to_wire())].get_or_insert(command_id);
         (!already).then(|| {
             self.transfer(
                 AuthorityDomain::Flight,
@@ -194,12 +248,58 @@ impl Authority {
         })
     }
 
+    /// `source` withdraws its own emergency stop (never another's).
+    pub fn release_emergency(&mut self, source: CommandSource, now_ns: u64) -> Released {
+        if self.engagers[usize::from(source.to_wire())]
+            .take()
+            .is_none()
+        {
+            return Released::NotEngaged;
+        }
+        if self.in_emergency() {
+            return Released::Remaining(self.engagements().iter().map(|e| e.source).collect());
+        }
+        Released::Ended(self.end_emergency(now_ns))
+    }
+
+    /// Ends the emergency stop whoever engaged it (the arbiter admits this only from
+    /// operator or safety). `None` when no stop was in force; else the stops that
+    /// were in force and the release of safety's flight authority.
+    pub fn clear_emergency(&mut self, now_ns: u64) -> Option<(Vec<Engagement>, Change)> {
+        let was = self.engagements();
+        if was.is_empty() {
+            return None;
+        }
+        self.engagers = [None; CommandSource::ALL.len()];
+        Some((was, self.end_emergency(now_ns)))
+    }
+
+    fn end_emergency(&mut self, now_ns: u64) -> Change {
+        self.transfer(
+            AuthorityDomain::Flight,
+            None,
+            AuthorityChange::Released,
+            now_ns,
+        )
+    }
+
+    /// At start: the stops in force when the service last saved its state are in
+    /// force again (safety holds flight authority). Nothing else is restored: nobody
+    /// else holds authority after a restart.
+    pub fn restore_emergency(&mut self, engaged: &[Engagement], now_ns: u64) -> Option<Change> {
+        let mut change = None;
+        for e in engaged {
+            change = self.emergency(e.source, e.command_id, now_ns).or(change);
+        }
+        change
+    }
+
     /// The link to the autopilot went down: nobody holds authority (an emergency
     /// stop stays in force with safety holding flight authority).
     pub fn link_lost(&mut self, now_ns: u64) -> Vec<Change> {
         let mut changes = Vec::new();
         for domain in [AuthorityDomain::Flight, AuthorityDomain::Payload] {
-            let emergency_hold = domain == AuthorityDomain::Flight && self.emergency;
+            let emergency_hold = domain == AuthorityDomain::Flight && self.in_emergency();
             if self.slot(domain).holder.is_some() && !emergency_hold {
                 changes.push(self.transfer(domain, None, AuthorityChange::LinkLost, now_ns));
             }
@@ -220,7 +320,7 @@ impl Authority {
 
     fn deadline(&self, domain: AuthorityDomain) -> Option<u64> {
         let slot = self.slot(domain);
-        let exempt = domain == AuthorityDomain::Flight && self.emergency;
+        let exempt = domain == AuthorityDomain::Flight && self.in_emergency();
         (slot.holder.is_some() && !exempt).then(|| slot.heard_ns.saturating_add(self.timeout_ns))
     }
 
@@ -243,9 +343,10 @@ impl Authority {
             payload_holder: wire(self.payload.holder),
             payload_previous: wire(self.payload.previous),
             payload_change: self.payload.change.to_wire(),
-            emergency: u8::from(self.emergency),
+            emergency: u8::from(self.in_emergency()),
             flight_since_ns: self.flight.since_ns,
             payload_since_ns: self.payload.since_ns,
+            emergency_sources: self.emergency_sources(),
             ..AuthorityState::default()
         }
     }
@@ -321,15 +422,36 @@ mod tests {
     }
 
     #[test]
-    fn emergency_holds_until_safety_releases_and_survives_link_loss() {
+    fn emergency_holds_until_every_engager_releases_and_survives_link_loss() {
         let mut a = Authority::new(5 * S);
         a.act(Flight, ManualRc, S);
         a.act(Payload, Vision, S);
-        let c = a.emergency(2 * S).unwrap();
+        let c = a.emergency(DjiDrc, 11, 2 * S).unwrap();
         assert_eq!((c.from, c.to), (Some(ManualRc), Some(Safety)));
-        assert_eq!(a.emergency(2 * S), None, "a second stop changes nothing");
+        assert_eq!(
+            a.emergency(DjiDrc, 12, 2 * S),
+            None,
+            "a second stop changes nothing"
+        );
+        assert_eq!(a.emergency(Operator, 40, 2 * S), None);
         assert!(a.in_emergency());
-        assert_eq!(a.state(1).emergency, 1);
+        assert_eq!(
+            a.engagements(),
+            [
+                Engagement {
+                    source: DjiDrc,
+                    command_id: 11
+                },
+                Engagement {
+                    source: Operator,
+                    command_id: 40
+                },
+            ],
+            "one engagement per source, its first command id"
+        );
+        let st = a.state(1);
+        assert_eq!(st.emergency, 1);
+        assert!(st.emergency_by(DjiDrc) && st.emergency_by(Operator) && !st.emergency_by(Safety));
         assert_eq!(a.next_deadline(), Some(6 * S), "only payload can time out");
         a.poll(100 * S);
         assert_eq!(a.slot(Flight).holder, Some(Safety));
@@ -339,9 +461,50 @@ mod tests {
             "payload already timed out, flight held: {lost:?}"
         );
         assert_eq!(a.release(Flight, ManualRc, 102 * S), None);
-        a.release(Flight, Safety, 103 * S).unwrap();
+        assert_eq!(
+            a.release(Flight, Safety, 102 * S),
+            None,
+            "releasing authority never ends a stop, not even safety's"
+        );
+        assert_eq!(a.release_emergency(Vision, 103 * S), Released::NotEngaged);
+        assert_eq!(
+            a.release_emergency(DjiDrc, 103 * S),
+            Released::Remaining(vec![Operator])
+        );
+        assert_eq!(a.release_emergency(DjiDrc, 103 * S), Released::NotEngaged);
+        assert!(a.in_emergency());
+        assert_eq!(a.slot(Flight).holder, Some(Safety));
+        let Released::Ended(c) = a.release_emergency(Operator, 104 * S) else {
+            panic!("the last engager ends the stop");
+        };
+        assert_eq!(
+            (c.from, c.to, c.change),
+            (Some(Safety), None, AuthorityChange::Released)
+        );
         assert!(!a.in_emergency());
-        assert_eq!(a.state(1).emergency, 0);
+        assert_eq!((a.state(1).emergency, a.state(1).emergency_sources), (0, 0));
+    }
+
+    #[test]
+    fn clear_ends_every_engagement_and_restore_brings_them_back() {
+        let mut a = Authority::new(5 * S);
+        assert_eq!(a.clear_emergency(S), None);
+        a.emergency(SwarmQueue, 1, S);
+        a.emergency(ShotEngine, 2, S);
+        let (was, c) = a.clear_emergency(2 * S).unwrap();
+        assert_eq!(
+            was.iter().map(|e| e.source).collect::<Vec<_>>(),
+            [ShotEngine, SwarmQueue]
+        );
+        assert_eq!((c.to, c.change), (None, AuthorityChange::Released));
+        assert!(!a.in_emergency());
+
+        let mut b = Authority::new(5 * S);
+        let c = b.restore_emergency(&was, 3 * S).unwrap();
+        assert_eq!((c.to, c.change), (Some(Safety), AuthorityChange::Emergency));
+        assert_eq!(b.engagements(), was);
+        assert_eq!(b.next_deadline(), None);
+        assert_eq!(b.restore_emergency(&[], 3 * S), None);
     }
 
     #[test]

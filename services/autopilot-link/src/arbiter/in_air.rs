@@ -6,6 +6,7 @@
 //! | command | in the air |
 //! |---|---|
 //! | `MotorKill { emergency: false }` | refused: only an emergency kill stops the motors in flight |
+//! | `Disarm { force: true }` | refused: a forced disarm skips the autopilot's landed check, so in flight it is a motor kill; it has no emergency flag, so it is always refused (a deliberate kill in flight is `MotorKill { emergency: true }`). A plain `Disarm` passes: the autopilot refuses it unless landed |
 //! | `MotorTest` | refused for every source, safety included: a motor test spins one motor at a fixed throttle, which is never meaningful in flight (ArduCopter itself only runs it landed) |
 //! | `Servo { channel, .. }` | refused unless `channel` is in `servo_channels_in_flight` (`[arbiter]` config; empty by default): a servo output in flight may be a control surface, a gripper or a parachute, so only channels the operator declared harmless (a payload release, a light) are driven by remote tools such as the IMC gateway |
 //!
@@ -20,6 +21,9 @@ pub fn refusal(command: &Command, servo_channels: &[u8]) -> Option<String> {
     match *command {
         Command::MotorKill { emergency: false } => {
             Some("in the air: only an emergency kill stops the motors".to_string())
+        }
+        Command::Disarm { force: true } => {
+            Some("in the air: a forced disarm is a motor kill".to_string())
         }
         Command::MotorTest { motor, .. } => Some(format!(
             "in the air: motor test of motor {motor} refused, motor tests run only on the ground"

@@ -7,17 +7,32 @@
 //! | step | refusal |
 //! |---|---|
 //! | the sample decodes to a valid command (again: nothing bypasses the range checks) | `InvalidParameter` |
-//! | no emergency stop in force, unless the sender is the safety source | `Emergency` |
+//! | no emergency stop in force, unless the sender is the safety source or the command is `EmergencyStop`, `ReleaseEmergency` or `ClearEmergency` (decided here, see below) | `Emergency` |
+//! | the autopilot flies its failsafe (RTL, LAND, SmartRTL): a source below manual RC may not change the mode or the motion ([`failsafe_refusal`]; `FailsafeHeld` event) | `AutopilotFailsafe` |
+//! | a forced arm (skips the pre-arm checks) comes from safety or operator | `Denied` |
 //! | authority ([`authority`]: implicit grab, pre-emption by priority) | `NoAuthority` |
 //! | a setpoint is fresh ([`freshness`]) | `Stale` |
-//! | in the air ([`in_air`]): a motor kill is flagged as an emergency kill, no motor test, a servo only on a channel of `servo_channels_in_flight` | `InAir` |
+//! | in the air ([`in_air`]): a motor kill is flagged as an emergency kill, no forced disarm, no motor test, a servo only on a channel of `servo_channels_in_flight` | `InAir` |
+//! | `SetHome`: the current home is known (`WrongState`), the new one within `max_home_move_m` of it and `max_home_alt_change_m` of its altitude (`Denied`), inside every fence (`Geofence`) | as said |
 //! | speed limits from the config (reduce → `Limited`) and the geofence ([`geofence`]: position targets refused, velocities reduced → `Limited`) | `Geofence` |
 //!
 //! Only a command that passes every step changes authority (so a refused command
 //! from a higher-priority source pre-empts nobody) and feeds the setpoint stream.
-//! An emergency stop always passes: safety takes flight authority and keeps it until
-//! it releases it. [`Arbiter::poll`] does what is due without a command: quiet
-//! holders lose authority, and a stopped setpoint stream is braked.
+//!
+//! An emergency stop always passes, from any source, and is owned by its engagers
+//! ([`authority`]): safety takes flight authority and keeps it while any engager's
+//! stop is in force. `ReleaseEmergency` withdraws the sender's own stop
+//! (`EmergencyReleased`; the last one ends the stop: `EmergencyCleared`, flight
+//! authority released); `ClearEmergency` ends it whoever engaged it, only from
+//! operator or safety (`Denied` otherwise; the event names the sender and the
+//! engagers). Releasing authority never ends a stop. The stops and the fences
+//! survive a restart ([`persist`]).
+//!
+//! [`Arbiter::poll`] does what is due without a command: quiet holders lose
+//! authority, and a stopped setpoint stream is braked. A source flying to a position
+//! target (`GoTo`, `Takeoff`) that loses flight authority by timeout or pre-emption
+//! is braked too ([`Effect::TargetBrake`]); the target ends with any other motion
+//! command (velocity, brake, land, RTL, mode change, emergency stop).
 //!
 //! In the air means armed and (position unknown or more than `in_air_alt_m` above
 //! home or moving faster than `in_air_speed_mps`): conservative, an armed vehicle of
@@ -27,27 +42,30 @@
 pub mod audit;
 pub mod authority;
 mod envelope;
-pub mod freshness;
 pub mod fence_stack;
+pub mod freshness;
 pub mod geofence;
 #[cfg(test)]
 mod geofence_tests;
 pub mod in_air;
 #[cfg(test)]
 mod in_air_tests;
+pub mod persist;
+#[cfg(test)]
+mod safety_tests;
 #[cfg(test)]
 mod tests;
 
 use std::time::Duration;
 
 use skymesh_ipc_types::{
-    AckResult, ArbiterEventKind, AuthorityDomain, Command, CommandKind, CommandSource, FlightMode,
-    RefusalReason, VehicleCommand, VehicleState,
+    AckResult, ArbiterEventKind, AuthorityChange, AuthorityDomain, Command, CommandKind,
+    CommandSource, FlightMode, RefusalReason, VehicleCommand, VehicleState,
 };
 
-use authority::{Authority, Change, Claim};
-use freshness::{Freshness, FreshnessPolicy, Streams};
+use authority::{Authority, Change, Claim, Released};
 use fence_stack::FenceStack;
+use freshness::{Freshness, FreshnessPolicy, Streams};
 use geofence::Envelope;
 
 /// The arbiter's configuration (validated in [`crate::config`]).
@@ -74,6 +92,10 @@ pub struct ArbiterSettings {
     /// Servo channels a `Servo` command may drive while in the air (sorted, each
     /// 1..=32); every other channel is refused `InAir` in flight ([`in_air`]).
     pub servo_channels_in_flight: Vec<u8>,
+    /// `SetHome` may move home at most this far (m, horizontally).
+    pub max_home_move_m: f32,
+    /// ... and change its altitude (AMSL) by at most this much (m).
+    pub max_home_alt_change_m: f32,
 }
 
 /// Position and velocity of the vehicle, as far as the arbiter needs them.
@@ -89,6 +111,15 @@ pub struct Kinematics {
     pub age_s: f32,
 }
 
+/// The autopilot's home (HOME_POSITION), where RTL returns to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Home {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// Above mean sea level, m.
+    pub alt_msl_m: f32,
+}
+
 /// What the arbiter knows about the vehicle when it decides.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VehicleView {
@@ -97,15 +128,18 @@ pub struct VehicleView {
     /// `None` when no position has been received or it is older than
     /// [`VehicleView::POSITION_MAX_AGE_NS`].
     pub position: Option<Kinematics>,
+    /// `None` until the autopilot reported its home.
+    pub home: Option<Home>,
 }
 
 impl Default for VehicleView {
-    /// Disarmed, mode unknown, no position.
+    /// Disarmed, mode unknown, no position, no home.
     fn default() -> Self {
         VehicleView {
             armed: false,
             mode: FlightMode::Unknown,
             position: None,
+            home: None,
         }
     }
 }
@@ -114,7 +148,13 @@ impl VehicleView {
     /// An older position is not used for the geofence or the in-air test.
     pub const POSITION_MAX_AGE_NS: u64 = 2_000_000_000;
 
-    pub fn new(armed: bool, mode: FlightMode, state: Option<&VehicleState>, now_ns: u64) -> Self {
+    pub fn new(
+        armed: bool,
+        mode: FlightMode,
+        state: Option<&VehicleState>,
+        home: Option<Home>,
+        now_ns: u64,
+    ) -> Self {
         let position = state
             .filter(|s| {
                 s.position_valid == 1
@@ -131,6 +171,7 @@ impl VehicleView {
             armed,
             mode,
             position,
+            home,
         }
     }
 
@@ -181,6 +222,9 @@ pub enum Effect {
     },
     /// `source`'s setpoint stream stopped while moving: brake to a hover.
     StaleBrake { source: CommandSource },
+    /// `source` flew to a position target (`GoTo`, `Takeoff`) and lost flight
+    /// authority by timeout or pre-emption: brake to a hover, as for a stopped stream.
+    TargetBrake { source: CommandSource },
 }
 
 /// The arbiter's answer to one command.
@@ -246,6 +290,50 @@ fn ends_stream(kind: CommandKind) -> bool {
 
 const NS_PER_MS: u64 = 1_000_000;
 
+/// The autopilot flies its own failsafe (or a pilot's choice of it): RTL, LAND,
+/// SmartRTL.
+fn in_failsafe(mode: FlightMode) -> bool {
+    matches!(
+        mode,
+        FlightMode::Rtl | FlightMode::Land | FlightMode::SmartRtl
+    )
+}
+
+/// Why `command` from `source` may not run while the autopilot flies its failsafe
+/// in `mode`; `None` when it may. Sources below manual RC may not change the mode
+/// or the motion: `SetMode`, `Brake`, `GoTo`, `VelocityNed`, `Takeoff`, `SetYaw`,
+/// `SetHome` (it moves where RTL goes), and RTL during LAND (a LAND failsafe
+/// usually means too little battery to fly back). `Land` stays allowed (it ends the
+/// flight where the vehicle is, as the autopilot's own escalation would); so do the
+/// camera's ROI, payload commands and an emergency stop (which holds the
+/// failsafe's descent rather than overriding it).
+fn failsafe_refusal(mode: FlightMode, source: CommandSource, command: &Command) -> Option<String> {
+    if !in_failsafe(mode) || source.priority() >= CommandSource::ManualRc.priority() {
+        return None;
+    }
+    let refused = match command {
+        Command::SetMode(_)
+        | Command::Brake
+        | Command::GoTo { .. }
+        | Command::VelocityNed { .. }
+        | Command::Takeoff { .. }
+        | Command::SetYaw { .. }
+        | Command::SetHome { .. } => true,
+        Command::ReturnToLaunch => mode != FlightMode::Rtl,
+        _ => false,
+    };
+    refused.then(|| format!("{mode} failsafe held: manual RC only"))
+}
+
+/// `a, b, c`.
+fn names(sources: &[CommandSource]) -> String {
+    sources
+        .iter()
+        .map(|s| s.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The arbiter of one vehicle. `Clone`: the service decides a retransmission
 /// again on a copy, which changes nothing here.
 #[derive(Debug, Clone)]
@@ -260,6 +348,12 @@ pub struct Arbiter {
     /// The last velocity setpoint was reduced by the fence (events on the edges only).
     fence_limiting: bool,
     link_up: bool,
+    /// Who flies to a position target (`GoTo`, `Takeoff`) now: braked when it loses
+    /// flight authority by timeout or pre-emption.
+    position_target: Option<CommandSource>,
+    /// Sources told (`FailsafeHeld`) during the current autopilot failsafe, as a
+    /// bitmask (one event per source and failsafe, not one per refused setpoint).
+    failsafe_told: u8,
     scratch: Vec<f64>,
 }
 
@@ -288,6 +382,8 @@ impl Arbiter {
             fence: FenceStack::default(),
             fence_limiting: false,
             link_up: false,
+            position_target: None,
+            failsafe_told: 0,
             scratch: Vec::with_capacity(32),
         }
     }
@@ -323,25 +419,65 @@ impl Arbiter {
         let kind = command.kind();
         if self.authority.in_emergency()
             && source != CommandSource::Safety
-            && kind != CommandKind::EmergencyStop
+            && !matches!(
+                kind,
+                CommandKind::EmergencyStop
+                    | CommandKind::ReleaseEmergency
+                    | CommandKind::ClearEmergency
+            )
         {
             return refused(
                 RefusalReason::Emergency,
                 "emergency stop: only safety may command",
             );
         }
-        if kind == CommandKind::EmergencyStop {
-            effects.extend(self.authority.emergency(now_ns).map(Effect::Authority));
-            self.streams.end();
-            effects.push(Effect::Event {
-                kind: ArbiterEventKind::EmergencyStop,
-                source: Some(source),
-                detail: format!("emergency stop by {source}: braking, safety holds"),
-            });
-            return Outcome::Execute {
-                command,
-                limited: None,
-            };
+        match kind {
+            CommandKind::EmergencyStop => {
+                effects.extend(
+                    self.authority
+                        .emergency(source, sample.command_id, now_ns)
+                        .map(Effect::Authority),
+                );
+                self.streams.end();
+                self.position_target = None;
+                effects.push(Effect::Event {
+                    kind: ArbiterEventKind::EmergencyStop,
+                    source: Some(source),
+                    detail: format!("emergency stop by {source}: braking, safety holds"),
+                });
+                return Outcome::Execute {
+                    command,
+                    limited: None,
+                };
+            }
+            CommandKind::ReleaseEmergency => {
+                return self.release_emergency(now_ns, source, effects)
+            }
+            CommandKind::ClearEmergency => return self.clear_emergency(now_ns, source, effects),
+            _ => {}
+        }
+        if let Some(detail) = failsafe_refusal(vehicle.mode, source, &command) {
+            let bit = 1 << source.to_wire();
+            if self.failsafe_told & bit == 0 {
+                self.failsafe_told |= bit;
+                effects.push(Effect::Event {
+                    kind: ArbiterEventKind::FailsafeHeld,
+                    source: Some(source),
+                    detail: detail.clone(),
+                });
+            }
+            return refused(RefusalReason::AutopilotFailsafe, detail);
+        }
+        if !in_failsafe(vehicle.mode) {
+            self.failsafe_told = 0;
+        }
+        if matches!(command, Command::Arm { force: true })
+            && !matches!(source, CommandSource::Safety | CommandSource::Operator)
+        {
+            return refused(
+                RefusalReason::Denied,
+                "forced arm: safety or operator only",
+            );
         }
         let domain = kind.authority().unwrap_or(AuthorityDomain::Flight);
         if kind.is_authority_request() {
@@ -375,6 +511,16 @@ impl Arbiter {
                 return refused(RefusalReason::InAir, detail);
             }
         }
+        if let Command::SetHome {
+            lat_deg,
+            lon_deg,
+            alt_msl_m,
+        } = command
+        {
+            if let Err((reason, detail)) = self.home_check(lat_deg, lon_deg, alt_msl_m, vehicle) {
+                return refused(reason, detail);
+            }
+        }
         let (command, limited) = match self.envelope(command, vehicle, source, effects) {
             Ok(x) => x,
             Err(detail) => {
@@ -390,11 +536,11 @@ impl Arbiter {
         if let Err(e) = command.validate() {
             return refused(e.reason(), format!("after limiting: {e}"));
         }
-        effects.extend(
-            self.authority
-                .act(domain, source, now_ns)
-                .map(Effect::Authority),
-        );
+        let change = self.authority.act(domain, source, now_ns);
+        if domain == AuthorityDomain::Flight {
+            self.track_target(kind, source);
+        }
+        self.authority_changed(change, effects);
         match (stream_until, command) {
             (
                 Some(until_ns),
@@ -450,23 +596,164 @@ impl Arbiter {
             Claim::Free => format!("{name} authority granted"),
             Claim::Outranks(holder) => format!("{name} authority taken from {holder}"),
         };
-        effects.extend(
-            self.authority
-                .act(domain, source, now_ns)
-                .map(Effect::Authority),
-        );
+        let change = self.authority.act(domain, source, now_ns);
+        self.authority_changed(change, effects);
         Outcome::Done { detail }
+    }
+
+    /// Publishes an authority change; a holder of a position target that lost flight
+    /// authority by timeout or pre-emption is braked ([`Effect::TargetBrake`]).
+    fn authority_changed(&mut self, change: Option<Change>, effects: &mut Vec<Effect>) {
+        let Some(c) = change else { return };
+        let lost = matches!(
+            c.change,
+            AuthorityChange::Timeout | AuthorityChange::Preempted
+        );
+        if c.domain == AuthorityDomain::Flight && lost && c.from.is_some() {
+            if let Some(source) = self.position_target.filter(|t| Some(*t) == c.from) {
+                self.position_target = None;
+                effects.push(Effect::TargetBrake { source });
+            }
+        }
+        effects.push(Effect::Authority(c));
+    }
+
+    /// An executed flight command of `source`: a `GoTo` or `Takeoff` is now the
+    /// position target; anything else that moves the vehicle replaces it (a velocity
+    /// setpoint, `Brake`, `Land`, RTL, a mode change...). Yaw, ROI and home leave it.
+    fn track_target(&mut self, kind: CommandKind, source: CommandSource) {
+        match kind {
+            CommandKind::GoTo | CommandKind::Takeoff => self.position_target = Some(source),
+            CommandKind::VelocityNed => self.position_target = None,
+            k if ends_stream(k) => self.position_target = None,
+            _ => {}
+        }
+    }
+
+    /// `source` withdraws its own emergency stop.
+    fn release_emergency(
+        &mut self,
+        now_ns: u64,
+        source: CommandSource,
+        effects: &mut Vec<Effect>,
+    ) -> Outcome {
+        let detail = match self.authority.release_emergency(source, now_ns) {
+            Released::NotEngaged => {
+                return Outcome::Done {
+                    detail: format!("no emergency stop by {source} in force"),
+                }
+            }
+            Released::Remaining(others) => {
+                let detail = format!(
+                    "{source} released its stop; still held by {}",
+                    names(&others)
+                );
+                effects.push(Effect::Event {
+                    kind: ArbiterEventKind::EmergencyReleased,
+                    source: Some(source),
+                    detail: detail.clone(),
+                });
+                detail
+            }
+            Released::Ended(change) => {
+                effects.push(Effect::Event {
+                    kind: ArbiterEventKind::EmergencyReleased,
+                    source: Some(source),
+                    detail: format!("{source} released its stop, the last one"),
+                });
+                effects.push(Effect::Event {
+                    kind: ArbiterEventKind::EmergencyCleared,
+                    source: Some(source),
+                    detail: format!("emergency stop ended: {source} was the last engager"),
+                });
+                effects.push(Effect::Authority(change));
+                "emergency stop ended".to_string()
+            }
+        };
+        Outcome::Done { detail }
+    }
+
+    /// Ends the emergency stop whoever engaged it: operator and safety only.
+    fn clear_emergency(
+        &mut self,
+        now_ns: u64,
+        source: CommandSource,
+        effects: &mut Vec<Effect>,
+    ) -> Outcome {
+        if !matches!(source, CommandSource::Safety | CommandSource::Operator) {
+            return refused(
+                RefusalReason::Denied,
+                "clear_emergency: operator or safety only",
+            );
+        }
+        let Some((was, change)) = self.authority.clear_emergency(now_ns) else {
+            return Outcome::Done {
+                detail: "no emergency stop in force".to_string(),
+            };
+        };
+        let engagers: Vec<CommandSource> = was.iter().map(|e| e.source).collect();
+        let detail = format!("cleared by {source}; engaged by {}", names(&engagers));
+        effects.push(Effect::Event {
+            kind: ArbiterEventKind::EmergencyCleared,
+            source: Some(source),
+            detail: detail.clone(),
+        });
+        effects.push(Effect::Authority(change));
+        Outcome::Done { detail }
+    }
+
+    /// `SetHome` bounds: home is where a failsafe RTL flies, so it stays inside the
+    /// fences, within `max_home_move_m` of the current home and at its altitude
+    /// (± `max_home_alt_change_m`).
+    fn home_check(
+        &self,
+        lat_deg: f64,
+        lon_deg: f64,
+        alt_msl_m: f32,
+        vehicle: &VehicleView,
+    ) -> Result<(), (RefusalReason, String)> {
+        let Some(home) = vehicle.home else {
+            return Err((
+                RefusalReason::WrongState,
+                "home not known yet: cannot bound a new home".to_string(),
+            ));
+        };
+        let frame = geofence::LocalFrame::new(home.lat_deg, home.lon_deg);
+        let moved = frame.to_local(lat_deg, lon_deg).norm();
+        let max = f64::from(self.settings.max_home_move_m);
+        if !moved.is_finite() || moved > max {
+            return Err((
+                RefusalReason::Denied,
+                format!("new home {moved:.0} m from the current one, max {max:.0} m"),
+            ));
+        }
+        let dz = alt_msl_m - home.alt_msl_m;
+        if !dz.is_finite() || dz.abs() > self.settings.max_home_alt_change_m {
+            return Err((
+                RefusalReason::Denied,
+                format!(
+                    "home altitude change {:.1} m, max {:.1} m",
+                    dz.abs(),
+                    self.settings.max_home_alt_change_m
+                ),
+            ));
+        }
+        if !self.fence.contains(lat_deg, lon_deg) {
+            return Err((
+                RefusalReason::Geofence,
+                "new home outside the geofence".to_string(),
+            ));
+        }
+        Ok(())
     }
 
     /// What is due at `now_ns` without a command: quiet holders lose authority, a
     /// stopped stream is braked.
     pub fn poll(&mut self, now_ns: u64) -> Vec<Effect> {
-        let mut effects: Vec<Effect> = self
-            .authority
-            .poll(now_ns)
-            .into_iter()
-            .map(Effect::Authority)
-            .collect();
+        let mut effects = Vec::new();
+        for change in self.authority.poll(now_ns) {
+            self.authority_changed(Some(change), &mut effects);
+        }
         if let Some(stream) = self.streams.poll(now_ns) {
             effects.push(Effect::StaleBrake {
                 source: stream.source,

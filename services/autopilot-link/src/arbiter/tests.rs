@@ -7,7 +7,9 @@ use CommandSource::*;
 const MS: u64 = 1_000_000;
 pub(super) const S: u64 = 1000 * MS;
 /// Home of vehicle-sim.
-const HOME: (f64, f64) = (-35.363261, 149.165230);
+pub(super) const HOME: (f64, f64) = (-35.363261, 149.165230);
+/// Its altitude above sea level, m.
+pub(super) const HOME_ALT_MSL: f32 = 584.0;
 
 pub(super) fn settings() -> ArbiterSettings {
     use skymesh_runtime::ServiceConfig;
@@ -23,7 +25,7 @@ pub(super) fn sample(source: CommandSource, cmd: Command, stamp_ns: u64) -> Vehi
     s
 }
 
-fn vel(n: f32, e: f32, d: f32) -> Command {
+pub(super) fn vel(n: f32, e: f32, d: f32) -> Command {
     Command::VelocityNed {
         vel_ned_mps: [n, e, d],
         yaw_rate_dps: None,
@@ -44,6 +46,11 @@ pub(super) fn flying(north: f64, east: f64, vel_ned_mps: [f32; 3]) -> VehicleVie
             vel_ned_mps,
             age_s: 0.0,
         }),
+        home: Some(Home {
+            lat_deg: HOME.0,
+            lon_deg: HOME.1,
+            alt_msl_m: HOME_ALT_MSL,
+        }),
     }
 }
 
@@ -61,7 +68,7 @@ pub(super) fn executed(d: &Decision) -> Command {
     }
 }
 
-fn authority_changes(d: &[Effect]) -> Vec<AuthorityChange> {
+pub(super) fn authority_changes(d: &[Effect]) -> Vec<AuthorityChange> {
     d.iter()
         .filter_map(|e| match e {
             Effect::Authority(c) => Some(c.change),
@@ -247,7 +254,7 @@ fn gopro_set_needs_payload_authority_only_and_leaves_the_flight_alone() {
 }
 
 #[test]
-fn emergency_stop_from_anyone_blocks_everyone_but_safety_until_it_releases() {
+fn emergency_stop_from_anyone_blocks_everyone_but_safety_until_its_engagers_release() {
     let mut a = Arbiter::new(settings());
     let v = flying(0.0, 0.0, [2.0, 0.0, 0.0]);
     a.decide(S, &sample(ManualRc, vel(2.0, 0.0, 0.0), S), &v);
@@ -291,13 +298,37 @@ fn emergency_stop_from_anyone_blocks_everyone_but_safety_until_it_releases() {
         executed(&a.decide(62 * S, &sample(Safety, Command::Land, 62 * S), &v)),
         Command::Land
     );
-    a.decide(
+    // Releasing authority never ends a stop, not even safety's release.
+    let d = a.decide(
         63 * S,
         &sample(Safety, Command::ReleaseFlightAuthority, 63 * S),
         &v,
     );
-    assert_eq!(a.authority().state(1).emergency, 0);
+    assert!(d.effects.is_empty(), "{d:?}");
+    let st = a.authority().state(1);
+    assert_eq!((st.flight(), st.emergency), (Some(Safety), 1));
+    // Vision and manual RC engaged it: both must withdraw.
+    let d = a.decide(
+        64 * S,
+        &sample(ManualRc, Command::ReleaseEmergency, 64 * S),
+        &v,
+    );
+    assert_eq!(
+        d.detail(),
+        "manual_rc released its stop; still held by vision"
+    );
+    assert_eq!(a.authority().state(1).emergency, 1);
     let d = a.decide(64 * S, &sample(ManualRc, Command::Land, 64 * S), &v);
+    assert_eq!(refusal(&d).0, RefusalReason::Emergency);
+    let d = a.decide(
+        65 * S,
+        &sample(Vision, Command::ReleaseEmergency, 65 * S),
+        &v,
+    );
+    assert_eq!(d.detail(), "emergency stop ended");
+    assert_eq!(authority_changes(&d.effects), [AuthorityChange::Released]);
+    assert_eq!(a.authority().state(1).emergency, 0);
+    let d = a.decide(66 * S, &sample(ManualRc, Command::Land, 66 * S), &v);
     assert_eq!(executed(&d), Command::Land);
 }
 
@@ -368,7 +399,11 @@ fn numbers_are_rechecked_and_limited() {
 }
 
 /// A keep-in square of ±`half` metres around home, plus an optional keep-out.
-fn fence_set(source: CommandSource, half: f64, keep_out: Option<[(f64, f64); 2]>) -> GeofenceSet {
+pub(super) fn fence_set(
+    source: CommandSource,
+    half: f64,
+    keep_out: Option<[(f64, f64); 2]>,
+) -> GeofenceSet {
     let frame = geofence::LocalFrame::new(HOME.0, HOME.1);
     let unit = frame.to_local(HOME.0 + 1e-3, HOME.1 + 1e-3);
     let ll = |n: f64, e: f64| [HOME.0 + n / unit.x * 1e-3, HOME.1 + e / unit.y * 1e-3];
@@ -398,7 +433,7 @@ fn fence_set(source: CommandSource, half: f64, keep_out: Option<[(f64, f64); 2]>
     set
 }
 
-fn goto_ne(north: f64, east: f64, alt: f32) -> Command {
+pub(super) fn goto_ne(north: f64, east: f64, alt: f32) -> Command {
     let v = flying(north, east, [0.0; 3]).position.unwrap();
     Command::GoTo {
         lat_deg: v.lat_deg,
@@ -409,7 +444,7 @@ fn goto_ne(north: f64, east: f64, alt: f32) -> Command {
     }
 }
 
-fn event_kinds(effects: &[Effect]) -> Vec<ArbiterEventKind> {
+pub(super) fn event_kinds(effects: &[Effect]) -> Vec<ArbiterEventKind> {
     effects
         .iter()
         .filter_map(|e| match e {
@@ -448,7 +483,7 @@ fn the_geofence_refuses_targets_and_limits_velocities() {
     let d = a.decide(S, &sample(Operator, goto_ne(40.0, 0.0, 10.0), S), &v);
     assert_eq!(
         refusal(&d),
-        (RefusalReason::Geofence, "path leaves the fence after 20 m")
+        (RefusalReason::Geofence, "path passes within 2.0 m of the fence")
     );
     let d = a.decide(S, &sample(Operator, goto_ne(40.0, 20.0, 10.0), S), &v);
     assert_eq!(
@@ -567,15 +602,16 @@ fn link_loss_clears_authority_but_not_an_emergency() {
 }
 
 #[test]
-fn set_home_needs_flight_authority_but_no_envelope_and_keeps_the_stream() {
+fn set_home_needs_flight_authority_and_keeps_the_stream() {
     let mut a = Arbiter::new(settings());
     a.set_geofence(&fence_set(Operator, 50.0, None), 1);
     let v = flying(0.0, 0.0, [0.0; 3]);
-    // 1 km north: far outside the 50 m keep-in, and still executed as sent.
+    // 20 m north, inside the 50 m keep-in, at home's altitude: executed as sent.
+    let p = flying(20.0, 0.0, [0.0; 3]).position.unwrap();
     let home = Command::SetHome {
-        lat_deg: HOME.0 + 0.009,
-        lon_deg: HOME.1,
-        alt_msl_m: 600.0,
+        lat_deg: p.lat_deg,
+        lon_deg: p.lon_deg,
+        alt_msl_m: HOME_ALT_MSL + 0.5,
     };
     a.decide(S, &sample(ShotEngine, vel(2.0, 0.0, 0.0), S), &v);
     let d = a.decide(S + 100 * MS, &sample(ShotEngine, home, S + 100 * MS), &v);

@@ -5,15 +5,15 @@
 use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{
-    ArbiterEvent, ArbiterEventKind, AuthorityDomain, Command, CommandSource, FixedStr, FlightMode,
-    GeofenceSet, RefusalReason, NO_HOLDER,
+    ArbiterEvent, ArbiterEventKind, AuthorityDomain, Command, CommandKind, CommandSource, FixedStr,
+    FlightMode, GeofenceSet, RefusalReason, NO_HOLDER,
 };
 use skymesh_runtime::clock::monotonic_ns;
 
 use super::Service;
 use crate::acks::{Answer, Origin};
 use crate::arbiter::audit::Record;
-use crate::arbiter::{Effect, VehicleView};
+use crate::arbiter::{Effect, Home, VehicleView};
 use crate::commands::{self, PlanContext};
 use crate::Lifecycle;
 
@@ -29,10 +29,21 @@ impl<L: Lifecycle> Service<L> {
     }
 
     pub(super) fn vehicle_view(&self, now_ns: u64) -> VehicleView {
+        // The status is refreshed on every autopilot message (HOME_POSITION included).
+        let home = self
+            .last_status
+            .as_ref()
+            .filter(|s| s.home_valid == 1)
+            .map(|s| Home {
+                lat_deg: s.home_lat_deg,
+                lon_deg: s.home_lon_deg,
+                alt_msl_m: s.home_alt_msl_m,
+            });
         VehicleView::new(
             self.telemetry.is_armed(),
             self.telemetry.flight_mode(),
             self.last_state.as_ref(),
+            home,
             now_ns,
         )
     }
@@ -57,7 +68,38 @@ impl<L: Lifecycle> Service<L> {
 
     pub(super) fn on_geofence(&mut self, set: &GeofenceSet) -> anyhow::Result<()> {
         let effects = self.arbiter.set_geofence(set, self.settings.vehicle_id);
-        self.apply(effects)
+        let applied = self.apply(effects);
+        self.save_state(false);
+        applied
+    }
+
+    /// After a command of wire kind `kind`: the state file is written when the
+    /// command could have changed the emergency stops.
+    pub(super) fn persist_after(&mut self, kind: u8) {
+        if matches!(
+            CommandKind::try_from(kind),
+            Ok(CommandKind::EmergencyStop
+                | CommandKind::ReleaseEmergency
+                | CommandKind::ClearEmergency)
+        ) {
+            self.save_state(false);
+        }
+    }
+
+    /// Writes the arbiter's stops and fences to the state file if they changed
+    /// (`clean_exit` at a clean stop). A failure is logged and counted; the service
+    /// goes on with the state in memory.
+    pub(super) fn save_state(&mut self, clean_exit: bool) {
+        let mut state = self.arbiter.persisted();
+        state.clean_exit = clean_exit;
+        if let Err(e) = self.store.save(&state) {
+            self.audit.state_file_error();
+            tracing::error!(
+                state_file = %self.store.path().display(),
+                error = %e,
+                "cannot write the arbiter state file: the emergency stops and fences would not survive a restart"
+            );
+        }
     }
 
     /// Does what the arbiter decided besides answering.
@@ -100,6 +142,9 @@ impl<L: Lifecycle> Service<L> {
                     detail,
                 } => {
                     let src = name(source);
+                    if let (ArbiterEventKind::EmergencyCleared, Some(by)) = (kind, source) {
+                        self.audit.emergency_cleared(by, &detail);
+                    }
                     match kind {
                         ArbiterEventKind::EmergencyStop | ArbiterEventKind::GeofenceInvalid => {
                             tracing::warn!(event = %kind, source = src, detail, "arbiter event")
@@ -136,18 +181,26 @@ impl<L: Lifecycle> Service<L> {
                         ..ArbiterEvent::default()
                     })?;
                 }
-                Effect::StaleBrake { source } => self.stale_brake(source)?,
+                Effect::StaleBrake { source } => self.stale_brake(source, false)?,
+                Effect::TargetBrake { source } => self.stale_brake(source, true)?,
             }
         }
         Ok(())
     }
 
-    /// `source`'s setpoint stream stopped while the vehicle was moving on it: hold a
-    /// hover with a zero-velocity setpoint. Only in GUIDED, the one mode in which the
-    /// setpoints had any effect; in any other mode the autopilot (or the pilot) is
-    /// already in charge and switching it to BRAKE would override them.
-    fn stale_brake(&mut self, source: CommandSource) -> anyhow::Result<()> {
+    /// `source`'s setpoint stream stopped while the vehicle was moving on it, or
+    /// (`target`) `source` flew to a position target (`GoTo`, `Takeoff`) and lost
+    /// flight authority by timeout or pre-emption: hold a hover with a zero-velocity
+    /// setpoint. Only in GUIDED, the one mode in which the setpoints or targets had
+    /// any effect; in any other mode the autopilot (or the pilot) is already in
+    /// charge and switching it to BRAKE would override them.
+    fn stale_brake(&mut self, source: CommandSource, target: bool) -> anyhow::Result<()> {
         let mode = self.telemetry.flight_mode();
+        let what = if target {
+            "position target orphaned"
+        } else {
+            "setpoint stream stopped"
+        };
         let detail = if mode == FlightMode::Guided {
             self.audit.stale_brake(source);
             let ctx = PlanContext {
@@ -162,15 +215,15 @@ impl<L: Lifecycle> Service<L> {
                 _ => false,
             };
             if sent {
-                "setpoint stream stopped: braked to a hover"
+                format!("{what}: braked to a hover")
             } else {
-                "setpoint stream stopped: brake not sent, link down"
+                format!("{what}: brake not sent, link down")
             }
         } else {
-            "setpoint stream stopped: not GUIDED, nothing to brake"
+            format!("{what}: not GUIDED, nothing to brake")
         };
-        tracing::warn!(source = %source, mode = %mode, detail, "stale setpoint stream");
-        self.publish_event(ArbiterEventKind::StaleBrake, Some(source), detail)
+        tracing::warn!(source = %source, mode = %mode, detail, "braking for a source that stopped commanding");
+        self.publish_event(ArbiterEventKind::StaleBrake, Some(source), &detail)
     }
 
     pub(super) fn publish_authority(&mut self) -> anyhow::Result<()> {
