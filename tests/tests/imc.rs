@@ -21,6 +21,8 @@ use tokio::net::UdpSocket;
 /// The gateway's IMC address (its default).
 const GATEWAY_ID: u16 = 0x2c01;
 const REPLY: Duration = Duration::from_secs(10);
+/// A query the gateway answers from its cached hardware state: at once.
+const FIRST_REPLY: Duration = Duration::from_secs(1);
 /// MAVLink SERVO_OUTPUT_RAW.
 const SERVO_OUTPUT_RAW: u32 = 36;
 
@@ -51,27 +53,23 @@ async fn ask(
         .unwrap_or_else(|| panic!("no {what} in answer to {m:?}"))
 }
 
-/// The state of power channel `name`, from QueryPowerChannelState. The gateway
-/// answers from the last `HardwareState` the hardware service published (on change
-/// and at 1 Hz) and drops the query, counted, until it has one: asked again every
-/// half second until [`REPLY`].
+/// The state of power channel `name`, from one QueryPowerChannelState answered
+/// within [`FIRST_REPLY`]. The gateway answers from the hardware service's state,
+/// which it has before it reports running and which it refreshes before every query:
+/// one request, no retries.
 async fn channel_state(peer: &ImcClient, name: &str) -> ChannelState {
-    let deadline = Instant::now() + REPLY;
-    loop {
-        let reply = peer
-            .request(
-                &Message::QueryPowerChannelState,
-                Duration::from_millis(500),
-                |m| matches!(m, Message::PowerChannelState { name: n, .. } if n == name),
-            )
-            .await
-            .unwrap();
-        match reply {
-            Some(Message::PowerChannelState { state, .. }) => return state,
-            Some(_) => unreachable!(),
-            None if Instant::now() < deadline => continue,
-            None => panic!("no {name} in answer to QueryPowerChannelState"),
-        }
+    let reply = peer
+        .request(
+            &Message::QueryPowerChannelState,
+            FIRST_REPLY,
+            |m| matches!(m, Message::PowerChannelState { name: n, .. } if n == name),
+        )
+        .await
+        .unwrap();
+    match reply {
+        Some(Message::PowerChannelState { state, .. }) => state,
+        Some(_) => unreachable!(),
+        None => panic!("no {name} in answer to QueryPowerChannelState within {FIRST_REPLY:?}"),
     }
 }
 
@@ -95,6 +93,15 @@ fn imc_operates_leds_gpio_power_channels_and_talks_to_peers() {
     );
     rt.block_on(async {
         let peer = peer(&mesh).await;
+
+        // The first request, sent the moment the gateway reports running, is answered
+        // (IMC has no error reply: an unanswered query is silence for the operator).
+        let t0 = Instant::now();
+        assert_eq!(channel_state(&peer, "lights").await, ChannelState::Off);
+        eprintln!(
+            "imc: first QueryPowerChannelState answered in {:?}",
+            t0.elapsed()
+        );
 
         // LEDs: set, then query.
         let set = Message::SetLedBrightness {
@@ -185,6 +192,12 @@ fn imc_operates_leds_gpio_power_channels_and_talks_to_peers() {
         )
         .await;
         assert_eq!(state_of(m), ChannelState::On);
+        // Read after write: the query right after the reply reads the change.
+        assert_eq!(
+            channel_state(&peer, "lights").await,
+            ChannelState::On,
+            "the query after the toggle's reply"
+        );
         let m = ask(
             &peer,
             &control(ChannelOp::Toggle, 0.0),
