@@ -1,5 +1,18 @@
-//! The arbiter's envelope step: speed limits from the config, then the geofence
-//! ([`super::geofence`]) for position targets, take-offs and velocity setpoints.
+//! The arbiter's envelope step: speed limits from the config, then the fences
+//! ([`super::fence_stack`], all sources' at once) for position targets, take-offs and
+//! velocity setpoints.
+//!
+//! - `VelocityNed`: [`super::fence_stack::FenceStack::limit_velocity`] (the stop
+//!   predicted from the current velocity, the command and the fix's age stays the
+//!   margin inside every fence).
+//! - `GoTo`: always sent with a speed (the command's, capped, else the cap), so a
+//!   `DO_CHANGE_SPEED` always precedes it. Under a fence: the target altitude within
+//!   the vertical margin, the target the margin inside, the straight path checked
+//!   ([`super::fence_stack::FenceStack::check_path`]); refused when the position is
+//!   unknown; from outside, only a path that enters once and stays in, clear of
+//!   every keep-out by the margin; from inside a keep-out, refused.
+//! - `Takeoff`: under a fence, refused when the position is unknown, outside the
+//!   fence, or above the lowest ceiling less the vertical margin.
 
 use skymesh_ipc_types::{ArbiterEventKind, Command, CommandSource};
 
@@ -43,21 +56,16 @@ impl Arbiter {
                 }
                 let mut fence_limit = None;
                 if !self.fence.is_empty() {
-                    match vehicle.position {
+                    match &vehicle.position {
                         Some(k) => {
-                            for fence in self.fence.fences() {
-                                let pos = fence.frame.to_local(k.lat_deg, k.lon_deg);
-                                let (out, why) = fence.limit_velocity(
-                                    &self.envelope,
-                                    pos,
-                                    k.alt_rel_m,
-                                    k.vel_ned_mps,
-                                    v,
-                                    &mut self.scratch,
-                                );
-                                v = out;
-                                fence_limit = fence_limit.or(why.map(|w| w.to_string()));
-                            }
+                            let (out, why) = self.fence.limit_velocity(
+                                &self.envelope,
+                                k,
+                                v,
+                                s.max_horizontal_speed_mps,
+                            );
+                            v = out;
+                            fence_limit = why.map(|w| w.to_string());
                         }
                         None if v.iter().any(|x| *x != 0.0) => {
                             v = [0.0; 3];
@@ -91,35 +99,22 @@ impl Arbiter {
                 yaw_deg,
                 speed_mps,
             } => {
-                let speed = speed_mps.map(|v| v.min(s.max_horizontal_speed_mps));
-                if speed != speed_mps {
-                    note = Some(format!("speed max {:.1} m/s", s.max_horizontal_speed_mps));
+                // Always a speed: without one the autopilot flies its own default
+                // (WPNAV_SPEED), which nothing here bounds.
+                let cap = s.max_horizontal_speed_mps;
+                let speed = speed_mps.map_or(cap, |v| v.min(cap));
+                if speed_mps.is_some_and(|v| v > cap) {
+                    note = Some(format!("speed max {cap:.1} m/s"));
                 }
-                for fence in self.fence.fences() {
-                    if !fence.altitude_ok(alt_rel_m) {
-                        return Err(format!(
-                            "target alt {alt_rel_m:.1} m outside {:.1}..{:.1} m",
-                            fence.floor_m, fence.ceiling_m
-                        ));
-                    }
-                    let target = fence.frame.to_local(lat_deg, lon_deg);
-                    if !fence.contains(target) {
-                        return Err("target outside the fence".to_string());
-                    }
-                    if let Some(k) = vehicle.position {
-                        let pos = fence.frame.to_local(k.lat_deg, k.lon_deg);
-                        let way = target - pos;
-                        let dist = way.norm();
-                        if fence.contains(pos) && dist > 1e-3 {
-                            if let Some(exit) =
-                                fence.exit_distance(pos, way / dist, &mut self.scratch)
-                            {
-                                if exit < dist {
-                                    return Err(format!("path leaves the fence after {exit:.0} m"));
-                                }
-                            }
-                        }
-                    }
+                if !self.fence.is_empty() {
+                    self.altitude_target(alt_rel_m, "target alt")?;
+                    let from = vehicle.position.map(|k| (k.lat_deg, k.lon_deg));
+                    self.fence.check_path(
+                        from,
+                        (lat_deg, lon_deg),
+                        self.envelope.margin_m,
+                        &mut self.scratch,
+                    )?;
                 }
                 Ok((
                     Command::GoTo {
@@ -127,23 +122,19 @@ impl Arbiter {
                         lon_deg,
                         alt_rel_m,
                         yaw_deg,
-                        speed_mps: speed,
+                        speed_mps: Some(speed),
                     },
                     note,
                 ))
             }
             Command::Takeoff { alt_rel_m } => {
-                for fence in self.fence.fences() {
-                    if alt_rel_m > fence.ceiling_m {
-                        return Err(format!(
-                            "takeoff to {alt_rel_m:.1} m above ceiling {:.1} m",
-                            fence.ceiling_m
-                        ));
-                    }
-                    if let Some(k) = vehicle.position {
-                        if !fence.contains(fence.frame.to_local(k.lat_deg, k.lon_deg)) {
-                            return Err("vehicle outside the fence".to_string());
-                        }
+                if !self.fence.is_empty() {
+                    self.altitude_target(alt_rel_m, "takeoff to")?;
+                    let Some(k) = vehicle.position else {
+                        return Err("position unknown: takeoff not checked".to_string());
+                    };
+                    if !self.fence.contains(k.lat_deg, k.lon_deg) {
+                        return Err("vehicle outside the fence".to_string());
                     }
                 }
                 Ok((command, None))
@@ -161,6 +152,21 @@ impl Arbiter {
                 Some(format!("yaw rate max {:.0} deg/s", s.max_yaw_rate_dps)),
             )),
             other => Ok((other, None)),
+        }
+    }
+
+    /// A target altitude within the fences' lowest ceiling and highest floor, the
+    /// vertical margin inside.
+    fn altitude_target(&self, alt_rel_m: f32, what: &str) -> Result<(), String> {
+        let vm = self.envelope.vertical_margin_m as f32;
+        let ceiling = self.fence.ceiling_m().unwrap_or(f32::MAX) - vm;
+        let floor = self.fence.floor_m().unwrap_or(f32::MIN) + vm;
+        if (floor..=ceiling).contains(&alt_rel_m) {
+            Ok(())
+        } else {
+            Err(format!(
+                "{what} {alt_rel_m:.1} m outside {floor:.1}..{ceiling:.1} m"
+            ))
         }
     }
 }

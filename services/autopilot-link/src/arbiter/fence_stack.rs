@@ -14,8 +14,8 @@
 
 use skymesh_ipc_types::{ArbiterEventKind, CommandSource, GeofenceSet, NO_HOLDER};
 
-use super::geofence::Fence;
-use super::{Arbiter, Effect};
+use super::geofence::{stoppable, Envelope, Fence, Limit, Ne, MAX_FIX_AGE_S};
+use super::{Arbiter, Effect, Kinematics};
 
 /// One source's fence: the compiled geometry and the sample it came from (kept for
 /// the state file: restoring is [`Arbiter::set_geofence`] with each).
@@ -108,6 +108,331 @@ impl FenceStack {
         let before = self.entries.len();
         self.entries.retain(|e| e.source != source);
         self.entries.len() != before
+    }
+}
+
+/// Fences at most: one per source.
+const MAX_FENCES: usize = CommandSource::ALL.len();
+/// Segments of one stopping-trajectory check (see [`FenceStack::limit_velocity`]).
+const MAX_SEGMENTS: usize = 5 + 2 * MAX_CHORDS;
+/// The transition from the current velocity to the command is followed in at most
+/// this many chords...
+const MAX_CHORDS: usize = 16;
+/// ... each at most this long (s) while that cap allows.
+const CHORD_S: f64 = 0.2;
+/// Steps of the bisection for the largest allowed fraction of a command.
+const BISECT_STEPS: u32 = 10;
+/// Inward speed commanded when even a stop now would end within the margin, m/s.
+const BACK_IN_MPS: f64 = 1.0;
+/// Slack for rounding in "no closer than the start" comparisons, m.
+const EPS_M: f64 = 1e-6;
+
+/// A segment of a stopping trajectory, as offsets from the vehicle, m.
+type Segment = (Ne, Ne);
+
+/// The vehicle's position in each fence's own local frame, in fence order.
+#[derive(Clone, Copy)]
+struct Here {
+    at: [Ne; MAX_FENCES],
+}
+
+/// The stopping trajectory of a horizontal velocity command `w` from current
+/// velocity `c`, as segments (offsets from the vehicle), and the rounding slack of
+/// its chords. Three vehicle models, all checked:
+/// - the command takes effect after `lag` s at `c`, then the velocity changes from
+///   `c` to `w` at `a` (a parabola, followed in chords): a stop may come at any
+///   point of it, so from every chord point a braking segment along the velocity
+///   there (`u·|u|/2a`), the first being the stop along `c` alone;
+/// - the command takes effect at once after the lag, and the vehicle brakes along
+///   `w` from `|w|`;
+/// - the vehicle already flies `w` during the lag (setpoints on their way), then
+///   brakes along it.
+fn stopping_trajectory(
+    c: Ne,
+    w: Ne,
+    lag: f64,
+    a: f64,
+    out: &mut [Segment; MAX_SEGMENTS],
+) -> (usize, f64) {
+    let brake = |u: Ne| u * (u.norm() / (2.0 * a));
+    let mut n = 0;
+    let mut push = |seg: Segment, n: &mut usize| {
+        out[*n] = seg;
+        *n += 1;
+    };
+    let o1 = c * lag;
+    push((Ne::zeros(), o1), &mut n);
+    push((o1, o1 + brake(w)), &mut n);
+    // Setpoints already on their way may have it flying at `w` during the lag.
+    let ow = w * lag;
+    push((Ne::zeros(), ow), &mut n);
+    push((ow, ow + brake(w)), &mut n);
+    push((o1, o1 + brake(c)), &mut n);
+    let dv = w - c;
+    let tau = dv.norm() / a;
+    if tau <= 0.0 {
+        return (n, 0.0);
+    }
+    let dir = dv / dv.norm();
+    let chords = ((tau / CHORD_S).ceil() as usize).clamp(1, MAX_CHORDS);
+    let dt = tau / chords as f64;
+    let mut prev = o1;
+    for i in 1..=chords {
+        let t = dt * i as f64;
+        let q = o1 + c * t + dir * (0.5 * a * t * t);
+        let u = if i == chords { w } else { c + dir * (a * t) };
+        push((prev, q), &mut n);
+        push((q, q + brake(u)), &mut n);
+        prev = q;
+    }
+    // A chord is at most a·dt²/8 from the parabola it stands for.
+    (n, a * dt * dt / 8.0)
+}
+
+impl FenceStack {
+    fn here(&self, lat_deg: f64, lon_deg: f64) -> Here {
+        let mut at = [Ne::zeros(); MAX_FENCES];
+        for (slot, f) in at.iter_mut().zip(self.fences()) {
+            *slot = f.frame.to_local(lat_deg, lon_deg);
+        }
+        Here { at }
+    }
+
+    /// Clearance of the vehicle (the smallest over the fences; 0 when outside one).
+    fn clearance(&self, here: &Here) -> f64 {
+        self.fences()
+            .zip(here.at)
+            .map(|(f, p)| f.clearance(p))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Every segment is clear by `r` in every fence.
+    fn clear(&self, here: &Here, segments: &[Segment], r: f64) -> bool {
+        self.fences().zip(here.at).all(|(f, p)| {
+            segments
+                .iter()
+                .all(|(a, b)| f.segment_clear(p + a, p + b, r))
+        })
+    }
+
+    /// The unit direction from the nearest boundary point of any fence toward the
+    /// vehicle (inward when inside), and that point's distance.
+    fn away_from_nearest(&self, here: &Here) -> Option<(Ne, f64)> {
+        self.fences()
+            .zip(here.at)
+            .filter_map(|(f, p)| {
+                let q = f.nearest_boundary(p)?;
+                Some(((p - q).try_normalize(1e-9)?, (p - q).norm()))
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    /// Limits a NED velocity setpoint so that the vehicle at `k` stops inside every
+    /// fence, at least the margin from each boundary (measured perpendicular to it).
+    ///
+    /// Horizontally, the stopping trajectory of the command ([`stopping_trajectory`];
+    /// lag = `response_s` + the fix's age, deceleration `decel_mps2`) must be clear
+    /// by the margin — or, when the vehicle is already closer, by its own clearance
+    /// (it may move along or away from the boundary, not closer). The command is
+    /// kept when it passes, else scaled down to the largest fraction that passes
+    /// (bisection); when even a stop (fraction 0) does not pass because the current
+    /// velocity carries the vehicle on, it is replaced by a velocity pointing back
+    /// in (away from the nearest boundary), which makes the autopilot brake at its
+    /// full rate. Outside a fence only the component back toward it is kept. With a
+    /// fix older than [`MAX_FIX_AGE_S`], a command toward the nearest boundary is
+    /// zeroed, and no vertical motion is allowed. Vertically, the lowest ceiling and
+    /// the highest floor with the vertical margin.
+    pub fn limit_velocity(
+        &self,
+        env: &Envelope,
+        k: &Kinematics,
+        command: [f32; 3],
+        max_speed_mps: f32,
+    ) -> ([f32; 3], Option<Limit>) {
+        let mut out = command;
+        let mut limit = None;
+        if self.is_empty() {
+            return (out, None);
+        }
+        let stale = k.age_s > MAX_FIX_AGE_S;
+        let age = f64::from(k.age_s.max(0.0));
+        let lag = env.response_s + age;
+        let a = env.decel_mps2;
+        let here = self.here(k.lat_deg, k.lon_deg);
+        let c = Ne::new(k.vel_ned_mps[0].into(), k.vel_ned_mps[1].into());
+        let mut w = Ne::new(command[0].into(), command[1].into());
+        let d0 = self.clearance(&here);
+        let horizontal = if d0 <= 0.0 {
+            // Outside one of the fences: back toward the first one it is outside of.
+            let back = self
+                .fences()
+                .zip(here.at)
+                .find(|(f, p)| !f.contains(*p))
+                .and_then(|(f, p)| f.way_back(p))
+                .unwrap_or_else(Ne::zeros);
+            let kept = back * w.dot(&back).max(0.0);
+            ((kept - w).norm() > 1e-3).then_some((kept, Limit::Outside))
+        } else {
+            let mut why = None;
+            let nearest = self.away_from_nearest(&here);
+            if stale && w.norm() > 1e-3 {
+                if let Some((away, _)) = nearest {
+                    if w.dot(&away) < 0.0 {
+                        w = Ne::zeros();
+                        why = Some(Limit::StaleFix { age_s: k.age_s });
+                    }
+                }
+            }
+            let r = env.margin_m.min(d0 - EPS_M).max(0.0);
+            let mut segments = [(Ne::zeros(), Ne::zeros()); MAX_SEGMENTS];
+            let mut safe = |v: Ne| {
+                let (n, slack) = stopping_trajectory(c, v, lag, a, &mut segments);
+                // The chords' slack, but never more than the start has (in the band
+                // the rule is "no closer than now").
+                let r = if d0 >= env.margin_m {
+                    r + slack
+                } else {
+                    (r + slack).min(d0 - EPS_M).max(0.0)
+                };
+                self.clear(&here, &segments[..n], r)
+            };
+            if safe(w) {
+                why.map(|y| (w, y))
+            } else if safe(Ne::zeros()) {
+                let (mut lo, mut hi) = (0.0, 1.0);
+                for _ in 0..BISECT_STEPS {
+                    let mid = 0.5 * (lo + hi);
+                    if safe(w * mid) {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                // A crawl is a stop (the bisection's last step is not a command).
+                let to = if w.norm() * lo < 0.01 { Ne::zeros() } else { w * lo };
+                Some((
+                    to,
+                    why.unwrap_or(Limit::Boundary {
+                        from: w.norm(),
+                        to: to.norm(),
+                    }),
+                ))
+            } else {
+                let away = nearest.map_or(Ne::zeros(), |(away, _)| away);
+                let speed = w.dot(&away).max(BACK_IN_MPS).min(max_speed_mps.into());
+                Some((away * speed, Limit::BackIn { clearance_m: d0 }))
+            }
+        };
+        if let Some((h, why)) = horizontal {
+            out[0] = h.x as f32;
+            out[1] = h.y as f32;
+            limit = Some(why);
+        }
+        // Vertical, NED: positive down.
+        let up = -f64::from(command[2]);
+        let cur_up = -f64::from(k.vel_ned_mps[2]);
+        let alt = f64::from(k.alt_rel_m);
+        let ceiling = f64::from(self.ceiling_m().unwrap_or(f32::MAX));
+        let floor = f64::from(self.floor_m().unwrap_or(f32::MIN));
+        let vertical = if up > 0.0 {
+            let room = ceiling - env.vertical_margin_m - alt - cur_up.max(0.0) * lag;
+            let allowed = if alt > ceiling || stale {
+                0.0
+            } else {
+                stoppable(room, a)
+            };
+            (up > allowed).then_some((allowed, Limit::Ceiling))
+        } else if up < 0.0 {
+            let room = alt - floor - env.vertical_margin_m - (-cur_up).max(0.0) * lag;
+            let allowed = if alt < floor || stale {
+                0.0
+            } else {
+                stoppable(room, a)
+            };
+            (-up > allowed).then_some((-allowed, Limit::Floor))
+        } else {
+            None
+        };
+        if let Some((allowed_up, why)) = vertical {
+            out[2] = -allowed_up as f32;
+            limit = limit.or(Some(if stale {
+                Limit::StaleFix { age_s: k.age_s }
+            } else {
+                why
+            }));
+        }
+        (out, limit)
+    }
+
+    /// Checks a straight flight from `from` (the vehicle, `None` if unknown) to
+    /// `to` (lat, lon): the target at least `margin_m` inside every fence; from
+    /// inside, every point of the path at least the margin from every boundary (or,
+    /// from closer, no closer than the start); from outside a fence (and not in a
+    /// keep-out), a path that enters once and stays in, and passes no keep-out
+    /// within the margin. An unknown position is refused: the path cannot be
+    /// checked. `Err` says why.
+    pub fn check_path(
+        &self,
+        from: Option<(f64, f64)>,
+        to: (f64, f64),
+        margin_m: f64,
+        scratch: &mut Vec<f64>,
+    ) -> Result<(), String> {
+        if self.is_empty() {
+            return Ok(());
+        }
+        let target = self.here(to.0, to.1);
+        if self.clearance(&target) <= 0.0 {
+            return Err("target outside the fence".to_string());
+        }
+        if !self.clear(&target, &[(Ne::zeros(), Ne::zeros())], margin_m) {
+            return Err(format!("target within {margin_m:.1} m of the fence"));
+        }
+        let Some(from) = from else {
+            return Err("position unknown: path not checked".to_string());
+        };
+        let here = self.here(from.0, from.1);
+        let d0 = self.clearance(&here);
+        let n = self.len();
+        if d0 > 0.0 {
+            let r = margin_m.min(d0 - EPS_M).max(0.0);
+            let ok = self
+                .fences()
+                .zip(here.at)
+                .zip(target.at)
+                .all(|((f, p), t)| f.segment_clear(p, t, r));
+            return if ok {
+                Ok(())
+            } else {
+                Err(format!("path passes within {r:.1} m of the fence"))
+            };
+        }
+        let fences = || self.fences().zip(here.at[..n].iter().zip(&target.at[..n]));
+        if fences().any(|(f, (p, _))| f.in_keep_out(*p)) {
+            return Err("vehicle in a keep-out: fly out first".to_string());
+        }
+        if !fences().all(|(f, (p, t))| f.segment_clear_of_keep_outs(*p, *t, margin_m)) {
+            return Err("path from outside nears a keep-out".to_string());
+        }
+        // Outside a keep-in: once the path is inside every keep-in it must stay.
+        scratch.clear();
+        for (f, (p, t)) in fences() {
+            f.keep_in_crossings(*p, *t, scratch);
+        }
+        scratch.push(1.0);
+        scratch.sort_unstable_by(f64::total_cmp);
+        let mut entered = false;
+        let mut last = 0.0;
+        for &u in scratch.iter() {
+            let mid = 0.5 * (last + u);
+            last = u;
+            let inside = fences().all(|(f, (p, t))| f.contains(p + (t - p) * mid));
+            if entered && !inside {
+                return Err("path from outside leaves the fence again".to_string());
+            }
+            entered |= inside;
+        }
+        Ok(())
     }
 }
 
@@ -204,7 +529,8 @@ impl Arbiter {
 mod tests {
     use super::*;
     use crate::arbiter::geofence::LocalFrame;
-    use crate::arbiter::tests::{flying, refusal, sample, settings, S};
+    use crate::arbiter::tests::{executed, flying, refusal, sample, settings, S};
+    use crate::arbiter::VehicleView;
     use skymesh_ipc_types::{
         AckResult, Command,
         CommandSource::{Operator, Safety, ShotEngine, SwarmQueue, Vision},
@@ -427,5 +753,354 @@ mod tests {
         let fx = a.fence_sets();
         assert_eq!(fx.len(), 1);
         assert_eq!(fx[0], keep_in(SwarmQueue, (-50.0, 50.0), (-50.0, 50.0)));
+    }
+
+    // ---- The velocity envelope and the path check over the stack ----
+
+    fn envelope() -> Envelope {
+        let s = settings();
+        Envelope {
+            decel_mps2: s.fence_deceleration_mps2.into(),
+            margin_m: s.fence_margin_m.into(),
+            vertical_margin_m: s.fence_vertical_margin_m.into(),
+            response_s: s.fence_response_s.into(),
+        }
+    }
+
+    fn at(p: Ne, vel: Ne, age_s: f32) -> Kinematics {
+        let [lat_deg, lon_deg] = ll(p.x, p.y);
+        Kinematics {
+            lat_deg,
+            lon_deg,
+            alt_rel_m: 10.0,
+            vel_ned_mps: [vel.x as f32, vel.y as f32, 0.0],
+            age_s,
+        }
+    }
+
+    /// Flies a vehicle (setpoints take effect `lag` s late, velocity follows them at
+    /// up to `accel`) on `command` through the envelope every 20 ms for `secs`, then
+    /// stops the stream (a zero setpoint) until it rests. Returns the largest value
+    /// of `toward(position)` seen and the rest position.
+    fn fly(
+        stack: &FenceStack,
+        start: Ne,
+        vel: Ne,
+        command: Ne,
+        secs: f64,
+        toward: impl Fn(Ne) -> f64,
+    ) -> (f64, Ne) {
+        let env = envelope();
+        let (dt, lag, accel) = (0.02, 0.3, 2.5);
+        let delay = (lag / dt) as usize;
+        let (mut p, mut v) = (start, vel);
+        let mut queue = std::collections::VecDeque::from(vec![vel; delay]);
+        let mut worst = toward(p);
+        let steps = (secs / dt) as usize;
+        for i in 0..steps + 2000 {
+            let sp = if i < steps {
+                let (out, _) = stack.limit_velocity(
+                    &env,
+                    &at(p, v, 0.0),
+                    [command.x as f32, command.y as f32, 0.0],
+                    12.0,
+                );
+                Ne::new(out[0].into(), out[1].into())
+            } else {
+                Ne::zeros()
+            };
+            queue.push_back(sp);
+            let target = queue.pop_front().unwrap();
+            let dv = target - v;
+            let step = accel * dt;
+            v += if dv.norm() > step {
+                dv * (step / dv.norm())
+            } else {
+                dv
+            };
+            p += v * dt;
+            worst = worst.max(toward(p));
+        }
+        assert!(v.norm() < 1e-6, "came to rest");
+        (worst, p)
+    }
+
+    fn boxed(source: CommandSource) -> Arbiter {
+        let mut a = Arbiter::new(settings());
+        a.set_geofence(&keep_in(source, (-50.0, 50.0), (-50.0, 50.0)), 1);
+        a
+    }
+
+    #[test]
+    fn at_ten_degrees_incidence_the_vehicle_stops_the_margin_from_the_wall() {
+        let a = boxed(SwarmQueue);
+        let margin = envelope().margin_m;
+        // 5 m/s at 10 degrees to the north wall (x = 50), for 30 s: along the ray the
+        // wall is 115 m away, perpendicular 20 m.
+        let dir = Ne::new(10f64.to_radians().sin(), 10f64.to_radians().cos());
+        let (north, rest) = fly(
+            a.fence(),
+            Ne::new(30.0, -45.0),
+            Ne::zeros(),
+            dir * 5.0,
+            30.0,
+            |p| p.x,
+        );
+        assert!(north <= 50.0 - margin + 1e-6, "{north} (rest {rest:?})");
+        // It did fly on along the wall and toward it as far as allowed.
+        assert!(north > 50.0 - margin - 4.0, "{north}");
+        // Shallower still: 2 degrees.
+        let dir = Ne::new(2f64.to_radians().sin(), 2f64.to_radians().cos());
+        let (north, _) = fly(
+            a.fence(),
+            Ne::new(44.0, -45.0),
+            Ne::zeros(),
+            dir * 8.0,
+            12.0,
+            |p| p.x,
+        );
+        assert!(north <= 50.0 - margin + 1e-6, "{north}");
+    }
+
+    #[test]
+    fn the_current_velocity_toward_a_wall_counts_when_the_command_points_elsewhere() {
+        let a = boxed(SwarmQueue);
+        let env = envelope();
+        // 5 m/s east toward the east wall (y = 50) 3 m away, commanded north: no
+        // braking distance left, so the envelope commands back in (westward).
+        let k = at(Ne::new(0.0, 47.0), Ne::new(0.0, 5.0), 0.0);
+        let (out, why) = a.fence().limit_velocity(&env, &k, [3.0, 0.0, 0.0], 12.0);
+        assert!(matches!(why, Some(Limit::BackIn { .. })), "{why:?}");
+        assert!(out[1] < 0.0, "points back in: {out:?}");
+        // 12 m away the stop fits (1.5 m lag + 8.3 m braking + 2 m margin): the
+        // vehicle flown north on that command never comes within the margin.
+        let (east, _) = fly(
+            a.fence(),
+            Ne::new(0.0, 38.0),
+            Ne::new(0.0, 5.0),
+            Ne::new(3.0, 0.0),
+            5.0,
+            |p| p.y,
+        );
+        assert!(east <= 50.0 - env.margin_m + 1e-6, "{east}");
+        // Moving east is also limited when the command only continues it.
+        let k = at(Ne::new(0.0, 30.0), Ne::new(0.0, 5.0), 0.0);
+        let (out, why) = a.fence().limit_velocity(&env, &k, [0.0, 8.0, 0.0], 12.0);
+        assert!(matches!(why, Some(Limit::Boundary { .. })), "{why:?}");
+        assert!(out[1] < 8.0 && out[1] > 0.0, "{out:?}");
+    }
+
+    #[test]
+    fn a_stale_fix_refuses_motion_toward_the_boundary_and_adds_its_age() {
+        let a = boxed(SwarmQueue);
+        let env = envelope();
+        let toward = [0.0, 2.0, 0.0];
+        let fresh = at(Ne::new(0.0, 30.0), Ne::zeros(), 0.1);
+        let (out, why) = a.fence().limit_velocity(&env, &fresh, toward, 12.0);
+        assert_eq!((out, why), (toward, None), "fresh: free");
+        let stale = at(Ne::new(0.0, 30.0), Ne::zeros(), 0.8);
+        let (out, why) = a.fence().limit_velocity(&env, &stale, toward, 12.0);
+        assert_eq!(out, [0.0; 3]);
+        assert_eq!(why, Some(Limit::StaleFix { age_s: 0.8 }));
+        assert_eq!(
+            why.unwrap().to_string(),
+            "fix 0.8 s old: no motion to fence"
+        );
+        // Away from the nearest wall is still allowed.
+        let (out, why) = a
+            .fence()
+            .limit_velocity(&env, &stale, [0.0, -2.0, 0.0], 12.0);
+        assert_eq!((out, why), ([0.0, -2.0, 0.0], None));
+        // The age lengthens the stop: moving east at 4 m/s 13 m from the wall, a
+        // 0.4 s old fix allows less than a fresh one.
+        let speed = |age| {
+            let k = at(Ne::new(0.0, 37.0), Ne::new(0.0, 4.0), age);
+            a.fence().limit_velocity(&env, &k, [0.0, 6.0, 0.0], 12.0).0[1]
+        };
+        assert!(speed(0.4) < speed(0.0), "{} {}", speed(0.4), speed(0.0));
+    }
+
+    #[test]
+    fn inside_the_margin_only_along_or_away() {
+        let a = boxed(SwarmQueue);
+        let env = envelope();
+        let k = at(Ne::new(0.0, 49.0), Ne::zeros(), 0.0);
+        let (out, _) = a.fence().limit_velocity(&env, &k, [0.0, 1.0, 0.0], 12.0);
+        assert_eq!(out, [0.0; 3], "closer: no");
+        let (out, why) = a.fence().limit_velocity(&env, &k, [0.0, -3.0, 0.0], 12.0);
+        assert_eq!((out, why), ([0.0, -3.0, 0.0], None), "away: free");
+        // Outside: only the way back.
+        let k = at(Ne::new(0.0, 55.0), Ne::zeros(), 0.0);
+        let (out, why) = a.fence().limit_velocity(&env, &k, [1.0, -2.0, 0.0], 12.0);
+        assert_eq!(why, Some(Limit::Outside));
+        assert!(
+            out[0].abs() < 1e-3 && (out[1] + 2.0).abs() < 1e-3,
+            "{out:?}"
+        );
+    }
+
+    #[test]
+    fn two_fences_hold_together_and_the_box_alone_after_the_other_is_cleared() {
+        let mut a = boxed(SwarmQueue);
+        a.set_geofence(&keep_in(ShotEngine, (-20.0, 20.0), (-20.0, 20.0)), 1);
+        let env = envelope();
+        // North at 5 m/s from the middle: the Solo fence (x = 20) is the nearer wall.
+        let (north, _) = fly(
+            a.fence(),
+            Ne::zeros(),
+            Ne::zeros(),
+            Ne::new(5.0, 0.0),
+            20.0,
+            |p| p.x,
+        );
+        assert!(
+            north <= 20.0 - env.margin_m + 1e-6 && north > 17.0,
+            "{north}"
+        );
+        a.set_geofence(&clear(ShotEngine, None, 1), 1);
+        let (north, _) = fly(
+            a.fence(),
+            Ne::zeros(),
+            Ne::zeros(),
+            Ne::new(5.0, 0.0),
+            30.0,
+            |p| p.x,
+        );
+        assert!(
+            north <= 50.0 - env.margin_m + 1e-6 && north > 47.0,
+            "box: {north}"
+        );
+        // Lowest ceiling, highest floor.
+        let mut low = keep_in(Vision, (-100.0, 100.0), (-100.0, 100.0));
+        low.ceiling_m = 12.0;
+        a.set_geofence(&low, 1);
+        let k = at(Ne::zeros(), Ne::zeros(), 0.0);
+        let (out, why) = a.fence().limit_velocity(&env, &k, [0.0, 0.0, -3.0], 12.0);
+        assert_eq!(why, Some(Limit::Ceiling));
+        assert!(
+            (out[2] + (2.0f32 * 1.5 * 1.0).sqrt()).abs() < 1e-3,
+            "{out:?}"
+        );
+    }
+
+    fn goto_none(north: f64, east: f64) -> Command {
+        let [lat_deg, lon_deg] = ll(north, east);
+        Command::GoTo {
+            lat_deg,
+            lon_deg,
+            alt_rel_m: 10.0,
+            yaw_deg: None,
+            speed_mps: None,
+        }
+    }
+
+    #[test]
+    fn goto_always_carries_a_capped_speed() {
+        let mut a = Arbiter::new(settings());
+        let v = flying(0.0, 0.0, [0.0; 3]);
+        let d = a.decide(S, &sample(Operator, goto_none(10.0, 0.0), S), &v);
+        let Command::GoTo { speed_mps, .. } = executed(&d) else {
+            unreachable!()
+        };
+        assert_eq!(speed_mps, Some(settings().max_horizontal_speed_mps));
+        let mut fast = goto_none(10.0, 0.0);
+        if let Command::GoTo { speed_mps, .. } = &mut fast {
+            *speed_mps = Some(20.0);
+        }
+        let d = a.decide(S, &sample(Operator, fast, S), &v);
+        assert_eq!(d.result(), AckResult::Limited);
+    }
+
+    #[test]
+    fn goto_under_a_fence_needs_a_position_a_clear_path_and_a_target_inside_the_margin() {
+        let mut a = boxed(SwarmQueue);
+        let mut with_keep_out = keep_in(Operator, (-100.0, 100.0), (-100.0, 100.0));
+        // A keep-out between 60 and 70 m east, from south to north of the box.
+        let out_ring = [
+            ll(-80.0, 60.0),
+            ll(80.0, 60.0),
+            ll(80.0, 70.0),
+            ll(-80.0, 70.0),
+        ];
+        assert!(with_keep_out.push_polygon(FenceKind::KeepOut, &out_ring));
+        a.set_geofence(&with_keep_out, 1);
+        // Unknown position: refused with the fence, clearly.
+        let d = a.decide(
+            S,
+            &sample(Operator, goto_none(10.0, 0.0), S),
+            &VehicleView::default(),
+        );
+        assert_eq!(
+            refusal(&d),
+            (
+                RefusalReason::Geofence,
+                "position unknown: path not checked"
+            )
+        );
+        let takeoff = Command::Takeoff { alt_rel_m: 10.0 };
+        let d = a.decide(S, &sample(Operator, takeoff, S), &VehicleView::default());
+        assert_eq!(
+            refusal(&d),
+            (
+                RefusalReason::Geofence,
+                "position unknown: takeoff not checked"
+            )
+        );
+        // From outside (80 m east, beyond the keep-out), back in through it: refused.
+        let outside = flying(0.0, 80.0, [0.0; 3]);
+        let d = a.decide(S, &sample(Operator, goto_none(0.0, 0.0), S), &outside);
+        assert_eq!(
+            refusal(&d),
+            (
+                RefusalReason::Geofence,
+                "path from outside nears a keep-out"
+            )
+        );
+        // From outside the box but not beyond the keep-out (55 m east): back in, fine.
+        let near = flying(0.0, 55.0, [0.0; 3]);
+        let d = a.decide(S, &sample(Operator, goto_none(0.0, 30.0), S), &near);
+        assert_ne!(d.result(), AckResult::Refused, "{d:?}");
+        // ... but not to a target within the margin of the wall.
+        let d = a.decide(S, &sample(Operator, goto_none(0.0, 49.0), S), &near);
+        assert_eq!(
+            refusal(&d),
+            (RefusalReason::Geofence, "target within 2.0 m of the fence")
+        );
+        // From inside: a path that grazes the north wall closer than the margin.
+        let v = flying(40.0, -40.0, [0.0; 3]);
+        let d = a.decide(S, &sample(Operator, goto_none(40.0, 40.0), S), &v);
+        assert_ne!(d.result(), AckResult::Refused, "parallel, 10 m off: {d:?}");
+        let d = a.decide(S, &sample(Operator, goto_none(47.0, 0.0), S), &v);
+        assert_eq!(d.result(), AckResult::Accepted, "3 m off: {d:?}");
+        let mut bent = keep_in(Vision, (-100.0, 100.0), (-100.0, 100.0));
+        // A notch in the north wall of a U-shaped Vision fence the path cuts across.
+        bent.polygons[0] = Default::default();
+        bent.polygon_count = 0;
+        let u = [
+            ll(-100.0, -100.0),
+            ll(100.0, -100.0),
+            ll(100.0, -10.0),
+            ll(41.0, -10.0),
+            ll(41.0, 10.0),
+            ll(100.0, 10.0),
+            ll(100.0, 100.0),
+            ll(-100.0, 100.0),
+        ];
+        assert!(bent.push_polygon(FenceKind::KeepIn, &u));
+        a.set_geofence(&bent, 1);
+        let d = a.decide(S, &sample(Operator, goto_none(40.0, 40.0), S), &v);
+        assert_eq!(
+            refusal(&d),
+            (
+                RefusalReason::Geofence,
+                "path passes within 2.0 m of the fence"
+            )
+        );
+        // Takeoff outside the fences refused; at the box's edge fine.
+        let d = a.decide(S, &sample(Operator, takeoff, S), &outside);
+        assert_eq!(
+            refusal(&d),
+            (RefusalReason::Geofence, "vehicle outside the fence")
+        );
     }
 }

@@ -1,5 +1,14 @@
-//! Geofence geometry: polygons in a local tangent plane, inside tests, the distance
-//! along a ray to the first boundary crossing, and the velocity envelope. Pure.
+//! Geofence geometry: polygons in a local tangent plane, inside tests, distances
+//! perpendicular to the boundary (clearance of points and segments), the distance
+//! along a ray to the first boundary crossing. Pure. The velocity envelope built on
+//! them is in [`super::fence_stack`].
+//!
+//! **Clearance** of a point inside the fence is a lower bound of its distance to the
+//! nearest point outside: the smallest distance to any keep-out's boundary, and to
+//! the boundary of the keep-in that contains it (with several overlapping keep-ins,
+//! the largest of those). A segment is *clear by `r`* when it starts inside and every
+//! point of it has clearance ≥ `r` (so it crosses no boundary): the fence shrunk by
+//! the margin is where the clearance is at least the margin.
 //!
 //! **Frame.** Vertices and vehicle positions are projected onto a plane tangent to
 //! the ellipsoid at the first vertex of the first polygon (x north, y east, metres;
@@ -62,6 +71,37 @@ impl LocalFrame {
 
 fn cross(a: Ne, b: Ne) -> f64 {
     a.x * b.y - a.y * b.x
+}
+
+/// Squared distance from `p` to the segment `a`–`b`.
+fn point_segment_dist2(p: Ne, a: Ne, b: Ne) -> f64 {
+    let e = b - a;
+    let len2 = e.norm_squared();
+    let u = if len2 > 0.0 {
+        ((p - a).dot(&e) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + e * u - p).norm_squared()
+}
+
+/// The segments `a`–`b` and `c`–`d` cross at a point inside both.
+fn segments_cross(a: Ne, b: Ne, c: Ne, d: Ne) -> bool {
+    let (d1, d2) = (cross(b - a, c - a), cross(b - a, d - a));
+    let (d3, d4) = (cross(d - c, a - c), cross(d - c, b - c));
+    ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+}
+
+/// Squared distance between the segments `a`–`b` and `c`–`d` (0 when they cross).
+fn segment_dist2(a: Ne, b: Ne, c: Ne, d: Ne) -> f64 {
+    if segments_cross(a, b, c, d) {
+        return 0.0;
+    }
+    point_segment_dist2(a, c, d)
+        .min(point_segment_dist2(b, c, d))
+        .min(point_segment_dist2(c, a, b))
+        .min(point_segment_dist2(d, a, b))
 }
 
 /// One fence polygon in the local plane.
@@ -145,6 +185,59 @@ impl Polygon {
             }
         }
         best.1
+    }
+
+    /// Distance from `p` to the boundary (perpendicular to the nearest edge).
+    pub fn boundary_distance(&self, p: Ne) -> f64 {
+        self.edges()
+            .map(|(a, b)| point_segment_dist2(p, a, b))
+            .fold(f64::INFINITY, f64::min)
+            .sqrt()
+    }
+
+    /// Every point of the segment `a`–`b` is at least `r` from the boundary (and so
+    /// the segment crosses no edge). Edges whose bounding box is farther than `r`
+    /// from the segment's are skipped without computing a distance.
+    pub fn segment_clear_of_boundary(&self, a: Ne, b: Ne, r: f64) -> bool {
+        let lo = a.inf(&b) - Ne::repeat(r);
+        let hi = a.sup(&b) + Ne::repeat(r);
+        if self.max.x < lo.x || self.min.x > hi.x || self.max.y < lo.y || self.min.y > hi.y {
+            return true;
+        }
+        let r2 = r * r;
+        self.edges().all(|(c, d)| {
+            if c.x.max(d.x) < lo.x
+                || c.x.min(d.x) > hi.x
+                || c.y.max(d.y) < lo.y
+                || c.y.min(d.y) > hi.y
+            {
+                return true;
+            }
+            if segments_cross(a, b, c, d) {
+                return false;
+            }
+            // Touching the boundary is not clear, even for r = 0.
+            let d2 = segment_dist2(a, b, c, d);
+            d2 > 0.0 && d2 >= r2
+        })
+    }
+
+    /// The fractions `u` in (0, 1) at which the segment `a`–`b` crosses an edge.
+    fn segment_crossings(&self, a: Ne, b: Ne, out: &mut Vec<f64>) {
+        let dir = b - a;
+        for (c, d) in self.edges() {
+            let e = d - c;
+            let denom = cross(dir, e);
+            if denom.abs() < 1e-12 {
+                continue;
+            }
+            let ca = c - a;
+            let t = cross(ca, e) / denom;
+            let u = cross(ca, dir) / denom;
+            if (0.0..=1.0).contains(&u) && t > 0.0 && t < 1.0 {
+                out.push(t);
+            }
+        }
     }
 }
 
@@ -251,33 +344,123 @@ impl Fence {
             .min_by(|a, b| (a - p).norm_squared().total_cmp(&(b - p).norm_squared()))?;
         (q - p).try_normalize(1e-9)
     }
+
+    /// Clearance of `p` (see the module doc): 0 when outside.
+    pub fn clearance(&self, p: Ne) -> f64 {
+        let mut keep_in: Option<f64> = None;
+        let mut out = f64::INFINITY;
+        for poly in &self.polygons {
+            match poly.kind {
+                FenceKind::KeepOut => {
+                    if poly.contains(p) {
+                        return 0.0;
+                    }
+                    out = out.min(poly.boundary_distance(p));
+                }
+                FenceKind::KeepIn => {
+                    let c = if poly.contains(p) {
+                        poly.boundary_distance(p)
+                    } else {
+                        0.0
+                    };
+                    keep_in = Some(keep_in.map_or(c, |k| k.max(c)));
+                }
+            }
+        }
+        out.min(keep_in.unwrap_or(f64::INFINITY))
+    }
+
+    /// The segment `a`–`b` is clear by `r` (see the module doc): it starts inside,
+    /// stays within one keep-in that contains `a` (when there are keep-ins) and out
+    /// of every keep-out, at least `r` from each of their boundaries.
+    pub fn segment_clear(&self, a: Ne, b: Ne, r: f64) -> bool {
+        let mut has_keep_in = false;
+        let mut in_keep_in = false;
+        for poly in &self.polygons {
+            match poly.kind {
+                FenceKind::KeepOut => {
+                    if poly.contains(a) || !poly.segment_clear_of_boundary(a, b, r) {
+                        return false;
+                    }
+                }
+                FenceKind::KeepIn => {
+                    has_keep_in = true;
+                    in_keep_in =
+                        in_keep_in || (poly.contains(a) && poly.segment_clear_of_boundary(a, b, r));
+                }
+            }
+        }
+        in_keep_in || !has_keep_in
+    }
+
+    /// The segment `a`–`b` stays at least `r` from every keep-out (and out of them).
+    pub fn segment_clear_of_keep_outs(&self, a: Ne, b: Ne, r: f64) -> bool {
+        self.polygons
+            .iter()
+            .filter(|poly| poly.kind == FenceKind::KeepOut)
+            .all(|poly| !poly.contains(a) && poly.segment_clear_of_boundary(a, b, r))
+    }
+
+    /// In a keep-out.
+    pub fn in_keep_out(&self, p: Ne) -> bool {
+        self.polygons
+            .iter()
+            .any(|poly| poly.kind == FenceKind::KeepOut && poly.contains(p))
+    }
+
+    /// Adds the fractions in (0, 1) at which `a`–`b` crosses a keep-in edge.
+    pub fn keep_in_crossings(&self, a: Ne, b: Ne, out: &mut Vec<f64>) {
+        for poly in &self.polygons {
+            if poly.kind == FenceKind::KeepIn {
+                poly.segment_crossings(a, b, out);
+            }
+        }
+    }
+
+    /// The nearest point of any polygon's boundary to `p`, `None` without polygons.
+    pub fn nearest_boundary(&self, p: Ne) -> Option<Ne> {
+        self.polygons
+            .iter()
+            .map(|poly| poly.nearest_boundary_point(p))
+            .min_by(|a, b| (a - p).norm_squared().total_cmp(&(b - p).norm_squared()))
+    }
 }
 
 /// How hard the envelope brakes, from the arbiter settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Envelope {
-    /// Deceleration the vehicle is assumed to manage, m/s².
+    /// Deceleration (and acceleration) the vehicle is assumed to manage, m/s².
     pub decel_mps2: f64,
     /// Horizontal distance kept from the boundary, m.
     pub margin_m: f64,
     /// Vertical distance kept from ceiling and floor, m.
     pub vertical_margin_m: f64,
-    /// Telemetry age plus control lag: the current velocity is assumed to continue
-    /// for this long before a new setpoint takes effect, s.
+    /// Control lag: the current velocity is assumed to continue for this long (plus
+    /// the position fix's age) before a new setpoint takes effect, s.
     pub response_s: f64,
 }
 
-/// Why a velocity was reduced (formatted only when it was).
+/// A position fix older than this (s) is not trusted to move toward a boundary.
+pub const MAX_FIX_AGE_S: f32 = 0.5;
+
+/// Why a velocity was changed (formatted only when it was).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Limit {
-    /// Speed toward the horizontal boundary cut to stop `room_m` before it.
+    /// Horizontal speed cut so the stop stays the margin inside.
     Boundary {
-        room_m: f64,
         from: f64,
         to: f64,
     },
+    /// Even a stop now would end within the margin: commanded back in.
+    BackIn {
+        clearance_m: f64,
+    },
     /// Outside: only the component back toward the fence kept.
     Outside,
+    /// The position fix is too old to move toward a boundary.
+    StaleFix {
+        age_s: f32,
+    },
     Ceiling,
     Floor,
 }
@@ -285,10 +468,12 @@ pub enum Limit {
 impl core::fmt::Display for Limit {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Limit::Boundary { room_m, from, to } => {
-                write!(f, "fence {room_m:.1} m: {from:.1}->{to:.1} m/s")
+            Limit::Boundary { from, to } => write!(f, "fence: {from:.1}->{to:.1} m/s"),
+            Limit::BackIn { clearance_m } => {
+                write!(f, "fence {clearance_m:.1} m: braking back in")
             }
             Limit::Outside => f.write_str("outside fence: only back in"),
+            Limit::StaleFix { age_s } => write!(f, "fix {age_s:.1} s old: no motion to fence"),
             Limit::Ceiling => f.write_str("fence ceiling"),
             Limit::Floor => f.write_str("fence floor"),
         }
@@ -296,94 +481,6 @@ impl core::fmt::Display for Limit {
 }
 
 /// Fastest speed from which the vehicle still stops within `room_m`.
-fn stoppable(room_m: f64, decel: f64) -> f64 {
+pub fn stoppable(room_m: f64, decel: f64) -> f64 {
     (2.0 * decel * room_m.max(0.0)).sqrt()
 }
-
-impl Fence {
-    /// Limits a NED velocity setpoint so the vehicle at `pos`/`alt_rel_m`, moving at
-    /// `current` (NED), stops before the envelope: along the commanded horizontal
-    /// direction the speed is at most √(2·a·d), d = distance to the first boundary
-    /// crossing − margin − the distance covered during the response time; outside,
-    /// only the component back toward the fence is kept; vertically the same against
-    /// ceiling and floor. Returns the velocity and the first limit applied.
-    pub fn limit_velocity(
-        &self,
-        env: &Envelope,
-        pos: Ne,
-        alt_rel_m: f32,
-        current: [f32; 3],
-        command: [f32; 3],
-        scratch: &mut Vec<f64>,
-    ) -> ([f32; 3], Option<Limit>) {
-        let mut limit = None;
-        let mut out = command;
-        let cmd_h = Ne::new(command[0].into(), command[1].into());
-        let cur_h = Ne::new(current[0].into(), current[1].into());
-        let speed = cmd_h.norm();
-        if speed > 1e-3 {
-            let dir = cmd_h / speed;
-            let new_h = if self.contains(pos) {
-                let toward = cur_h.dot(&dir).max(0.0);
-                match self.exit_distance(pos, dir, scratch) {
-                    Some(d) => {
-                        let room = d - env.margin_m - toward * env.response_s;
-                        let allowed = stoppable(room, env.decel_mps2);
-                        if speed > allowed {
-                            limit = Some(Limit::Boundary {
-                                room_m: room.max(0.0),
-                                from: speed,
-                                to: allowed,
-                            });
-                            dir * allowed
-                        } else {
-                            cmd_h
-                        }
-                    }
-                    None => cmd_h,
-                }
-            } else {
-                let back = self.way_back(pos).unwrap_or_else(Ne::zeros);
-                let kept = back * cmd_h.dot(&back).max(0.0);
-                if (kept - cmd_h).norm() > 1e-3 {
-                    limit = Some(Limit::Outside);
-                }
-                kept
-            };
-            out[0] = new_h.x as f32;
-            out[1] = new_h.y as f32;
-        }
-        // Vertical, NED: positive down.
-        let up = -f64::from(command[2]);
-        let cur_up = -f64::from(current[2]);
-        let alt = f64::from(alt_rel_m);
-        let (ceiling, floor) = (f64::from(self.ceiling_m), f64::from(self.floor_m));
-        let vertical = if up > 0.0 {
-            let room = ceiling - env.vertical_margin_m - alt - cur_up.max(0.0) * env.response_s;
-            let allowed = if alt > ceiling {
-                0.0
-            } else {
-                stoppable(room, env.decel_mps2)
-            };
-            (up > allowed).then_some((allowed, Limit::Ceiling))
-        } else if up < 0.0 {
-            let room = alt - floor - env.vertical_margin_m - (-cur_up).max(0.0) * env.response_s;
-            let allowed = if alt < floor {
-                0.0
-            } else {
-                stoppable(room, env.decel_mps2)
-            };
-            (-up > allowed).then_some((-allowed, Limit::Floor))
-        } else {
-            None
-        };
-        if let Some((allowed_up, why)) = vertical {
-            out[2] = -allowed_up as f32;
-            limit = limit.or(Some(why));
-        }
-        (out, limit)
-    }
-}
-
-/// A position fix older than this (s) is not trusted to move toward a boundary.
-pub const MAX_FIX_AGE_S: f32 = 0.5;

@@ -1,5 +1,5 @@
 //! Geometry of [`super::geofence`]: polygons in local metres unless a test is about
-//! the projection.
+//! the projection. The envelope on top of it: `fence_envelope_tests`.
 
 use super::geofence::*;
 use skymesh_ipc_types::{FenceKind, GeofenceSet};
@@ -44,13 +44,6 @@ fn fence(polygons: Vec<Polygon>) -> Fence {
         floor_m: -5.0,
     }
 }
-
-const ENV: Envelope = Envelope {
-    decel_mps2: 1.5,
-    margin_m: 2.0,
-    vertical_margin_m: 1.0,
-    response_s: 0.0,
-};
 
 #[test]
 fn point_in_convex_and_concave_polygons_in_either_winding() {
@@ -163,98 +156,6 @@ fn way_back_points_to_the_nearest_boundary_of_the_violated_area() {
 }
 
 #[test]
-fn velocities_are_limited_to_stop_before_the_boundary() {
-    let f = fence(vec![square(FenceKind::KeepIn, 50.0)]);
-    let mut s = Vec::new();
-    // 40 m from the north edge, 2 m margin: √(2·1.5·38) ≈ 10.7 m/s allowed.
-    let (v, why) = f.limit_velocity(&ENV, ne(10.0, 0.0), 10.0, [0.0; 3], [5.0, 0.0, 0.0], &mut s);
-    assert_eq!((v, why), ([5.0, 0.0, 0.0], None));
-    // 10 m out: √(2·1.5·8) ≈ 4.9 m/s, same direction.
-    let (v, why) = f.limit_velocity(&ENV, ne(40.0, 0.0), 10.0, [0.0; 3], [8.0, 6.0, 0.0], &mut s);
-    assert!(matches!(why, Some(Limit::Boundary { .. })), "{why:?}");
-    let speed = v[0].hypot(v[1]);
-    // The ray at (0.8, 0.6) meets the north edge after 12.5 m: √(2·1.5·10.5) ≈ 5.6.
-    assert!((speed - 5.612).abs() < 0.01, "{v:?}");
-    assert!(
-        (v[0] / v[1] - 8.0 / 6.0).abs() < 1e-4,
-        "direction kept: {v:?}"
-    );
-    // Within the margin: nothing toward the edge, but along it or away is free.
-    let (v, _) = f.limit_velocity(&ENV, ne(49.0, 0.0), 10.0, [0.0; 3], [3.0, 0.0, 0.0], &mut s);
-    assert_eq!(v, [0.0, 0.0, 0.0]);
-    let (v, why) = f.limit_velocity(
-        &ENV,
-        ne(49.0, 0.0),
-        10.0,
-        [0.0; 3],
-        [-3.0, 0.0, 0.0],
-        &mut s,
-    );
-    assert_eq!((v, why), ([-3.0, 0.0, 0.0], None));
-    // Moving toward the edge already: the response time eats into the room.
-    let slow = Envelope {
-        response_s: 1.0,
-        ..ENV
-    };
-    let (v, _) = f.limit_velocity(
-        &slow,
-        ne(40.0, 0.0),
-        10.0,
-        [4.0, 0.0, 0.0],
-        [8.0, 0.0, 0.0],
-        &mut s,
-    );
-    assert!((v[0] - (2.0f32 * 1.5 * 4.0).sqrt()).abs() < 1e-3, "{v:?}");
-}
-
-#[test]
-fn outside_only_the_way_back_is_allowed() {
-    let f = fence(vec![square(FenceKind::KeepIn, 50.0)]);
-    let mut s = Vec::new();
-    let (v, why) = f.limit_velocity(&ENV, ne(60.0, 0.0), 10.0, [0.0; 3], [2.0, 1.0, 0.0], &mut s);
-    assert_eq!((v, why), ([0.0, 0.0, 0.0], Some(Limit::Outside)));
-    let (v, why) = f.limit_velocity(
-        &ENV,
-        ne(60.0, 0.0),
-        10.0,
-        [0.0; 3],
-        [-2.0, 1.0, 0.0],
-        &mut s,
-    );
-    assert_eq!((v, why), ([-2.0, 0.0, 0.0], Some(Limit::Outside)));
-    let (v, why) = f.limit_velocity(
-        &ENV,
-        ne(60.0, 0.0),
-        10.0,
-        [0.0; 3],
-        [-2.0, 0.0, 0.0],
-        &mut s,
-    );
-    assert_eq!((v, why), ([-2.0, 0.0, 0.0], None));
-}
-
-#[test]
-fn ceiling_and_floor_limit_vertical_speed() {
-    let f = fence(vec![square(FenceKind::KeepIn, 50.0)]);
-    let mut s = Vec::new();
-    // 3 m below the ceiling, 1 m margin: climb at most √(2·1.5·2) ≈ 2.45 m/s.
-    let (v, why) = f.limit_velocity(&ENV, ne(0.0, 0.0), 47.0, [0.0; 3], [0.0, 0.0, -5.0], &mut s);
-    assert_eq!(why, Some(Limit::Ceiling));
-    assert!((v[2] + 2.449).abs() < 1e-3, "{v:?}");
-    let (v, why) = f.limit_velocity(&ENV, ne(0.0, 0.0), 55.0, [0.0; 3], [0.0, 0.0, -1.0], &mut s);
-    assert_eq!(
-        (v[2], why),
-        (0.0, Some(Limit::Ceiling)),
-        "above: no climbing"
-    );
-    let (v, why) = f.limit_velocity(&ENV, ne(0.0, 0.0), 55.0, [0.0; 3], [0.0, 0.0, 1.0], &mut s);
-    assert_eq!((v[2], why), (1.0, None), "above: descending is fine");
-    let (v, why) = f.limit_velocity(&ENV, ne(0.0, 0.0), -3.5, [0.0; 3], [0.0, 0.0, 2.0], &mut s);
-    assert_eq!(why, Some(Limit::Floor));
-    assert!((v[2] - (2.0f32 * 1.5 * 0.5).sqrt()).abs() < 1e-3, "{v:?}");
-}
-
-#[test]
 fn the_local_frame_matches_great_circle_distances() {
     let frame = LocalFrame::new(-35.363261, 149.165230);
     let p = frame.to_local(-35.363261 + 0.009, 149.165230 + 0.011);
@@ -303,4 +204,45 @@ fn a_geofence_sample_compiles_or_is_refused() {
     set.polygons[0].vertices[2][1] = 149.01;
     set.enabled = 0;
     assert_eq!(Fence::compile(&set).unwrap(), None, "disabled clears");
+}
+
+#[test]
+fn clearance_is_perpendicular_and_segments_must_keep_it() {
+    let f = fence(vec![
+        square(FenceKind::KeepIn, 50.0),
+        poly(
+            FenceKind::KeepOut,
+            &[(20.0, -5.0), (30.0, -5.0), (30.0, 5.0), (20.0, 5.0)],
+        ),
+    ]);
+    assert!((f.clearance(ne(0.0, 45.0)) - 5.0).abs() < 1e-9, "east wall");
+    assert!((f.clearance(ne(17.0, 0.0)) - 3.0).abs() < 1e-9, "keep-out");
+    assert_eq!(f.clearance(ne(25.0, 0.0)), 0.0, "in the keep-out");
+    assert_eq!(f.clearance(ne(60.0, 0.0)), 0.0, "outside");
+    // A segment at 10 degrees to the north wall: 2 m from it at its end, not along
+    // the ray (which would still be 11.5 m).
+    let a = ne(40.0, -40.0);
+    let b = a + ne(10f64.to_radians().sin(), 10f64.to_radians().cos())
+        * (8.0 / 10f64.to_radians().sin());
+    assert!((b.x - 48.0).abs() < 1e-9);
+    assert!(f.segment_clear(a, b, 1.99));
+    assert!(!f.segment_clear(a, b, 2.01));
+    // Crossing the keep-out's corner region: not clear even by 0.
+    assert!(!f.segment_clear(ne(15.0, -10.0), ne(35.0, 10.0), 0.0));
+    // Overlapping keep-ins: clearance from the one that holds the point.
+    let two = fence(vec![
+        poly(
+            FenceKind::KeepIn,
+            &[(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)],
+        ),
+        poly(
+            FenceKind::KeepIn,
+            &[(0.0, 8.0), (10.0, 8.0), (10.0, 30.0), (0.0, 30.0)],
+        ),
+    ]);
+    assert!((two.clearance(ne(5.0, 20.0)) - 5.0).abs() < 1e-9);
+    assert!(
+        two.segment_clear(ne(5.0, 9.0), ne(5.0, 20.0), 1.0),
+        "within the second"
+    );
 }

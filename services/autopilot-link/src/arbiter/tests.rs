@@ -506,7 +506,11 @@ fn the_geofence_refuses_targets_and_limits_velocities() {
     let Command::VelocityNed { vel_ned_mps, .. } = executed(&d) else {
         unreachable!()
     };
-    assert!((vel_ned_mps[0] - 7.348).abs() < 0.01, "{vel_ned_mps:?}");
+    // Below √(2·1.5·18) ≈ 7.3 m/s: the lag and the margin measured perpendicular.
+    assert!(
+        vel_ned_mps[0] > 4.0 && vel_ned_mps[0] < 7.3,
+        "{vel_ned_mps:?}"
+    );
     let d = a.decide(2 * S, &sample(Operator, vel(10.0, 0.0, 0.0), 2 * S), &v);
     assert!(
         event_kinds(&d.effects).is_empty(),
