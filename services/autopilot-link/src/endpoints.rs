@@ -657,7 +657,7 @@ async fn tcp_in(
                     metrics.peers(clients.len());
                     let (hub, stop, sig) = (hub.clone(), shutdown.clone(), signing.clone());
                     tasks.spawn(async move {
-                        let reason = serve_stream(index, stream, &hub, crx, sig.as_deref(), &stop).await;
+                        let reason = serve_stream(index, stream, &hub, crx, sig.as_deref(), Accepted::Client, &stop).await;
                         tracing::info!(endpoint = hub.metrics(index).label(), %peer, reason, "tcp client disconnected");
                         id
                     });
@@ -713,7 +713,15 @@ async fn tcp_out(
                 delay = RECONNECT_MIN;
                 metrics.peers(1);
                 let (tx, crx) = mpsc::channel(ENDPOINT_QUEUE);
-                let serve = serve_stream(index, stream, &hub, crx, signing, &shutdown);
+                let serve = serve_stream(
+                    index,
+                    stream,
+                    &hub,
+                    crx,
+                    signing,
+                    Accepted::Destination,
+                    &shutdown,
+                );
                 tokio::pin!(serve);
                 let reason = loop {
                     tokio::select! {
@@ -751,12 +759,22 @@ async fn tcp_out(
 }
 
 /// Runs one TCP connection of endpoint `index` until it ends; returns why.
+/// Who is at the other end of a TCP endpoint's stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Accepted {
+    /// A `tcpin` client: anyone who reached the port.
+    Client,
+    /// The configured `tcpout` destination (we chose it).
+    Destination,
+}
+
 async fn serve_stream(
     index: u8,
     stream: TcpStream,
     hub: &Hub,
     mut rx: mpsc::Receiver<RawFrame>,
     signing: Option<&EndpointSigning>,
+    peer: Accepted,
     shutdown: &CancellationToken,
 ) -> &'static str {
     let metrics = &hub.metrics(index);
@@ -766,11 +784,18 @@ async fn serve_stream(
     let (mut reader, mut writer) = stream.into_split();
     let mut parser = FrameParser::new();
     let mut buf = vec![0u8; 4096];
+    // On a signing `tcpin` endpoint a client is sent nothing (telemetry, parameters,
+    // mission) until it has delivered one validly signed frame, as a `udpin` peer
+    // only becomes a peer then: whoever merely reaches the port learns nothing.
+    let mut authenticated = signing.is_none() || peer == Accepted::Destination;
     loop {
         tokio::select! {
             _ = shutdown.cancelled() => return "shutdown",
             frame = rx.recv() => {
                 let Some(frame) = frame else { return "endpoint stopped" };
+                if !authenticated {
+                    continue;
+                }
                 match tokio::time::timeout(WRITE_TIMEOUT, writer.write_all(frame.as_bytes())).await {
                     Ok(Ok(())) => metrics.frame_out(),
                     Ok(Err(_)) => {
@@ -786,7 +811,10 @@ async fn serve_stream(
             r = reader.read(&mut buf) => match r {
                 Ok(0) => return "closed by the other end",
                 Ok(n) => {
-                    deliver(hub, index, &mut parser, &buf[..n], false, signing);
+                    if deliver(hub, index, &mut parser, &buf[..n], false, signing) > 0 && !authenticated {
+                        authenticated = true;
+                        tracing::info!(endpoint = metrics.label(), "tcp client authenticated (first validly signed frame)");
+                    }
                 }
                 Err(_) => return "read failed",
             },

@@ -5,9 +5,10 @@
 //! carry a valid signature made with the shared 32-byte key: the first 6 bytes of
 //! SHA-256 over `key ‖ STX ‖ header ‖ payload ‖ CRC ‖ link id ‖ timestamp`. The
 //! timestamp (10 µs units since 2015-01-01 00:00 UTC, 48 bits) must be newer than
-//! the last one accepted from the same (system, component, link id) stream on that
-//! endpoint (replay protection); a stream's first frame must not be more than one
-//! minute older than our clock. Everything else is refused ([`Refusal`]): never
+//! the last one accepted from the same (system, component, link id) stream on any
+//! signing endpoint (replay protection: one table serves them all, so a frame seen
+//! on one endpoint cannot be replayed on another); a stream's first frame must not
+//! be more than one minute older than our clock. Everything else is refused ([`Refusal`]): never
 //! routed to the autopilot, the other endpoints or the virtual gimbals. Unsigned
 //! RADIO_STATUS is refused too (the spec allows accepting it because a telemetry
 //! radio injects it; no radio sits between a ground station and a network endpoint).
@@ -53,8 +54,9 @@ const V2_HEADER: usize = 10;
 const IFLAG_SIGNED: u8 = 0x01;
 /// A new stream's first timestamp may lag our clock by this much (1 minute in 10 µs).
 pub const MAX_STREAM_LAG: u64 = 60 * 100_000;
-/// Streams remembered per endpoint; beyond this the stalest is forgotten.
-pub const MAX_STREAMS: usize = 256;
+/// Streams remembered (one table for every endpoint); beyond this the stalest is
+/// forgotten.
+pub const MAX_STREAMS: usize = 1024;
 /// At most one warning per endpoint this often about refused frames.
 pub const LOG_EVERY: Duration = Duration::from_secs(10);
 const TIMESTAMP_MASK: u64 = (1 << 48) - 1;
@@ -328,7 +330,8 @@ impl Clock {
     }
 }
 
-/// The last accepted timestamp per (system, component, link id) stream of one endpoint.
+/// The last accepted timestamp per (system, component, link id) stream, over every
+/// signing endpoint.
 #[derive(Debug, Default)]
 pub struct Streams {
     last: HashMap<(u8, u8, u8), u64>,
@@ -378,11 +381,20 @@ impl Streams {
     }
 }
 
-/// What the endpoints share: the key and our clock.
+/// What the endpoints share: the key, our clock and the one replay table.
+///
+/// The replay table is shared so a frame accepted on one endpoint cannot be
+/// replayed on another: a ground station's signed frame captured on endpoint A
+/// (a radio link, a Wi-Fi `udpin`) and sent again on endpoint B has a timestamp
+/// that is not newer than its stream's last one, whichever endpoint saw it. A
+/// ground station that sends the same frame over two links on purpose (redundant
+/// links) gets the second copy refused as `replayed`, which is what the spec's
+/// per-stream rule makes of it.
 #[derive(Debug)]
 pub struct Signing {
     key: SigningKey,
     clock: Clock,
+    streams: Mutex<Streams>,
 }
 
 impl Signing {
@@ -390,6 +402,7 @@ impl Signing {
         Arc::new(Signing {
             key,
             clock: Clock::default(),
+            streams: Mutex::new(Streams::default()),
         })
     }
 }
@@ -419,7 +432,6 @@ impl LogLimit {
 pub struct EndpointSigning {
     shared: Arc<Signing>,
     link_id: u8,
-    streams: Mutex<Streams>,
     stats: Stats,
     label: String,
     refused: [OnceLock<Counter>; Refusal::ALL.len()],
@@ -432,7 +444,6 @@ impl EndpointSigning {
         EndpointSigning {
             shared,
             link_id,
-            streams: Mutex::new(Streams::default()),
             stats: stats.clone(),
             label,
             refused: Default::default(),
@@ -448,7 +459,8 @@ impl EndpointSigning {
     pub fn accept(&self, frame: &RawFrame) -> bool {
         let now = timestamp_at(SystemTime::now());
         let reference = self.shared.clock.reference(now);
-        let checked = lock(&self.streams).check(&self.shared.key, frame.as_bytes(), reference);
+        let checked =
+            lock(&self.shared.streams).check(&self.shared.key, frame.as_bytes(), reference);
         match checked {
             Ok(timestamp) => {
                 self.shared.clock.observe(timestamp);
@@ -667,6 +679,29 @@ mod tests {
         tampered[V2_HEADER + 2] ^= 0x40;
         assert_eq!(s.check(&key(), &tampered, T), Err(Refusal::BadSignature));
         assert_eq!(s.len(), 2);
+    }
+
+    /// One replay table for every endpoint: a frame accepted on endpoint A is
+    /// refused on endpoint B, counted there; a newer frame is accepted on B.
+    #[test]
+    fn a_frame_accepted_on_one_endpoint_is_a_replay_on_another() {
+        let stats = Stats::new();
+        let shared = Signing::new(key());
+        let a = EndpointSigning::new(shared.clone(), 0, &stats, "a".into());
+        let b = EndpointSigning::new(shared, 1, &stats, "b".into());
+        let now = timestamp_at(SystemTime::now());
+        let frame = signed(now, 7);
+        assert!(a.accept(&frame));
+        assert!(!b.accept(&frame), "replayed on another endpoint");
+        assert_eq!(
+            stats.value(
+                "skymesh_router_frames_dropped_total",
+                "endpoint=b,reason=replayed"
+            ),
+            Some(1.0)
+        );
+        assert!(b.accept(&signed(now + 1, 7)));
+        assert!(!a.accept(&signed(now + 1, 7)));
     }
 
     #[test]

@@ -26,6 +26,7 @@ use skymesh_autopilot_link::endpoints::Bound;
 use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
 use skymesh_autopilot_link::signing::{sign, timestamp_at, SigningKey, SigningSettings};
 use skymesh_autopilot_link::Settings;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 
@@ -571,4 +572,188 @@ async fn a_signed_ground_station_commands_vehicle_sim() {
     );
     mesh.stop().await;
     sim.stop().await;
+}
+
+/// autopilot-link on `autopilot_port` with a signing `udpin` (endpoint 0), a
+/// signing `tcpin` (endpoint 1) and an open `udpin` (endpoint 2), on free ports.
+async fn signed_tcp_mesh(autopilot_port: u16) -> (Mesh, [SocketAddr; 3]) {
+    let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
+    let endpoints = vec![
+        Endpoint::UdpIn(any),
+        Endpoint::TcpIn(any),
+        Endpoint::UdpIn(any),
+    ];
+    let bound = Bound::bind(&endpoints).await.expect("bind endpoints");
+    let addrs: Vec<SocketAddr> = bound
+        .local_addrs()
+        .into_iter()
+        .map(|a| a.expect("bound"))
+        .collect();
+    let mut s = Settings::with_connection(Endpoint::TcpOut {
+        host: "127.0.0.1".into(),
+        port: autopilot_port,
+    });
+    s.reconnect_max = Duration::from_secs(1);
+    s.endpoints = endpoints;
+    s.signing = Some(SigningSettings {
+        key: SigningKey::new(KEY),
+        endpoints: vec![0, 1],
+    });
+    let mesh = Mesh::start_routed(s, Some(bound)).await;
+    (mesh, [addrs[0], addrs[1], addrs[2]])
+}
+
+/// Waits until `name{labels}` is at least `min`.
+async fn until_metric(mesh: &Mesh, name: &str, labels: &str, min: f64) {
+    let deadline = Instant::now() + PATIENCE;
+    while mesh.metric(name, labels) < min {
+        assert!(
+            Instant::now() < deadline,
+            "{name}{{{labels}}} = {}, expected {min}",
+            mesh.metric(name, labels)
+        );
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+/// Reads what the TCP client has been sent so far without waiting for more.
+fn take_received(client: &tokio::net::TcpStream, into: &mut Vec<u8>) {
+    let mut buf = [0u8; 4096];
+    loop {
+        match client.try_read(&mut buf) {
+            Ok(0) => panic!("the endpoint closed the connection"),
+            Ok(n) => into.extend_from_slice(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return,
+            Err(e) => panic!("read: {e}"),
+        }
+    }
+}
+
+/// Vehicle HEARTBEATs seen by `peer` from now on: `n` of them prove the router
+/// routed at least `n` frames to its endpoints meanwhile (the autopilot sends 5/s).
+async fn routed_heartbeats(peer: &mut Peer, n: usize) {
+    // What was already received does not count.
+    while peer.parser.next_frame().is_some() {}
+    peer.parser.end_datagram();
+    while peer.socket.try_recv(&mut peer.buf).is_ok() {}
+    let count = Cell::new(0);
+    peer.recv_match(
+        "vehicle heartbeats",
+        |f| {
+            if f.message_id() == 0 && f.system_id() == VEHICLE && f.component_id() == 1 {
+                count.set(count.get() + 1);
+            }
+        },
+        |_| count.get() >= n,
+    )
+    .await;
+}
+
+/// A client of a signing `tcpin` endpoint is sent nothing — while the vehicle's
+/// heartbeats flow to the other endpoints — until it delivers a validly signed
+/// frame (an unsigned one does not count); then it gets the vehicle's frames,
+/// signed. A frame the signed ground station sent on the `udpin` endpoint,
+/// replayed on the `tcpin` endpoint, is refused as `replayed` (one replay table
+/// for every endpoint) and never reaches the autopilot twice.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tcpin_client_gets_nothing_before_signing_and_replays_cross_no_endpoint() {
+    let mut fake = FakeAutopilot::start();
+    let (mut mesh, [udp_at, tcp_at, open_at]) = signed_tcp_mesh(fake.port).await;
+    mesh.wait_link_up().await;
+    let mut log = Vec::new();
+    let tcp_label = format!("endpoint=tcpin:{tcp_at}");
+
+    // The open ground station proves frames are routed while we watch the TCP client.
+    let mut open = Peer::open(open_at, None).await;
+    open.send(&heartbeat(MavType::MAV_TYPE_GCS)).await;
+    routed_heartbeats(&mut open, 1).await;
+
+    let mut client = tokio::net::TcpStream::connect(tcp_at).await.unwrap();
+    until_metric(&mesh, "skymesh_router_endpoint_peers", &tcp_label, 1.0).await;
+    let mut got = Vec::new();
+    routed_heartbeats(&mut open, 3).await;
+    take_received(&client, &mut got);
+    assert!(got.is_empty(), "sent {} bytes before any frame", got.len());
+
+    // An unsigned frame does not open the stream.
+    client
+        .write_all(&unsigned(GCS, &heartbeat(MavType::MAV_TYPE_GCS)))
+        .await
+        .unwrap();
+    until_metric(
+        &mesh,
+        "skymesh_router_frames_dropped_total",
+        &format!("{tcp_label},reason=unsigned"),
+        1.0,
+    )
+    .await;
+    routed_heartbeats(&mut open, 3).await;
+    take_received(&client, &mut got);
+    assert!(
+        got.is_empty(),
+        "sent {} bytes after an unsigned frame",
+        got.len()
+    );
+
+    // The signed ground station on the udpin endpoint sends a command; replayed on
+    // the tcpin endpoint it is refused, and the client is still sent nothing.
+    let mut gcs = Peer::open(udp_at, Some(KEY)).await;
+    let first = gcs.send(&marked_command(1.0, (0, 0))).await;
+    fake.expect("the signed command", &mut log, |f| marker(f) == Some(1.0))
+        .await;
+    client.write_all(&first).await.unwrap();
+    until_metric(
+        &mesh,
+        "skymesh_router_frames_dropped_total",
+        &format!("{tcp_label},reason=replayed"),
+        1.0,
+    )
+    .await;
+    routed_heartbeats(&mut open, 3).await;
+    take_received(&client, &mut got);
+    assert!(
+        got.is_empty(),
+        "sent {} bytes after a replayed frame",
+        got.len()
+    );
+
+    // A validly signed frame of the client's own: from now on it hears the vehicle,
+    // every frame signed by us with the endpoint's link id (1).
+    let ts = timestamp_at(SystemTime::now()) + 1;
+    let own = signed_with(KEY, (254, 190), &marked_command(2.0, (0, 0)), 9, ts);
+    client.write_all(&own).await.unwrap();
+    fake.expect("the tcp client's command", &mut log, |f| {
+        marker(f) == Some(2.0)
+    })
+    .await;
+    let mut parser = FrameParser::new();
+    let mut buf = [0u8; 4096];
+    let heartbeat = tokio::time::timeout(PATIENCE, async {
+        loop {
+            let n = client.read(&mut buf).await.unwrap();
+            assert!(n > 0, "closed");
+            parser.push(&buf[..n]);
+            while let Some(f) = parser.next_frame() {
+                let (link, _) = verify(&KEY, f.as_bytes())
+                    .unwrap_or_else(|| panic!("{f:?} is not signed with the key"));
+                assert_eq!(link, 1);
+                if f.message_id() == 0 && f.system_id() == VEHICLE {
+                    return f;
+                }
+            }
+        }
+    })
+    .await
+    .expect("a vehicle heartbeat on the authenticated tcp client");
+    assert_eq!(heartbeat.component_id(), 1);
+
+    // The replayed command reached the autopilot once.
+    let markers: Vec<f32> = log
+        .iter()
+        .filter(|f| f.system_id() != VEHICLE)
+        .filter_map(marker)
+        .collect();
+    assert_eq!(markers, vec![1.0, 2.0]);
+    drop(client);
+    mesh.stop().await;
 }
