@@ -22,6 +22,7 @@ use skymesh_ipc_types::ServiceId;
 use skymesh_runtime::{Bus, Domain, Stats};
 
 pub mod bench;
+pub mod fault_link;
 pub mod transport_bench;
 
 /// Meshes are heavy for a 2-core machine: run one at a time so timing-sensitive

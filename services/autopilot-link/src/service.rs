@@ -481,8 +481,6 @@ impl<L: Lifecycle> Service<L> {
                     );
                 }
                 if u.heartbeat {
-                    let actions = self.stop.on_heartbeat(now, self.telemetry.flight_mode());
-                    self.run_stop(actions)?;
                     if let Some(change) = self.link.heartbeat(now) {
                         self.link_changed(change, now, "heartbeat")?;
                     }
@@ -524,19 +522,28 @@ impl<L: Lifecycle> Service<L> {
                     }
                 }
                 if let Some(state) = u.state {
-                    // A new velocity measurement (not the same one republished with
-                    // the next ATTITUDE) for the emergency stop.
-                    if state.position_valid == 1 && state.position_stamp_ns != self.stop_fed_stamp {
-                        self.stop_fed_stamp = state.position_stamp_ns;
-                        let actions = self.stop.on_velocity(now, state.vel_ned_mps);
-                        self.run_stop(actions)?;
-                    }
                     self.last_attitude = Some(now);
                     self.stream_retries = 0;
                     self.ports.state.publish(state)?;
                     self.last_state = Some(state);
                 }
                 self.publish_status_if_changed(now)?;
+                // After the samples: a source that reads the stop's answer finds
+                // VehicleStatus / VehicleState already showing what confirmed it.
+                if u.heartbeat {
+                    let actions = self.stop.on_heartbeat(now, self.telemetry.flight_mode());
+                    self.run_stop(actions)?;
+                }
+                // A new velocity measurement (not the same one republished with the
+                // next ATTITUDE).
+                if let Some(state) = u
+                    .state
+                    .filter(|s| s.position_valid == 1 && s.position_stamp_ns != self.stop_fed_stamp)
+                {
+                    self.stop_fed_stamp = state.position_stamp_ns;
+                    let actions = self.stop.on_velocity(now, state.vel_ned_mps);
+                    self.run_stop(actions)?;
+                }
             }
         }
         Ok(())
