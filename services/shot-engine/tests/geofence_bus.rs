@@ -1,14 +1,16 @@
 //! The geofence path through real iceoryx2 shared memory: the app's polygons arrive
-//! as an `AppGeofence` (solo-gateway's translation of GEOFENCE_SET_DATA), the answer
-//! goes to the app, and the fence to the arbiter as a `GeofenceSet`. Waits are
-//! bounded by generous timeouts; nothing asserts timing.
+//! as an `AppGeofence` (solo-gateway's translation of GEOFENCE_SET_DATA), the fence
+//! goes to the arbiter as a `GeofenceSet`, and the app's answer follows the
+//! arbiter's decision event (played by the test). Waits are bounded by generous
+//! timeouts; nothing asserts timing.
 
 mod common;
 
 use skymesh_ipc_types::{
-    topics, AppGeofence, AppMessage, AppSession, CommandSource, FenceKind, GeofenceSet, ServiceId,
+    topics, AppGeofence, AppMessage, AppSession, ArbiterEvent, ArbiterEventKind, CommandSource,
+    FenceKind, GeofenceSet, ServiceId,
 };
-use skymesh_runtime::{Bus, Stats, Subscriber};
+use skymesh_runtime::{Bus, Publisher, Stats, Subscriber};
 use solo_proto::SoloMessage;
 
 use common::{app_msg, settings, unique_domain, Engine, PATIENCE, VEHICLE};
@@ -34,6 +36,19 @@ async fn next_answer(to_app: &mut Subscriber<AppMessage>) -> SoloMessage {
     }
 }
 
+/// The arbiter's decision on `set`.
+fn decide(events: &mut Publisher<ArbiterEvent>, set: &GeofenceSet, kind: ArbiterEventKind) {
+    events
+        .publish(ArbiterEvent {
+            vehicle_id: set.vehicle_id,
+            kind: kind.to_wire(),
+            source: set.source,
+            request_id: set.request_id,
+            ..ArbiterEvent::default()
+        })
+        .unwrap();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -53,6 +68,9 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
         .unwrap();
     let mut arbiter = bus
         .subscriber::<GeofenceSet>(&topics::vehicle_geofence(VEHICLE))
+        .unwrap();
+    let mut events = bus
+        .publisher::<ArbiterEvent>(&topics::vehicle_arbiter_events(VEHICLE))
         .unwrap();
     let engine = Engine::start(&domain, settings(dir.path())).await;
 
@@ -82,6 +100,25 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
         .publish(app_msg(&SoloMessage::GeofenceClear))
         .unwrap();
 
+    // The arbiter's topic holds the latest fence: when both requests were handled
+    // in one wake only the clear is published (and its decision answers both);
+    // else the fence, then the clear.
+    let mut set = next(&mut arbiter, "GeofenceSet").await;
+    decide(&mut events, &set, ArbiterEventKind::GeofenceUpdated);
+    if set.enabled == 1 {
+        assert_eq!(set.header.service_id(), Ok(ServiceId::ShotEngine));
+        assert_eq!(
+            (set.vehicle_id, set.source),
+            (VEHICLE, CommandSource::ShotEngine.to_wire())
+        );
+        assert_eq!(set.polygons().unwrap(), [(FenceKind::KeepIn, &square[..])]);
+        set = next(&mut arbiter, "GeofenceSet").await;
+        decide(&mut events, &set, ArbiterEventKind::GeofenceUpdated);
+    }
+    assert_eq!(
+        (set.vehicle_id, set.enabled, set.polygon_count, set.source),
+        (VEHICLE, 0, 0, CommandSource::ShotEngine.to_wire())
+    );
     assert_eq!(
         next_answer(&mut to_app).await,
         SoloMessage::GeofenceSetAck {
@@ -96,24 +133,27 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
             valid: true
         }
     );
-    // The arbiter's topic holds the latest fence: when both requests were handled
-    // in one wake only the clear is published; else the fence, then the clear.
-    let mut set = next(&mut arbiter, "GeofenceSet").await;
-    if set.enabled == 1 {
-        assert_eq!(set.header.service_id(), Ok(ServiceId::ShotEngine));
-        assert_eq!(
-            (set.vehicle_id, set.source),
-            (VEHICLE, CommandSource::ShotEngine.to_wire())
-        );
-        assert_eq!(set.polygons().unwrap(), [(FenceKind::KeepIn, &square[..])]);
-        set = next(&mut arbiter, "GeofenceSet").await;
-    }
-    assert_eq!(
-        (set.vehicle_id, set.enabled, set.polygon_count, set.source),
-        (VEHICLE, 0, 0, CommandSource::ShotEngine.to_wire())
-    );
-    // Alone, the fence goes to the arbiter whole.
+    // Alone, the fence goes to the arbiter whole; refused there, the app hears so.
     fences.publish(fence).unwrap();
+    let set = next(&mut arbiter, "GeofenceSet").await;
+    assert_eq!(set.header.service_id(), Ok(ServiceId::ShotEngine));
+    assert_eq!(set.enabled, 1);
+    assert_eq!(set.polygons().unwrap(), [(FenceKind::KeepIn, &square[..])]);
+    decide(&mut events, &set, ArbiterEventKind::GeofenceInvalid);
+    assert_eq!(
+        next_answer(&mut to_app).await,
+        SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false
+        }
+    );
+    assert!(matches!(
+        next_answer(&mut to_app).await,
+        SoloMessage::ShotManagerError(_)
+    ));
+    fences.publish(fence).unwrap();
+    let set = next(&mut arbiter, "GeofenceSet").await;
+    decide(&mut events, &set, ArbiterEventKind::GeofenceUpdated);
     assert_eq!(
         next_answer(&mut to_app).await,
         SoloMessage::GeofenceSetAck {
@@ -121,10 +161,6 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
             valid: true
         }
     );
-    let set = next(&mut arbiter, "GeofenceSet").await;
-    assert_eq!(set.header.service_id(), Ok(ServiceId::ShotEngine));
-    assert_eq!(set.enabled, 1);
-    assert_eq!(set.polygons().unwrap(), [(FenceKind::KeepIn, &square[..])]);
     assert_eq!(
         engine
             .stats
@@ -133,6 +169,6 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
         1.0
     );
     engine.stop().await;
-    drop((fences, from_app, session, to_app, arbiter, bus));
+    drop((fences, from_app, session, to_app, arbiter, events, bus));
     domain.remove_leftover_files();
 }

@@ -61,6 +61,15 @@ impl Engine {
                 tracing::warn!(detail, "autopilot link lost; ending the shot");
                 self.exit_shot(ExitReason::LinkDown);
             }
+            Some(
+                kind @ (ArbiterEventKind::GeofenceUpdated | ArbiterEventKind::GeofenceInvalid),
+            ) if ours && ev.request_id != 0 => {
+                self.geofence_decided(
+                    ev.request_id,
+                    kind == ArbiterEventKind::GeofenceUpdated,
+                    detail,
+                );
+            }
             Some(ArbiterEventKind::StaleBrake) if ours && flying => {
                 tracing::warn!(detail, "the arbiter braked: our setpoints arrived late");
             }

@@ -5,24 +5,33 @@
 //!
 //! | from the app | the engine |
 //! |---|---|
-//! | GEOFENCE_SET_DATA (an `AppGeofence` from the gateway, or an `AppMessage` if it fits) | validates every polygon (`shots::fence`: type 0/1, ≥ 3 vertices, as many sub-polygon as polygon vertices, finite coordinates, no self-intersection, non-zero area; at most 8 polygons of 32 vertices, what the arbiter takes); valid → replaces the fence, GEOFENCE_SET_ACK {count, true}; invalid → keeps the fence it had, GEOFENCE_SET_ACK {count it has, false} and a SHOTMANAGER_ERROR saying why. No polygon at all is a valid empty fence (cleared). |
+//! | GEOFENCE_SET_DATA (an `AppGeofence` from the gateway, or an `AppMessage` if it fits) | validates every polygon (`shots::fence`: type 0/1, ≥ 3 vertices, as many sub-polygon as polygon vertices, finite coordinates, no self-intersection, non-zero area; at most 8 polygons of 32 vertices, what the arbiter takes); valid → replaces the fence and gives it to the arbiter, GEOFENCE_SET_ACK {count, true} once the arbiter took it; invalid here or at the arbiter → keeps the fence it had, GEOFENCE_SET_ACK {count it has, false} and a SHOTMANAGER_ERROR saying why. No polygon at all is a valid empty fence (cleared). |
 //! | GEOFENCE_UPDATE_POLY | action 0 replaces vertex `vertexIndex` of polygon `polygonIndex` (polygon and sub-polygon), 1 inserts one before it (`vertexIndex` = the vertex count appends), 2 removes it; the edited fence is validated again; ack as above (no fence, a bad index or action → negative ack) |
-//! | GEOFENCE_CLEAR | clears, GEOFENCE_SET_ACK {0, true} |
+//! | GEOFENCE_CLEAR | clears, GEOFENCE_SET_ACK {0, true} (once the arbiter dropped ours, at once if it had none) |
 //!
 //! The fence is also cleared when the app disconnects (FACTS.md); the next app to
-//! connect is then told with GEOFENCE_CLEAR.
+//! connect is then told with GEOFENCE_CLEAR. Only the engine's own fence goes: the
+//! arbiter keeps one fence per source, so a GroundControl keep-in box stays.
 //!
 //! # The arbiter
 //!
-//! Every change is published as a `GeofenceSet` (source `ShotEngine`) on
-//! `skymesh/vehicle/{id}/geofence`: the keep-in and keep-out polygons (not the
-//! sub-polygons), with `geofence_ceiling_m` / `geofence_floor_m` from the config
-//! (the Solo fence has none: large by default). The arbiter then refuses position
-//! targets outside it and slows every velocity setpoint towards it, whoever sends
-//! them. It does not take a fence from us while a source that outranks the shot
-//! engine holds one (it says so in an `ArbiterEvent`). A fence the engine never set
-//! is never cleared by it; after a restart, one it set before stays with the
-//! arbiter (the safe side) until the app sets or clears a fence.
+//! Every change is published as a `GeofenceSet` (source `ShotEngine`, a fresh
+//! `request_id`) on `skymesh/vehicle/{id}/geofence`: the keep-in and keep-out
+//! polygons (not the sub-polygons), with `geofence_ceiling_m` / `geofence_floor_m`
+//! from the config (the Solo fence has none: large by default); a clear is
+//! `enabled = 0` with `target_source` [`NO_HOLDER`] (the engine's own fence only).
+//! The arbiter keeps it beside other sources' fences and enforces all of them:
+//! it refuses position targets outside and slows every velocity setpoint towards
+//! them, whoever sends them. It answers each sample with a `GeofenceUpdated` or
+//! `GeofenceInvalid` event carrying the `request_id`, and the app's request is
+//! answered from that decision: GEOFENCE_SET_ACK {count, true}, or {count it
+//! keeps, false} with a SHOTMANAGER_ERROR and the engine's own fence put back to
+//! what the arbiter still holds. No decision within [`FENCE_ANSWER_TIMEOUT_NS`] is
+//! answered the same negative way ("the vehicle did not answer"). Requests sent
+//! before the previous one's sample left (the same loop turn) are answered by the
+//! decision on the sample that carries them. A fence the engine never set is never
+//! cleared by it; after a restart, one it set before stays with the arbiter (the
+//! safe side) until the app sets or clears a fence.
 //!
 //! # The predictive check
 //!
@@ -55,7 +64,7 @@
 use skymesh_ipc_types::arbiter::MAX_FENCE_POLYGONS;
 use skymesh_ipc_types::{
     AppGeofence, Command, CommandAck, CommandKind, CommandSource, FlightMode, GeofenceSet,
-    RefusalReason,
+    RefusalReason, NO_HOLDER,
 };
 use solo_proto::{GeofenceData, SoloMessage};
 
@@ -71,6 +80,9 @@ pub const IN_AIR_ALT_M: f32 = 1.0;
 pub const HOLD_REACHED_M: f64 = 1.5;
 /// ... and below this speed, m/s.
 pub const HOLD_STILL_MPS: f32 = 0.5;
+/// A fence change the arbiter has not decided on within this time is answered
+/// negatively (the arbiter answers at once when it runs), ns.
+pub const FENCE_ANSWER_TIMEOUT_NS: u64 = 2_000_000_000;
 /// The most vertices of one polygon the arbiter's `GeofenceSet` carries.
 const MAX_VERTICES: usize = skymesh_ipc_types::arbiter::MAX_FENCE_VERTICES;
 
@@ -96,6 +108,22 @@ pub(crate) struct Hold {
     grabbed_ns: u64,
 }
 
+/// A fence change given to the arbiter, waiting for its decision.
+#[derive(Debug, Clone)]
+struct Awaiting {
+    /// The `GeofenceSet::request_id` whose decision answers it.
+    request_id: u32,
+    /// Polygons of the fence it sets.
+    count: u16,
+    /// The engine's fence before it (what the arbiter keeps if it refuses).
+    previous: Fence,
+    previous_published: bool,
+    /// The app waits for a GEOFENCE_SET_ACK (not for the clear on its disconnect).
+    ack: bool,
+    /// Set on the first tick after it was made.
+    deadline_ns: Option<u64>,
+}
+
 /// The fence and what the engine does with it.
 #[derive(Debug, Default)]
 pub(crate) struct FenceState {
@@ -104,6 +132,10 @@ pub(crate) struct FenceState {
     published: bool,
     /// A `GeofenceSet` to publish with the next outputs.
     pending: Option<GeofenceSet>,
+    /// Changes waiting for the arbiter's decision, oldest first.
+    awaiting: Vec<Awaiting>,
+    /// The last `request_id` used.
+    last_request: u32,
     hold: Option<Hold>,
     /// The engine cleared the fence on its own; tell the next app (GEOFENCE_CLEAR).
     clear_unannounced: bool,
@@ -143,6 +175,8 @@ enum Refused {
     NoVertex { polygon: u16, vertex: u16 },
     #[error("unknown update action {0}")]
     BadAction(u8),
+    #[error("the vehicle refused it: {0}")]
+    Arbiter(String),
 }
 
 impl Engine {
@@ -179,8 +213,7 @@ impl Engine {
         match built {
             Ok(fence) => {
                 tracing::info!(polygons = fence.len(), "geofence set");
-                self.fence_replace(fence);
-                self.fence_ack(true);
+                self.fence_replace(fence, true);
             }
             Err(e) => self.fence_refused("set", &e),
         }
@@ -210,8 +243,7 @@ impl Engine {
         match edited {
             Ok(fence) => {
                 tracing::info!(action, polygon, vertex, "geofence polygon updated");
-                self.fence_replace(fence);
-                self.fence_ack(true);
+                self.fence_replace(fence, true);
             }
             Err(e) => self.fence_refused("update", &e),
         }
@@ -220,17 +252,17 @@ impl Engine {
     /// GEOFENCE_CLEAR from the app.
     pub(crate) fn geofence_clear_from_app(&mut self) {
         tracing::info!("geofence cleared by the app");
-        self.fence_replace(Fence::empty());
-        self.fence_ack(true);
+        self.fence_replace(Fence::empty(), true);
     }
 
-    /// The app went away: its fence goes with it (FACTS.md).
+    /// The app went away: its fence goes with it (FACTS.md); other sources' fences
+    /// stay with the arbiter.
     pub(crate) fn geofence_app_lost(&mut self) {
         if self.fence.fence.is_empty() {
             return;
         }
-        tracing::info!("app gone: geofence cleared");
-        self.fence_replace(Fence::empty());
+        tracing::info!("app gone: the app's geofence cleared");
+        self.fence_replace(Fence::empty(), false);
         self.fence.clear_unannounced = true;
     }
 
@@ -244,6 +276,85 @@ impl Engine {
     fn fence_ack(&mut self, valid: bool) {
         let count = u16::try_from(self.fence.fence.len()).unwrap_or(u16::MAX);
         self.out.app(SoloMessage::GeofenceSetAck { count, valid });
+    }
+
+    /// The arbiter's decision on our `GeofenceSet` `request_id`: answers every change
+    /// it carries; a refusal puts the engine's fence back to what the arbiter keeps.
+    pub(crate) fn geofence_decided(&mut self, request_id: u32, accepted: bool, detail: &str) {
+        let Some(first) = self
+            .fence
+            .awaiting
+            .iter()
+            .position(|a| a.request_id == request_id)
+        else {
+            tracing::debug!(request_id, "a geofence decision for no request of ours");
+            return;
+        };
+        let end = first
+            + self.fence.awaiting[first..]
+                .iter()
+                .take_while(|a| a.request_id == request_id)
+                .count();
+        let answered: Vec<Awaiting> = self.fence.awaiting.drain(first..end).collect();
+        if accepted {
+            tracing::debug!(request_id, detail, "the arbiter took the geofence");
+            for a in answered.iter().filter(|a| a.ack) {
+                self.out.app(SoloMessage::GeofenceSetAck {
+                    count: a.count,
+                    valid: true,
+                });
+            }
+            return;
+        }
+        tracing::warn!(request_id, detail, "the arbiter refused the geofence");
+        let (previous, published) = (answered[0].previous.clone(), answered[0].previous_published);
+        match self.fence.awaiting.get_mut(first) {
+            // A later change replaces it anyway: if that one is refused too, the
+            // engine goes back to what came before this one.
+            Some(next) => {
+                next.previous = previous;
+                next.previous_published = published;
+            }
+            None => {
+                self.fence.fence = previous;
+                self.fence.published = published;
+                self.out
+                    .metrics
+                    .geofence_polygons
+                    .set(self.fence.fence.len() as f64);
+                if self.fence.fence.is_empty() && self.fence.hold.is_some() {
+                    self.hold_end(true);
+                }
+            }
+        }
+        let asked = answered.iter().filter(|a| a.ack).count();
+        if asked > 0 {
+            for _ in 1..asked {
+                self.fence_ack(false);
+            }
+            self.fence_refused("arbiter", &Refused::Arbiter(detail.to_string()));
+        }
+    }
+
+    /// Changes the arbiter did not decide on in time: answered as refused.
+    fn geofence_expire(&mut self, now_ns: u64) {
+        for a in &mut self.fence.awaiting {
+            a.deadline_ns
+                .get_or_insert(now_ns.saturating_add(FENCE_ANSWER_TIMEOUT_NS));
+        }
+        let late = self
+            .fence
+            .awaiting
+            .first()
+            .filter(|a| a.deadline_ns.is_some_and(|d| d <= now_ns))
+            .map(|a| a.request_id);
+        if let Some(request_id) = late {
+            self.geofence_decided(
+                request_id,
+                false,
+                "the vehicle did not answer (autopilot-link not running?)",
+            );
+        }
     }
 
     fn fence_refused(&mut self, what: &str, e: &Refused) {
@@ -260,10 +371,13 @@ impl Engine {
         self.out.error(&format!("geofence refused: {e}; {kept}"));
     }
 
-    /// Replaces the fence and queues the `GeofenceSet` for the arbiter.
-    fn fence_replace(&mut self, fence: Fence) {
+    /// Replaces the fence and queues the `GeofenceSet` for the arbiter; `ack`: the
+    /// app is answered once the arbiter decided (at once when there is nothing to
+    /// tell the arbiter: a clear while it holds no fence of ours).
+    fn fence_replace(&mut self, fence: Fence, ack: bool) {
         self.fence.clear_unannounced = false;
-        self.fence.fence = fence;
+        let previous = std::mem::replace(&mut self.fence.fence, fence);
+        let previous_published = self.fence.published;
         self.out
             .metrics
             .geofence_polygons
@@ -273,32 +387,57 @@ impl Engine {
             tracing::info!("geofence cleared during a hold: LOITER");
             self.hold_end(true);
         }
-        if empty && !self.fence.published {
+        if empty && !self.fence.published && self.fence.awaiting.is_empty() {
+            if ack {
+                self.fence_ack(true);
+            }
             return;
         }
+        self.fence.last_request = self.fence.last_request.wrapping_add(1).max(1);
+        let request_id = self.fence.last_request;
         let mut set = GeofenceSet {
             vehicle_id: self.settings.vehicle_id,
             enabled: u8::from(!empty),
             source: CommandSource::ShotEngine.to_wire(),
+            request_id,
             ceiling_m: self.settings.geofence_ceiling_m,
             floor_m: self.settings.geofence_floor_m,
+            target_source: NO_HOLDER,
             ..GeofenceSet::default()
         };
         for z in self.fence.fence.zones() {
             // Counts were checked in `build`.
             set.push_polygon(z.kind, &z.polygon);
         }
+        // A sample not yet sent is replaced: its changes are answered by this one's
+        // decision.
+        if let Some(old) = self.fence.pending.replace(set) {
+            for a in &mut self.fence.awaiting {
+                if a.request_id == old.request_id {
+                    a.request_id = request_id;
+                }
+            }
+        }
+        self.fence.awaiting.push(Awaiting {
+            request_id,
+            count: u16::try_from(self.fence.fence.len()).unwrap_or(u16::MAX),
+            previous,
+            previous_published,
+            ack,
+            deadline_ns: None,
+        });
         self.fence.published = !empty;
-        self.fence.pending = Some(set);
     }
 
-    /// A hold is stepped on every tick, armed or not (see `Engine::idle_until`).
+    /// A hold, and a change waiting for the arbiter (its timeout), are stepped on
+    /// every tick, armed or not (see `Engine::idle_until`).
     pub(crate) fn geofence_needs_ticks(&self) -> bool {
-        self.fence.hold.is_some()
+        self.fence.hold.is_some() || !self.fence.awaiting.is_empty()
     }
 
     /// The predictive check and the hold, once per tick (before the shot steps).
     pub(crate) fn geofence_tick(&mut self, now_ns: u64) {
+        self.geofence_expire(now_ns);
         if self.fence.fence.is_empty() {
             return;
         }

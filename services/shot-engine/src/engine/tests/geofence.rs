@@ -1,7 +1,7 @@
 //! The app's geofence: validation and acks, the arbiter's `GeofenceSet`, updates,
 //! clears, and the predictive check with its hold.
 
-use skymesh_ipc_types::{AppGeofence, FenceKind, GeofenceSet};
+use skymesh_ipc_types::{AppGeofence, ArbiterEvent, ArbiterEventKind, FenceKind, GeofenceSet};
 use solo_proto::shots::{NONE, ORBIT};
 use solo_proto::GeofenceData;
 
@@ -264,6 +264,109 @@ fn clear_from_the_app_is_acknowledged_and_given_to_the_arbiter() {
     let set = out.geofence.unwrap();
     assert_eq!((set.enabled, set.polygon_count), (0, 0));
     assert_eq!(set.source, CommandSource::ShotEngine.to_wire());
+}
+
+#[test]
+fn the_app_is_answered_only_by_the_arbiters_decision() {
+    let mut h = Harness::ready();
+    h.fence_answer = FenceAnswer::Silent;
+    let out = h.fence(&field());
+    let set = out.geofence.expect("given to the arbiter");
+    assert_ne!(set.request_id, 0);
+    assert!(out.to_app.is_empty(), "no answer before the arbiter's");
+    // Another source's decision, and a decision on another request: no answer.
+    let mut ev = ArbiterEvent {
+        vehicle_id: VEHICLE,
+        kind: ArbiterEventKind::GeofenceUpdated.to_wire(),
+        source: CommandSource::SwarmQueue.to_wire(),
+        request_id: set.request_id,
+        ..ArbiterEvent::default()
+    };
+    h.engine.handle_arbiter_event(&ev, h.now);
+    ev.source = CommandSource::ShotEngine.to_wire();
+    ev.request_id = set.request_id + 1;
+    h.engine.handle_arbiter_event(&ev, h.now);
+    assert!(h.drain().to_app.is_empty());
+    ev.request_id = set.request_id;
+    h.engine.handle_arbiter_event(&ev, h.now);
+    assert_eq!(h.drain().to_app, [ack(2, true)]);
+    // Each change has its own request id.
+    h.fence_answer = FenceAnswer::Take;
+    let next = h.fence(&field()[..1]).geofence.unwrap();
+    assert!(next.request_id != set.request_id && next.request_id != 0);
+}
+
+#[test]
+fn a_fence_the_arbiter_refuses_is_answered_invalid_and_the_one_before_kept() {
+    let mut h = Harness::ready();
+    h.fence(&field()[..1]);
+    h.fence_answer = FenceAnswer::Refuse;
+    let out = h.fence(&field());
+    assert!(out.geofence.is_some(), "the engine found it valid");
+    assert_eq!(out.to_app[0], ack(1, false));
+    let text = error_text(&out);
+    assert!(
+        text.contains("the vehicle refused it: polygon 0 crosses itself"),
+        "{text}"
+    );
+    assert!(
+        text.contains("the previous 1-polygon geofence stays"),
+        "{text}"
+    );
+    assert_eq!(
+        h.stats.gauge("skymesh_shot_geofence_polygons", &[]).get(),
+        1.0
+    );
+    // The engine's own check is back on the fence the arbiter keeps: editing the
+    // keep-out (polygon 1) finds none.
+    h.fence_answer = FenceAnswer::Take;
+    let out = h.update(0, 1, 0, pt(25.0, -20.0));
+    assert_eq!(out.to_app[0], ack(1, false));
+    assert!(error_text(&out).contains("polygon 1 does not exist"));
+    // A refused clear: the fence stays.
+    h.fence_answer = FenceAnswer::Refuse;
+    let out = h.app(SoloMessage::GeofenceClear);
+    assert_eq!(out.to_app[0], ack(1, false));
+}
+
+#[test]
+fn no_decision_from_the_arbiter_is_answered_invalid_after_two_seconds() {
+    let mut h = Harness::ready();
+    // On the ground: the engine sleeps between its time-driven jobs.
+    h.status.armed = 0;
+    h.push_status();
+    h.tick();
+    assert!(h.engine.idle_until().is_some());
+    h.fence_answer = FenceAnswer::Silent;
+    assert!(h.fence(&field()).to_app.is_empty());
+    assert!(h.engine.idle_until().is_none(), "ticks for the timeout");
+    let early = h.run(1_800);
+    assert!(early.to_app.is_empty(), "{:?}", early.to_app);
+    let late = h.run(400);
+    assert_eq!(late.to_app[0], ack(0, false));
+    assert!(
+        error_text(&late).contains("did not answer"),
+        "{}",
+        error_text(&late)
+    );
+    assert!(h.engine.idle_until().is_some(), "nothing waits any more");
+}
+
+#[test]
+fn the_app_leaving_clears_only_the_engines_own_fence() {
+    let mut h = Harness::ready();
+    h.fence(&field());
+    let out = h.session(1, false);
+    let set = out.geofence.expect("a clear for the arbiter");
+    assert_eq!((set.enabled, set.polygon_count), (0, 0));
+    assert_eq!(set.source, CommandSource::ShotEngine.to_wire());
+    assert_eq!(
+        set.target_source,
+        skymesh_ipc_types::NO_HOLDER,
+        "its own only"
+    );
+    assert_ne!(set.request_id, 0);
+    assert!(out.to_app.is_empty());
 }
 
 #[test]

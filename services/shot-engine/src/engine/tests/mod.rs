@@ -20,9 +20,9 @@ mod zipline;
 use std::path::{Path, PathBuf};
 
 use skymesh_ipc_types::{
-    AckResult, AppSession, AuthorityState, Button, ButtonEvent, ButtonEventKind, Command,
-    CommandAck, CommandKind, CommandSource, FixedStr, FlightMode, PayloadState, RefusalReason,
-    VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, AppSession, ArbiterEvent, ArbiterEventKind, AuthorityState, Button, ButtonEvent,
+    ButtonEventKind, Command, CommandAck, CommandKind, CommandSource, FixedStr, FlightMode,
+    PayloadState, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::Stats;
 use solo_proto::{Location, SoloMessage};
@@ -51,8 +51,23 @@ pub fn settings(state_file: &Path) -> Settings {
     s
 }
 
+/// How the simulated arbiter answers the engine's `GeofenceSet`s.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FenceAnswer {
+    /// `GeofenceUpdated` with the sample's request id, as soon as it is published.
+    Take,
+    /// `GeofenceInvalid` with the sample's request id.
+    Refuse,
+    /// Nothing (autopilot-link not running).
+    Silent,
+}
+
 /// An engine with its own state file and a simulated clock.
 pub struct Harness {
+    /// The simulated arbiter's answer to every published `GeofenceSet`.
+    pub fence_answer: FenceAnswer,
+    /// Every `GeofenceSet` published, oldest first.
+    pub fences: Vec<skymesh_ipc_types::GeofenceSet>,
     pub engine: Engine,
     pub now: u64,
     pub stats: Stats,
@@ -81,6 +96,8 @@ impl Harness {
         let (store, _) = Store::open(path);
         let engine = Engine::new(settings(path), store, Metrics::new(&stats));
         Harness {
+            fence_answer: FenceAnswer::Take,
+            fences: Vec::new(),
             engine,
             now: 1_000 * MS,
             stats,
@@ -211,7 +228,36 @@ impl Harness {
     }
 
     pub fn drain(&mut self) -> Outputs {
-        self.engine.drain(self.now)
+        let out = self.engine.drain(self.now);
+        self.arbiter(out)
+    }
+
+    /// The simulated arbiter decides on a published `GeofenceSet` (`fence_answer`);
+    /// what the engine answers is added to `out`.
+    fn arbiter(&mut self, mut out: Outputs) -> Outputs {
+        let Some(set) = out.geofence else {
+            return out;
+        };
+        self.fences.push(set);
+        let kind = match self.fence_answer {
+            FenceAnswer::Take => ArbiterEventKind::GeofenceUpdated,
+            FenceAnswer::Refuse => ArbiterEventKind::GeofenceInvalid,
+            FenceAnswer::Silent => return out,
+        };
+        let ev = ArbiterEvent {
+            vehicle_id: set.vehicle_id,
+            kind: kind.to_wire(),
+            source: set.source,
+            request_id: set.request_id,
+            detail: FixedStr::new("polygon 0 crosses itself"),
+            ..ArbiterEvent::default()
+        };
+        self.engine.handle_arbiter_event(&ev, self.now);
+        let more = self.engine.drain(self.now);
+        out.commands.extend(more.commands);
+        out.to_app.extend(more.to_app);
+        out.status = more.status.or(out.status);
+        out
     }
 
     /// One loop tick 40 ms later (the vehicle state is refreshed first).
@@ -228,7 +274,8 @@ impl Harness {
                 self.now,
             );
         }
-        self.engine.tick(self.now)
+        let out = self.engine.tick(self.now);
+        self.arbiter(out)
     }
 
     /// Ticks for `ms` of simulated time, collecting everything.
