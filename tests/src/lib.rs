@@ -23,6 +23,7 @@ use skymesh_runtime::{Bus, Domain, Stats};
 
 pub mod bench;
 pub mod fault_link;
+pub mod sitl;
 pub mod transport_bench;
 
 /// Meshes are heavy for a 2-core machine: run one at a time so timing-sensitive
@@ -118,6 +119,9 @@ pub struct MeshOptions {
     /// Vehicle 1's autopilot-link connects to this port on 127.0.0.1 instead of
     /// straight to its vehicle-sim (a benchmark's tap sits there and forwards).
     pub link_via: Option<u16>,
+    /// Vehicle 1's autopilot-link connects to this TCP port on 127.0.0.1 (a real
+    /// autopilot: ArduPilot SITL, [`sitl`]) and no vehicle-sim is started for it.
+    pub autopilot_tcp: Option<u16>,
     /// Also run the hardware service and the IMC gateway (for vehicle 1).
     pub imc: bool,
     /// Extra TOML appended to the IMC gateway's config. Without an
@@ -192,6 +196,7 @@ impl Default for MeshOptions {
             shot_engine_extra: String::new(),
             solo_gateway_extra: String::new(),
             link_via: None,
+            autopilot_tcp: None,
             imc: false,
             imc_gateway_extra: String::new(),
             hardware_extra: String::new(),
@@ -321,9 +326,11 @@ impl Mesh {
             .then(|| free_port_run(opts.vehicles.max(1)))
             .transpose()?;
         for id in 1..=opts.vehicles.max(1) {
-            let port = match swarm_base {
-                Some(base) => base + u16::from(id - 1),
-                None => free_port(),
+            let real_autopilot = opts.autopilot_tcp.filter(|_| id == 1);
+            let port = match (real_autopilot, swarm_base) {
+                (Some(autopilot), _) => autopilot,
+                (None, Some(base)) => base + u16::from(id - 1),
+                (None, None) => free_port(),
             };
             mavlink_ports.push(port);
             // One vehicle keeps the default names; a fleet gets `-<id>` suffixes.
@@ -338,7 +345,7 @@ impl Mesh {
             } else {
                 format!("vehicle-sim{suffix}")
             };
-            if !opts.sim_swarm {
+            if !opts.sim_swarm && real_autopilot.is_none() {
                 // Vehicles stand 10 m apart (east) so a fleet does not share one spot.
                 let home_lon = 149.165230
                     + f64::from(id - 1) * 10.0 / (111_320.0 * (35.363261f64).to_radians().cos());
@@ -362,6 +369,12 @@ critical = true
                 Some(via) if id == 1 => via,
                 _ => port,
             };
+            // Started after its simulator; a real autopilot is not the supervisor's.
+            let after = if real_autopilot.is_some() {
+                "[]".to_string()
+            } else {
+                format!("[\"{sim}\"]")
+            };
             let endpoints = if id == 1 {
                 format!("{:?}", opts.link_endpoints)
             } else {
@@ -382,7 +395,7 @@ critical = true
 name = "autopilot-link{suffix}"
 binary = "{bins}/skymesh-autopilot-link"
 config = "autopilot-link{suffix}.toml"
-after = ["{sim}"]
+after = {after}
 critical = true
 "#,
                 bins = bins.display(),
