@@ -7,7 +7,9 @@
 //!   the stop's ack says `accepted` only once the autopilot reported BRAKE or the
 //!   vehicle was measured stopped, after frames that got through;
 //! - a lost ARM, then an emergency stop: the ARM is answered `cancelled` and never
-//!   goes out again; a lost ARM whose source is pre-empted: `preempted`, never again;
+//!   goes out again; a lost servo command (payload) is decided again before its
+//!   retransmission and refused `emergency`; a lost ARM whose source is pre-empted:
+//!   `preempted`, never again;
 //! - LAND flown by the autopilot: a low-priority `Brake` is refused
 //!   `autopilot_failsafe`, an emergency stop holds the descent (no BRAKE sent) and
 //!   the vehicle lands.
@@ -59,6 +61,10 @@ fn is_brake(msg: &MavMessage) -> Option<u8> {
 
 fn is_zero_setpoint(msg: &MavMessage) -> bool {
     matches!(msg, MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) if s.vx == 0.0 && s.vy == 0.0 && s.vz == 0.0)
+}
+
+fn is_servo(msg: &MavMessage) -> bool {
+    matches!(msg, MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_DO_SET_SERVO)
 }
 
 fn is_arm(msg: &MavMessage) -> bool {
@@ -288,9 +294,17 @@ fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
             .await,
             "GUIDED",
         );
-        // Every ARM to the vehicle is lost: only a retransmission could arm it.
-        link.set_rule(|dir, msg| dir == Dir::ToVehicle && is_arm(msg));
+        // Every ARM and DO_SET_SERVO to the vehicle is lost: only a retransmission
+        // could arm it or move the servo.
+        link.set_rule(|dir, msg| dir == Dir::ToVehicle && (is_arm(msg) || is_servo(msg)));
         let arm = g.send(CommandSource::SwarmQueue, &Command::Arm { force: false });
+        let servo = g.send(
+            CommandSource::Imc,
+            &Command::Servo {
+                channel: 9,
+                pwm_us: 1900,
+            },
+        );
         tokio::time::sleep(Duration::from_millis(300)).await;
         let stop = g.send(CommandSource::SwarmQueue, &Command::EmergencyStop);
         let stopped_at = Instant::now();
@@ -302,13 +316,31 @@ fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
         );
         let (_, s) = g.ack(stop, STOP_CONFIRM + Duration::from_secs(2)).await;
         assert_accepted(&s, "emergency stop on the ground");
+        // The servo is payload: not cancelled by the stop, but its retransmission is
+        // decided again, and the arbiter refuses it now.
+        let (_, a) = g.ack(servo, Duration::from_secs(5)).await;
+        assert_eq!(
+            (a.result(), a.reason()),
+            (Some(AckResult::Refused), Some(RefusalReason::Emergency)),
+            "{a:?}"
+        );
+        assert!(
+            a.detail.as_str().starts_with("not retransmitted"),
+            "{:?}",
+            a.detail
+        );
         // Past the retransmission (1.5 s) and the timeout (3 s) of the ARM.
         tokio::time::sleep(Duration::from_secs(4)).await;
         let arms = link.seen(|s| is_arm(&s.msg));
         assert_eq!(arms.len(), 1, "ARM frames: {arms:?}");
         assert!(arms.iter().all(|s| s.at < stopped_at));
+        let servos = link.seen(|s| is_servo(&s.msg));
+        assert_eq!(servos.len(), 1, "DO_SET_SERVO frames: {servos:?}");
         assert!(!g.status.latest().unwrap().expect("status").is_armed());
-        println!("safety_stop: lost ARM cancelled by the stop; 1 ARM frame in 4 s after it");
+        println!(
+            "safety_stop: lost ARM cancelled by the stop, lost servo re-decided and refused; \
+             1 ARM and 1 DO_SET_SERVO frame, none in the 4 s after the stop"
+        );
     });
     drop(mesh);
 

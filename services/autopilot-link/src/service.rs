@@ -945,3 +945,73 @@ fn overridden(effects: &[Effect]) -> Vec<Overridden> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arbiter::authority::Change;
+    use skymesh_ipc_types::{ArbiterEventKind, AuthorityChange, AuthorityDomain};
+
+    #[test]
+    fn a_failing_subscription_is_paused_then_retried_and_its_failure_measured() {
+        let t0 = Instant::now();
+        let mut h = BusHealth::default();
+        assert!(h.ready(t0));
+        assert_eq!(h.failed(t0), Duration::ZERO);
+        assert!(!h.ready(t0 + BUS_RETRY / 2), "not polled at once again");
+        assert!(h.ready(t0 + BUS_RETRY));
+        assert_eq!(h.failed(t0 + Duration::from_secs(3)), Duration::from_secs(3));
+        h.ok();
+        assert!(h.ready(t0));
+        assert_eq!(
+            h.failed(t0 + Duration::from_secs(4)),
+            Duration::ZERO,
+            "a sample in between starts the count again"
+        );
+    }
+
+    #[test]
+    fn preemptions_and_the_end_of_the_emergency_are_what_is_overridden() {
+        let change = |change, from, to| {
+            Effect::Authority(Change {
+                domain: AuthorityDomain::Flight,
+                from,
+                to,
+                change,
+            })
+        };
+        let effects = [
+            change(
+                AuthorityChange::Preempted,
+                Some(CommandSource::SwarmQueue),
+                Some(CommandSource::Operator),
+            ),
+            change(AuthorityChange::Granted, None, Some(CommandSource::Imc)),
+            change(AuthorityChange::Preempted, None, Some(CommandSource::Operator)),
+            Effect::Event {
+                kind: ArbiterEventKind::EmergencyCleared,
+                source: Some(CommandSource::Operator),
+                detail: String::new(),
+            },
+            Effect::Event {
+                kind: ArbiterEventKind::EmergencyReleased,
+                source: Some(CommandSource::DjiDrc),
+                detail: String::new(),
+            },
+        ];
+        assert_eq!(
+            overridden(&effects),
+            vec![
+                Overridden::Preempted {
+                    source: CommandSource::SwarmQueue,
+                    by: Some(CommandSource::Operator),
+                    domain: AuthorityDomain::Flight,
+                },
+                Overridden::EmergencyEnded,
+            ]
+        );
+        assert!(is_flight(CommandKind::Arm.to_wire()));
+        assert!(!is_flight(CommandKind::Servo.to_wire()));
+        assert!(!is_flight(CommandKind::EmergencyStop.to_wire()));
+    }
+}
