@@ -9,7 +9,7 @@
 //! | armed, mode RTL/SmartRTL, and the battery is low: `battery_remaining_pct` ≤ `low_battery_pct`, or the last STATUSTEXT says "battery" with "low", "critical" or "failsafe" (ArduCopter's battery failsafe texts) | 1 low battery return |
 //! | the same in LAND | 2 low battery landing |
 //! | the arbiter limited (`geofence_limited`) or refused (`geofence_refused`) one of our commands; a new onset after [`GEOFENCE_QUIET`] without such events | 3 near a restricted zone |
-//! | flight authority held by `manual_rc`, `operator` or `safety` (not the safety hold our own drone_emergency_stop caused) | 4 RC takeover |
+//! | flight authority held by `manual_rc`, `operator` or `safety` (not the safety hold of our own drone_emergency_stop: while `AuthorityState::emergency_by(dji_drc)`, or just after we sent it) | 4 RC takeover |
 //! | armed in RTL/SmartRTL/LAND without a low battery (a return or landing someone else triggered: the document's "triggered return") | 4 RC takeover |
 //!
 //! MAVLink has no "why did the mode change" field, hence the battery evidence above.
@@ -175,9 +175,12 @@ impl InvalidWatch {
                 .own_estop
                 .filter(|t| now.saturating_duration_since(*t) < OWN_ESTOP_GRACE);
         }
+        // Our own stop in force (whoever else stopped the vehicle too): the safety
+        // hold is the one the pilot asked for.
+        let own_stop_held = snap.authority.is_some_and(|a| a.emergency_by(SOURCE));
         levels[Condition::AuthorityTaken as usize] = match holder {
             Some(CommandSource::ManualRc | CommandSource::Operator) => true,
-            Some(CommandSource::Safety) => self.own_estop.is_none(),
+            Some(CommandSource::Safety) => self.own_estop.is_none() && !own_stop_held,
             _ => false,
         };
         levels

@@ -204,6 +204,32 @@ fn authority_taken_by_a_higher_source_but_not_by_our_own_estop() {
 }
 
 #[test]
+fn a_safety_hold_is_ours_while_the_arbiter_counts_our_stop_among_its_engagers() {
+    let t = Instant::now();
+    let st = status(FlightMode::Guided, 80, "");
+    let stopped_by = |sources: &[CommandSource]| {
+        let mut s = snap(st, Some(CommandSource::Safety));
+        let a = s.authority.as_mut().unwrap();
+        for source in sources {
+            a.emergency = 1;
+            a.emergency_sources |= 1 << source.to_wire();
+        }
+        s
+    };
+    // Our stop (from an earlier session: no grace here), with another's: ours.
+    let mut w = InvalidWatch::new(20);
+    assert_eq!(
+        w.on_vehicle(t, &stopped_by(&[SOURCE, CommandSource::SwarmQueue]), NOW_NS),
+        vec![]
+    );
+    // We released ours; GroundControl's stop holds the vehicle: taken from us.
+    assert_eq!(
+        w.on_vehicle(t, &stopped_by(&[CommandSource::SwarmQueue]), NOW_NS),
+        vec![R::RcTakeover]
+    );
+}
+
+#[test]
 fn geofence_events_of_ours_start_a_condition_after_a_quiet_period() {
     let t = Instant::now();
     let mut w = InvalidWatch::new(20);

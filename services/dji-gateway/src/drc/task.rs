@@ -454,6 +454,12 @@ impl Task {
         );
     }
 
+    /// drone_emergency_stop: an emergency stop engaged under our own source
+    /// (`dji_drc`), so the arbiter counts the DJI pilot among its engagers. The DJI
+    /// Cloud API has no method that releases it (drone_emergency_stop has no
+    /// counterpart, and a later drone_control is a stick input, not a release): it
+    /// is never withdrawn from here, and only an operator's or safety's
+    /// `ClearEmergency` ends it. Stick commands meanwhile are refused by the arbiter.
     fn emergency_stop(&mut self) {
         tracing::warn!("DRC: drone_emergency_stop");
         self.session.emergency_stop();
