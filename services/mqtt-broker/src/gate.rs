@@ -273,11 +273,16 @@ impl Gate {
         };
         let _ = up.set_nodelay(true);
         let (mut ur, mut uw) = up.into_split();
-        // The CONNECT as sent, but with the internal secret as the password.
+        // The CONNECT as sent, but with the internal secret as the password and,
+        // with logins, the client id in the user's own namespace.
         let login = Login {
             username: username.clone(),
             password: self.secret.clone(),
         };
+        let mut connect = connect;
+        if user.is_some() {
+            connect.client_id = namespaced(&username, &connect.client_id);
+        }
         let mut out = BytesMut::new();
         if V4
             .write(
@@ -370,11 +375,13 @@ impl Gate {
                 }
                 Ok(Packet::Subscribe(s, _)) => {
                     for f in &s.filters {
-                        if acl::valid_filter(&f.path).is_err() {
+                        // rumqttd's shared subscriptions: the ACL applies to the filter.
+                        let path = shared_filter(&f.path);
+                        if acl::valid_filter(path).is_err() {
                             let detail = format!("subscribe to `{}`: not a filter", f.path);
                             return End::Refused(reason::PROTOCOL, detail);
                         }
-                        if user.is_some_and(|u| !acl::any_covers(&u.subscribe, &f.path)) {
+                        if user.is_some_and(|u| !acl::any_covers(&u.subscribe, path)) {
                             let detail = format!("subscribe to `{}`", f.path);
                             return End::Refused(reason::SUBSCRIBE_ACL, detail);
                         }
@@ -403,6 +410,27 @@ impl Gate {
             }
         }
     }
+}
+
+/// rumqttd keys sessions (persistent subscriptions, the one connection per id) by
+/// client id alone: with logins, another user must neither take over a user's
+/// connection nor inherit its persistent subscriptions by reusing its id. The id
+/// rumqttd sees is `hex(username):client_id` (injective: hex has no `:`; none of
+/// `+$#/`, which rumqttd refuses). An empty id stays empty (rumqttd assigns one).
+fn namespaced(username: &str, client_id: &str) -> String {
+    if client_id.is_empty() {
+        return String::new();
+    }
+    let hex: String = username.bytes().map(|b| format!("{b:02x}")).collect();
+    format!("{hex}:{client_id}")
+}
+
+/// The filter of a `$share/{group}/{filter}` subscription, else `filter`.
+fn shared_filter(filter: &str) -> &str {
+    filter
+        .strip_prefix("$share/")
+        .and_then(|rest| rest.split_once('/'))
+        .map_or(filter, |(_, f)| f)
 }
 
 /// Sends a refusing CONNACK (best effort: the client may be gone).
@@ -459,6 +487,15 @@ pub fn make_secret() -> std::io::Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn client_ids_live_in_their_users_namespace() {
+        assert_eq!(namespaced("gw", "dev"), "6777:dev");
+        assert_ne!(namespaced("ab", "x"), namespaced("a", "62:x"));
+        assert_eq!(namespaced("gw", ""), "");
+        assert_eq!(shared_filter("$share/g/thing/#"), "thing/#");
+        assert_eq!(shared_filter("thing/#"), "thing/#");
+    }
 
     #[test]
     fn passwords_compare_whole() {

@@ -216,6 +216,25 @@ async fn topic_acls_deliver_inside_and_disconnect_outside() {
         "thing/product/SN1/services_reply"
     );
 
+    // Another user reusing the gateway's client id neither takes over its
+    // connection nor its session: the gateway's next reply still arrives.
+    let (_imp, imp_ev) = connect(broker.addr, "gw", Some(("cloud", "c"))).await;
+    let _imp_task = drive(imp_ev);
+    gw.publish(
+        "thing/product/SN1/services_reply",
+        QoS::AtLeastOnce,
+        false,
+        &b"ok2"[..],
+    )
+    .await
+    .expect("publish");
+    let got = next_publish(&mut cloud_ev, "the gateway's second reply").await;
+    assert_eq!(&got.payload[..], b"ok2");
+    assert_eq!(
+        &next_publish(&mut audit_ev, "audited").await.payload[..],
+        b"ok2"
+    );
+
     // Outside: a client of the gateway's login publishing a DRC command (the cloud's
     // topic) is disconnected and the command reaches nobody.
     let (rogue, mut rogue_ev) = connect(broker.addr, "rogue", Some(("gateway", "g"))).await;
