@@ -142,16 +142,17 @@ pub(crate) async fn run(
     let mut demand = Demand::new(settings.always_on);
     ctx.ready();
     while ticker.tick(&ctx, &metrics).await?.is_some() {
+        // Idle, neither the pose nor the file is read: playback pauses while nobody
+        // watches.
+        if finished || !demand.wanted(&ports, &metrics) {
+            continue;
+        }
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {
             tracker.update_vehicle(&v);
         }
         if let Some(p) = payload {
             tracker.update_payload(&p);
-        }
-        // Idle, the file is not read: playback pauses while nobody watches.
-        if finished || !demand.wanted(&ports, &metrics) {
-            continue;
         }
         let began = std::time::Instant::now();
         if next_frame(

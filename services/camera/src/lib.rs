@@ -17,9 +17,9 @@
 //!
 //! **On demand.** Frames are made only while the frame topic has a subscriber (the
 //! vision pipeline subscribes only while its own output is used; tools and tests),
-//! or always with `always_on` ([`Demand`]). Idle, each tick only reads the vehicle's
-//! pose and the topic's subscriber count (shared memory, no system call), so a new
-//! reader gets its first frame within a frame period.
+//! or always with `always_on` ([`Demand`]). Idle, each tick only reads the topic's
+//! subscriber count (shared memory, no system call), so a new reader gets its first
+//! frame within a frame period.
 //!
 //! The frame header's `pose.attitude_q` is the **camera mount → NED** quaternion
 //! (x along the optical axis, y image right, z image down), not the vehicle's
@@ -178,15 +178,17 @@ async fn run_synthetic(
     let mut demand = Demand::new(source.settings().always_on);
     ctx.ready();
     while let Some(tick) = ticker.tick(&ctx, &metrics).await? {
+        // Idle, the pose is not even read: the topics keep their newest samples,
+        // which the first tick with a reader takes.
+        if !demand.wanted(&ports, &metrics) {
+            continue;
+        }
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {
             source.update_vehicle(&v);
         }
         if let Some(p) = payload {
             source.update_payload(&p);
-        }
-        if !demand.wanted(&ports, &metrics) {
-            continue;
         }
         if source.pose().is_err() {
             metrics.skipped(Skip::NoPose, 1);

@@ -143,9 +143,6 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
             (i, r) = next_frame(&mut ports.streams) => { r?; Event::Frame(i) }
             _ = tick.tick() => Event::Tick,
         };
-        if let Some(v) = ports.vehicle.latest()? {
-            pipeline.vehicle = Some(v);
-        }
         let mut replies = Vec::new();
         match event {
             Event::Control(c) => {
@@ -159,6 +156,10 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
                 }
             }
             Event::Frame(i) => {
+                // Read for frames only (its topic keeps the newest samples).
+                if let Some(v) = ports.vehicle.latest()? {
+                    pipeline.vehicle = Some(v);
+                }
                 let StreamPorts { frames, output, .. } = &mut ports.streams[i];
                 let sinks = &mut ports.sinks;
                 let Some(frames) = frames.as_mut() else {
