@@ -11,7 +11,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use gc_proto::Record;
-use skymesh_ipc_types::{SwarmReply, SwarmResult, ALL_DRONES};
+use skymesh_ipc_types::{SwarmCommandKind, SwarmReply, SwarmResult, ALL_DRONES};
 use skymesh_runtime::Subscriber;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::mpsc;
@@ -41,7 +41,21 @@ struct Client {
     cancel: CancellationToken,
 }
 
+/// Geofence commands: a refusal (the arbiter refused the box, or did not take it)
+/// is answered ACK_CMD_TIMEOUT, the protocol's one failure record, so the client
+/// never believes a fence is in force that is not.
+fn refusal_answered(kind: u8) -> bool {
+    matches!(
+        SwarmCommandKind::try_from(kind),
+        Ok(SwarmCommandKind::SetGeofence
+            | SwarmCommandKind::ReconfigureGeofence
+            | SwarmCommandKind::SetGeofencePosition)
+    )
+}
+
 /// The record a reply becomes for the client, if any. `ALL_DRONES` is context −1.
+/// GroundControl has no record for a refusal: it is only logged, except for the
+/// geofence commands ([`refusal_answered`]).
 pub fn reply_record(reply: &SwarmReply, result: SwarmResult) -> Option<Record> {
     let drone = if reply.drone == ALL_DRONES {
         -1
@@ -52,6 +66,9 @@ pub fn reply_record(reply: &SwarmReply, result: SwarmResult) -> Option<Record> {
     match result {
         SwarmResult::Success => Some(Record::ack(true, drone, kind)),
         SwarmResult::Timeout => Some(Record::ack(false, drone, kind)),
+        SwarmResult::Refused if refusal_answered(reply.kind) => {
+            Some(Record::ack(false, drone, kind))
+        }
         SwarmResult::IdleState => Some(Record::idle_state(drone, reply.value != 0)),
         SwarmResult::Refused | SwarmResult::Accepted => None,
     }
@@ -302,6 +319,26 @@ mod tests {
         assert_eq!((idle.context, idle.int1), (4, 1));
         assert!(reply_record(&r, SwarmResult::Refused).is_none());
         assert!(reply_record(&r, SwarmResult::Accepted).is_none());
+        for kind in [
+            SwarmCommandKind::SetGeofence,
+            SwarmCommandKind::ReconfigureGeofence,
+            SwarmCommandKind::SetGeofencePosition,
+        ] {
+            let fence = SwarmReply {
+                kind: kind.to_wire(),
+                ..r
+            };
+            let refused = reply_record(&fence, SwarmResult::Refused).unwrap();
+            assert_eq!(
+                refused.net_type(),
+                Some(NetCmdType::AckCmdTimeout),
+                "{kind}"
+            );
+            assert_eq!(
+                (refused.context, refused.int1),
+                (4, i32::from(kind.to_wire()))
+            );
+        }
         let all = SwarmReply {
             drone: ALL_DRONES,
             ..r

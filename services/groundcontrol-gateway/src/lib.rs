@@ -6,7 +6,9 @@
 //! fixed 32-byte records, privileged and non-privileged clients) and its pose
 //! broadcast (UDP 6666, one datagram of 84-byte records per frame). Commands become
 //! `SwarmCommand` samples for the swarm queue, which *decides*; its replies come back
-//! as `ACK_CMD_SUCCESS`/`ACK_CMD_TIMEOUT` records and `CHECK_ALL_IDLE` answers, and
+//! as `ACK_CMD_SUCCESS`/`ACK_CMD_TIMEOUT` records and `CHECK_ALL_IDLE` answers (a
+//! refusal has no record and is only logged, except a refused geofence command:
+//! `ACK_CMD_TIMEOUT`, so a box the arbiter did not take never looks in force), and
 //! its `SwarmState` becomes the broadcast.
 //!
 //! | module | role |
