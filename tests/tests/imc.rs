@@ -103,6 +103,40 @@ fn imc_operates_leds_gpio_power_channels_and_talks_to_peers() {
             t0.elapsed()
         );
 
+        // The arbiter's series exist at 0 before its first decision (a dashboard
+        // sees 0, not "no data"), once autopilot-link's first stats sample is in.
+        let sources = [
+            "safety",
+            "manual_rc",
+            "dji_drc",
+            "shot_engine",
+            "swarm_queue",
+            "imc",
+            "vision",
+            "operator",
+        ];
+        let s = "service=\"autopilot-link\"";
+        let series: Vec<String> = sources
+            .iter()
+            .flat_map(|src| {
+                [
+                    format!("skymesh_arbiter_decisions_total{{decision=\"accepted\",reason=\"none\",{s},source=\"{src}\"}}"),
+                    format!("skymesh_arbiter_decisions_total{{decision=\"limited\",reason=\"none\",{s},source=\"{src}\"}}"),
+                    format!("skymesh_arbiter_authority_holder{{{s},source=\"{src}\",vehicle=\"1\"}}"),
+                    format!("skymesh_arbiter_stale_brakes_total{{{s},source=\"{src}\"}}"),
+                ]
+            })
+            .collect();
+        mesh.wait_for(Duration::from_secs(5), "autopilot-link's stats", |m| {
+            m.metric("skymesh_autopilot_link_up{service=\"autopilot-link\"}")
+                .ok()
+                .flatten()
+        })
+        .unwrap();
+        for series in &series {
+            assert_eq!(mesh.metric(series).unwrap(), Some(0.0), "{series}");
+        }
+
         // LEDs: set, then query.
         let set = Message::SetLedBrightness {
             name: "status".into(),

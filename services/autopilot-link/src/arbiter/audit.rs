@@ -1,13 +1,16 @@
 //! Audit: every decision is counted and logged as one structured line (the
 //! `CommandAck` is published by the service), plus the arbiter's other series.
 //!
-//! Series (all registered on first use: the stats sample holds 384 entries for the
-//! whole service, so no label combination is spent before it happens):
+//! Series. The label sets known at start exist at 0 from the first scrape
+//! (Prometheus convention: a dashboard sees 0, not "no data"): every source's
+//! `accepted` and `limited` decisions, its authority-holder gauge and its stale-brake
+//! counter (32 series). Refusals are registered on first use: source × reason would
+//! spend 144 of the stats sample's 384 entries on series that mostly stay zero.
 //! - `skymesh_arbiter_decisions_total{source,decision,reason}` — decision is
 //!   `accepted`, `limited` or `refused`; reason is a `RefusalReason` name (`none`
 //!   when accepted or limited).
 //! - `skymesh_arbiter_authority_holder{vehicle,source}` — 1 for the flight-authority
-//!   holder, 0 for every source that held it before.
+//!   holder, 0 for every other source.
 //! - `skymesh_arbiter_stale_brakes_total{source}` — brakes because the source's
 //!   setpoint stream stopped (or its position target lost authority).
 //! - `skymesh_arbiter_emergency_ends_total{source}` — emergency stops ended by that
@@ -59,7 +62,7 @@ fn source_name(raw: u8) -> &'static str {
 
 impl Audit {
     pub fn new(stats: &Stats, vehicle_id: u8) -> Self {
-        Audit {
+        let mut audit = Audit {
             stats: stats.clone(),
             vehicle: vehicle_id.to_string(),
             decisions: HashMap::new(),
@@ -68,26 +71,57 @@ impl Audit {
             last_setpoint: [None; CommandSource::ALL.len()],
             clears: HashMap::new(),
             state_file_errors: None,
+        };
+        for &source in CommandSource::ALL {
+            for result in [AckResult::Accepted, AckResult::Limited] {
+                audit.decision_counter(source.as_str(), result, RefusalReason::None);
+            }
+            audit.stale_brake_counter(source);
+            let gauge = audit.stats.gauge(
+                "skymesh_arbiter_authority_holder",
+                &[("vehicle", &audit.vehicle), ("source", source.as_str())],
+            );
+            gauge.set(0.0);
+            audit.holders.push((source, gauge));
         }
+        audit
     }
 
-    /// Counts and logs one decision.
-    pub fn decision(&mut self, r: Record<'_>) {
-        let source = source_name(r.source);
+    fn decision_counter(
+        &mut self,
+        source: &'static str,
+        result: AckResult,
+        reason: RefusalReason,
+    ) -> &Counter {
         let stats = &self.stats;
         self.decisions
-            .entry((source, r.result, r.reason))
+            .entry((source, result, reason))
             .or_insert_with(|| {
                 stats.counter(
                     "skymesh_arbiter_decisions_total",
                     &[
                         ("source", source),
-                        ("decision", r.result.as_str()),
-                        ("reason", r.reason.as_str()),
+                        ("decision", result.as_str()),
+                        ("reason", reason.as_str()),
                     ],
                 )
             })
-            .inc();
+    }
+
+    fn stale_brake_counter(&mut self, source: CommandSource) -> &Counter {
+        let stats = &self.stats;
+        self.stale_brakes.entry(source).or_insert_with(|| {
+            stats.counter(
+                "skymesh_arbiter_stale_brakes_total",
+                &[("source", source.as_str())],
+            )
+        })
+    }
+
+    /// Counts and logs one decision.
+    pub fn decision(&mut self, r: Record<'_>) {
+        let source = source_name(r.source);
+        self.decision_counter(source, r.result, r.reason).inc();
         let kind_known = CommandKind::try_from(r.kind).ok();
         let kind = kind_known.map_or("unknown", CommandKind::as_str);
         let repeat = match kind_known {
@@ -152,16 +186,7 @@ impl Audit {
 
     /// The arbiter braked because `source`'s setpoint stream stopped.
     pub fn stale_brake(&mut self, source: CommandSource) {
-        let stats = &self.stats;
-        self.stale_brakes
-            .entry(source)
-            .or_insert_with(|| {
-                stats.counter(
-                    "skymesh_arbiter_stale_brakes_total",
-                    &[("source", source.as_str())],
-                )
-            })
-            .inc();
+        self.stale_brake_counter(source).inc();
     }
 
     /// `by` ended the emergency stop (the last engager released it, or a
@@ -205,9 +230,28 @@ mod tests {
     }
 
     #[test]
-    fn series_are_registered_on_use_with_bounded_labels() {
+    fn known_series_exist_at_zero_refusals_on_use() {
         let stats = Stats::new();
         let mut a = Audit::new(&stats, 3);
+        let d = "skymesh_arbiter_decisions_total";
+        let h = "skymesh_arbiter_authority_holder";
+        let b = "skymesh_arbiter_stale_brakes_total";
+        for s in CommandSource::ALL.iter().map(|s| s.as_str()) {
+            for decision in ["accepted", "limited"] {
+                let labels = format!("source={s},decision={decision},reason=none");
+                assert_eq!(value(&stats, d, &labels), Some(0.0), "{labels}");
+            }
+            assert_eq!(
+                value(&stats, h, &format!("vehicle=3,source={s}")),
+                Some(0.0)
+            );
+            assert_eq!(value(&stats, b, &format!("source={s}")), Some(0.0));
+        }
+        assert_eq!(
+            value(&stats, d, "source=vision,decision=refused,reason=stale"),
+            None,
+            "refusals are registered on first use"
+        );
         let rec = |source: u8, result, reason| Record {
             source,
             kind: CommandKind::VelocityNed.to_wire(),
@@ -236,7 +280,6 @@ mod tests {
             AckResult::Limited,
             RefusalReason::None,
         ));
-        let d = "skymesh_arbiter_decisions_total";
         assert_eq!(
             value(&stats, d, "source=vision,decision=refused,reason=stale"),
             Some(2.0)
@@ -255,22 +298,19 @@ mod tests {
         );
         assert_eq!(
             value(&stats, d, "source=operator,decision=accepted,reason=none"),
-            None
+            Some(0.0)
         );
 
-        let h = "skymesh_arbiter_authority_holder";
         a.flight_holder(Some(CommandSource::ShotEngine));
         a.flight_holder(Some(CommandSource::ManualRc));
         assert_eq!(value(&stats, h, "vehicle=3,source=shot_engine"), Some(0.0));
         assert_eq!(value(&stats, h, "vehicle=3,source=manual_rc"), Some(1.0));
         a.flight_holder(None);
         assert_eq!(value(&stats, h, "vehicle=3,source=manual_rc"), Some(0.0));
-        assert_eq!(value(&stats, h, "vehicle=3,source=vision"), None);
+        assert_eq!(value(&stats, h, "vehicle=3,source=vision"), Some(0.0));
 
         a.stale_brake(CommandSource::Imc);
-        assert_eq!(
-            value(&stats, "skymesh_arbiter_stale_brakes_total", "source=imc"),
-            Some(1.0)
-        );
+        assert_eq!(value(&stats, b, "source=imc"), Some(1.0));
+        assert_eq!(value(&stats, b, "source=dji_drc"), Some(0.0));
     }
 }
