@@ -363,12 +363,36 @@ impl<L: Lifecycle> Service<L> {
         .fold(self.next_tick, Instant::min)
     }
 
+    /// Everything due at `now`. Each part runs even if one before it failed (a
+    /// bus error must not hold back the heartbeat, a retransmission or the stop);
+    /// the first error is returned.
     fn on_timers(&mut self, now: Instant) -> anyhow::Result<()> {
+        let results = [
+            self.poll_arbiter(),
+            self.poll_link(now),
+            self.poll_commands(now),
+            self.publish_payload_if_due(),
+            self.poll_vision(),
+            self.tick(now),
+        ];
+        results.into_iter().find(Result::is_err).unwrap_or(Ok(()))
+    }
+
+    fn poll_arbiter(&mut self) -> anyhow::Result<()> {
         let effects = self.arbiter.poll(monotonic_ns());
-        self.apply(effects)?;
+        self.apply(effects)
+    }
+
+    fn poll_link(&mut self, now: Instant) -> anyhow::Result<()> {
         if let Some(change) = self.link.poll(now) {
             self.link_changed(change, now, "no heartbeat within the link timeout")?;
         }
+        Ok(())
+    }
+
+    /// Retransmissions (decided again), timeouts, the stop's repeats and
+    /// deadlines, refusals whose explanation did not come.
+    fn poll_commands(&mut self, now: Instant) -> anyhow::Result<()> {
         for action in self.tracker.poll(now) {
             match action {
                 Action::Retransmit {
@@ -401,8 +425,11 @@ impl<L: Lifecycle> Service<L> {
                 self.answer(answer)?;
             }
         }
-        self.publish_payload_if_due()?;
-        self.poll_vision()?;
+        Ok(())
+    }
+
+    /// Our HEARTBEAT, the periodic status and authority, stream re-requests.
+    fn tick(&mut self, now: Instant) -> anyhow::Result<()> {
         if now >= self.next_tick {
             // On the machine-wide grid (skymesh_runtime::timer), at least half a tick
             // on (a stalled machine skips the missed ticks): the status goes out on
@@ -960,7 +987,10 @@ mod tests {
         assert_eq!(h.failed(t0), Duration::ZERO);
         assert!(!h.ready(t0 + BUS_RETRY / 2), "not polled at once again");
         assert!(h.ready(t0 + BUS_RETRY));
-        assert_eq!(h.failed(t0 + Duration::from_secs(3)), Duration::from_secs(3));
+        assert_eq!(
+            h.failed(t0 + Duration::from_secs(3)),
+            Duration::from_secs(3)
+        );
         h.ok();
         assert!(h.ready(t0));
         assert_eq!(
@@ -987,7 +1017,11 @@ mod tests {
                 Some(CommandSource::Operator),
             ),
             change(AuthorityChange::Granted, None, Some(CommandSource::Imc)),
-            change(AuthorityChange::Preempted, None, Some(CommandSource::Operator)),
+            change(
+                AuthorityChange::Preempted,
+                None,
+                Some(CommandSource::Operator),
+            ),
             Effect::Event {
                 kind: ArbiterEventKind::EmergencyCleared,
                 source: Some(CommandSource::Operator),
