@@ -474,10 +474,7 @@ impl Arbiter {
         if matches!(command, Command::Arm { force: true })
             && !matches!(source, CommandSource::Safety | CommandSource::Operator)
         {
-            return refused(
-                RefusalReason::Denied,
-                "forced arm: safety or operator only",
-            );
+            return refused(RefusalReason::Denied, "forced arm: safety or operator only");
         }
         let domain = kind.authority().unwrap_or(AuthorityDomain::Flight);
         if kind.is_authority_request() {
@@ -573,6 +570,11 @@ impl Arbiter {
             CommandKind::GrabFlightAuthority | CommandKind::GrabPayloadAuthority
         );
         if !grab {
+            if domain == AuthorityDomain::Flight && self.authority.in_emergency() {
+                return Outcome::Done {
+                    detail: "emergency stop in force: safety keeps it".to_string(),
+                };
+            }
             return match self.authority.release(domain, source, now_ns) {
                 Some(c) => {
                     effects.push(Effect::Authority(c));
@@ -644,10 +646,7 @@ impl Arbiter {
                 }
             }
             Released::Remaining(others) => {
-                let detail = format!(
-                    "{source} released its stop; still held by {}",
-                    names(&others)
-                );
+                let detail = format!("{source} released; still held by {}", names(&others));
                 effects.push(Effect::Event {
                     kind: ArbiterEventKind::EmergencyReleased,
                     source: Some(source),
@@ -659,7 +658,7 @@ impl Arbiter {
                 effects.push(Effect::Event {
                     kind: ArbiterEventKind::EmergencyReleased,
                     source: Some(source),
-                    detail: format!("{source} released its stop, the last one"),
+                    detail: format!("{source} released, the last engager"),
                 });
                 effects.push(Effect::Event {
                     kind: ArbiterEventKind::EmergencyCleared,

@@ -89,6 +89,11 @@ fn releasing_flight_authority_never_ends_a_stop() {
             &v,
         );
         assert!(d.effects.is_empty(), "{source}: {d:?}");
+        if source == Safety {
+            assert_eq!(d.detail(), "emergency stop in force: safety keeps it");
+        } else {
+            assert_eq!(d.reason(), RefusalReason::Emergency);
+        }
         assert_eq!(a.authority().state(1).emergency, 1, "{source}");
         assert_eq!(a.authority().state(1).flight(), Some(Safety));
     }

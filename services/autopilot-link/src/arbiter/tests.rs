@@ -313,10 +313,7 @@ fn emergency_stop_from_anyone_blocks_everyone_but_safety_until_its_engagers_rele
         &sample(ManualRc, Command::ReleaseEmergency, 64 * S),
         &v,
     );
-    assert_eq!(
-        d.detail(),
-        "manual_rc released its stop; still held by vision"
-    );
+    assert_eq!(d.detail(), "manual_rc released; still held by vision");
     assert_eq!(a.authority().state(1).emergency, 1);
     let d = a.decide(64 * S, &sample(ManualRc, Command::Land, 64 * S), &v);
     assert_eq!(refusal(&d).0, RefusalReason::Emergency);
@@ -483,7 +480,10 @@ fn the_geofence_refuses_targets_and_limits_velocities() {
     let d = a.decide(S, &sample(Operator, goto_ne(40.0, 0.0, 10.0), S), &v);
     assert_eq!(
         refusal(&d),
-        (RefusalReason::Geofence, "path passes within 2.0 m of the fence")
+        (
+            RefusalReason::Geofence,
+            "path passes within 2.0 m of the fence"
+        )
     );
     let d = a.decide(S, &sample(Operator, goto_ne(40.0, 20.0, 10.0), S), &v);
     assert_eq!(
