@@ -48,10 +48,10 @@ use crate::config::User;
 
 /// Why a client was refused (label `reason` of `skymesh_mqtt_refused_total`).
 pub mod reason {
-    /// Missing, unknown or wrong credentials (CONNACK 4), or a will topic outside
-    /// the user's `publish` filters (CONNACK 5).
+    /// Missing, unknown or wrong credentials (CONNACK 4).
     pub const LOGIN: &str = "login";
-    /// A PUBLISH outside the user's `publish` filters.
+    /// A PUBLISH, or a CONNECT's will (CONNACK 5), outside the user's `publish`
+    /// filters.
     pub const PUBLISH_ACL: &str = "publish_acl";
     /// A SUBSCRIBE filter outside the user's `subscribe` filters.
     pub const SUBSCRIBE_ACL: &str = "subscribe_acl";
@@ -249,7 +249,7 @@ impl Gate {
             let denied = if acl::valid_topic(&topic).is_err() {
                 Some(reason::PROTOCOL)
             } else if user_acl.is_some_and(|u| !acl::any_matches(&u.publish, &topic)) {
-                Some(reason::LOGIN)
+                Some(reason::PUBLISH_ACL)
             } else if !self.admit_topic(&topic) {
                 Some(reason::TOPIC_LIMIT)
             } else {

@@ -292,6 +292,9 @@ async fn topic_acls_deliver_inside_and_disconnect_outside() {
         }
         other => panic!("a will outside the ACL must be refused, got {other:?}"),
     }
+    broker
+        .until_metric("skymesh_mqtt_refused_total", "reason=publish_acl", 2.0)
+        .await;
     drop((audit, cloud, gw, c2));
     broker.stop().await;
 }
