@@ -682,3 +682,58 @@ async fn clients_beyond_max_clients_are_closed_and_the_others_served() {
     }
     gw.stop().await;
 }
+
+/// The next demand word within 2.5 s (the renewal period is 1 s).
+async fn next(
+    words: &mut skymesh_runtime::Subscriber<skymesh_ipc_types::VisionDemand>,
+) -> Option<skymesh_ipc_types::VisionDemand> {
+    words
+        .recv_timeout(Duration::from_millis(2500))
+        .await
+        .expect("demand topic")
+}
+
+#[tokio::test]
+async fn a_connected_client_is_demand_for_the_pipeline() {
+    use skymesh_ipc_types::{topics, ServiceId, VisionDemand};
+    use skymesh_runtime::{Bus, Stats};
+
+    let gw = Gateway::start().await;
+    let tool =
+        Bus::open(&gw.domain, "demand-watch", ServiceId::Tool, 1, Stats::new()).expect("tool bus");
+    let mut words = tool
+        .subscriber::<VisionDemand>(&topics::vision_demand())
+        .expect("demand subscriber");
+    // The harness's probe client has come and gone: its words end with a withdrawal,
+    // then nothing while no client is connected.
+    let mut last = None;
+    while let Some(w) = next(&mut words).await {
+        last = Some(w.wanted);
+    }
+    assert_ne!(last, Some(1), "the probe client's word was not withdrawn");
+
+    let c = gw.client().await;
+    assert_eq!(
+        next(&mut words).await.map(|w| w.wanted),
+        Some(1),
+        "a client connected"
+    );
+    // Renewed (the pipeline's lease is 3 s).
+    assert_eq!(next(&mut words).await.map(|w| w.wanted), Some(1), "renewed");
+
+    drop(c);
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    loop {
+        let w = next(&mut words).await.expect("a word");
+        if w.wanted == 0 {
+            break;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "never withdrawn");
+    }
+    assert_eq!(
+        next(&mut words).await,
+        None,
+        "nothing more once nobody is connected"
+    );
+    gw.stop().await;
+}
