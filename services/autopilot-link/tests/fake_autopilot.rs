@@ -378,11 +378,13 @@ async fn a_newer_command_of_the_same_kind_cancels_the_older() {
     )
     .unwrap();
     let arm_id = mesh.send(arm);
+    // The same source: a higher one would pre-empt the operator, and its ARM would
+    // be answered `preempted` instead (acks.rs: a pre-emption cancels).
     let disarm = skymesh_ipc_types::VehicleCommand::new(
         VEHICLE,
-        skymesh_ipc_types::CommandSource::Safety,
+        skymesh_ipc_types::CommandSource::Operator,
         0,
-        &Command::Disarm { force: true },
+        &Command::Disarm { force: false },
     )
     .unwrap();
     let disarm_id = mesh.send(disarm);
