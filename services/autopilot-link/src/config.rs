@@ -1058,4 +1058,31 @@ mod tests {
             )]
         );
     }
+
+    #[test]
+    fn the_state_file_defaults_per_vehicle_under_the_state_directory_or_tmp() {
+        assert_eq!(
+            default_state_file(Some("/var/lib/skymesh:/other"), Some("d"), 3),
+            PathBuf::from("/var/lib/skymesh/autopilot-link-3.json")
+        );
+        assert_eq!(
+            default_state_file(None, Some("e2e1"), 1),
+            PathBuf::from("/tmp/skymesh-e2e1/autopilot-link-1.json")
+        );
+        assert_eq!(
+            default_state_file(Some(""), None, 2),
+            PathBuf::from("/tmp/skymesh-skymesh/autopilot-link-2.json")
+        );
+        let s =
+            parse_str("state_file = \"/x/link.json\"\n[arbiter]\nmax_home_move_m = 20").unwrap();
+        assert_eq!(s.state_file, PathBuf::from("/x/link.json"));
+        assert_eq!(s.arbiter.max_home_move_m, 20.0);
+        let e = parse_str("state_file = \"/\"").unwrap_err();
+        assert!(e.to_string().contains("state_file"), "{e}");
+        let e = parse_str("[arbiter]\nmax_home_alt_change_m = -1").unwrap_err();
+        assert!(
+            e.to_string().contains("arbiter.max_home_alt_change_m"),
+            "{e}"
+        );
+    }
 }
