@@ -28,11 +28,14 @@ use skymesh_e2e::{Mesh, MeshOptions, HOME};
 use skymesh_ipc_types::{
     topics, Command, PixelFormat, SceneTruth, TargetTruth, VehicleState, VisionState, ZoomMode,
 };
+use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::ipc::Subscriber;
 use skymesh_runtime::FrameSubscriber;
 use solo_common::{ne, offset, runtime, Vehicle, STARTUP};
 
 const PATIENCE: Duration = Duration::from_secs(15);
+/// How far the gateway's newest state may trail the test's own subscriber's.
+const STATE_LAG: Duration = Duration::from_secs(1);
 /// Hover height of the detection checks (the 50 m).
 const HEIGHT: f32 = 50.0;
 /// Virtual camera 0's MAVLink component (deploy/autopilot-link.toml's first).
@@ -132,10 +135,11 @@ impl DigiView {
         self.get(param, req.encode())
     }
 
-    /// GETs until `ok` holds for the reply (the gateway answers from the newest
-    /// state it has received, which on a loaded machine can trail what this test
-    /// saw on the bus by a frame or two, and a stalled check machine longer);
-    /// panics after `PATIENCE`.
+    /// GETs until `ok` holds for the reply, for values the pipeline changes on its
+    /// own (a capture's count): the gateway answers from the newest state it has
+    /// received, which may trail what this test saw on its own subscriber of the same
+    /// topic by a publication; panics after [`STATE_LAG`]. Never for a value a SET
+    /// changed: that is read back at once ([`DigiView::set_then_get`]).
     fn get_until(
         &mut self,
         param: ParamType,
@@ -146,17 +150,22 @@ impl DigiView {
         loop {
             let p = self.get_stream(param, cam);
             if ok(&p) {
-                if t.elapsed() > Duration::from_millis(50) {
-                    eprintln!(
-                        "vision e2e: {} matched after {:.0} ms",
-                        param.name(),
-                        t.elapsed().as_secs_f64() * 1e3
-                    );
-                }
                 return p;
             }
-            assert!(t.elapsed() < PATIENCE, "{}: still {p:?}", param.name());
-            std::thread::sleep(Duration::from_millis(50));
+            assert!(t.elapsed() < STATE_LAG, "{}: still {p:?}", param.name());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Read your writes: a SET acknowledged, then one GET of the same parameter sent
+    /// right after the ACKNOWLEDGEMENT, whose answer is returned (no retries: the
+    /// gateway answers from a state that contains the change).
+    fn set_then_get(&mut self, p: &Param, cam: Option<u8>) -> Param {
+        assert_eq!(self.set(p), MessageType::Acknowledgement, "SET {p:?}");
+        let param = p.param_type();
+        match param {
+            ParamType::Ai | ParamType::Detection => self.get(param, [0; 64]),
+            _ => self.get_stream(param, cam),
         }
     }
 
@@ -411,6 +420,20 @@ fn vision_end_to_end() {
         ],
         STARTUP,
     );
+    // The first request, the moment the gateway reports running: answered from the
+    // pipeline's state (CURRENT), not UNKNOWN. Idle (0) until a client's demand has
+    // the pipeline reading frames, running (1) after.
+    let mut dv = DigiView::connect(mesh.digiview_port);
+    let t = Instant::now();
+    let Param::SystemStatus(st) = dv.get(ParamType::SystemStatus, [0; 64]) else {
+        panic!()
+    };
+    eprintln!(
+        "vision e2e: first SYSTEM_STATUS {} in {:?}",
+        st.status,
+        t.elapsed()
+    );
+    assert!(st.status <= 1, "first SYSTEM_STATUS {st:?}");
     let bus = mesh.bus("vision-e2e").unwrap();
     let rt = runtime();
     let v = Vehicle::new(&bus);
@@ -419,7 +442,6 @@ fn vision_end_to_end() {
     let output = bus
         .frame_subscriber(&topics::vision_output("main"))
         .unwrap();
-    let dv = DigiView::connect(mesh.digiview_port);
     let gcs = Gcs::open(gcs_port);
     let mut c = Ctx {
         mesh,
@@ -591,7 +613,12 @@ fn digiview_parameters(c: &mut Ctx) {
         overlay_mode: 2,
         ..Default::default()
     });
-    assert_eq!(c.dv.set(&set), MessageType::Acknowledgement);
+    let got = c.dv.set_then_get(&set, None);
+    assert!(
+        matches!(&got, Param::VideoOutput(v)
+            if (v.layout_mode, v.layout_views, v.views.len(), v.width, v.height) == (4, 4, 4, 1920, 1080)),
+        "GET right after the SET: {got:?}"
+    );
     let st = c.wait_vision("layout 4", |s| s.streams[0].num_views == 4);
     assert_eq!(
         (st.streams[0].out_width, st.streams[0].out_height),
@@ -601,10 +628,6 @@ fn digiview_parameters(c: &mut Ctx) {
     while c.output_centre().0 != 1920 {
         assert!(Instant::now() < deadline, "output never became 1920 wide");
     }
-    c.dv.get_until(ParamType::VideoOutput, None, |p| {
-        matches!(p, Param::VideoOutput(v)
-            if (v.layout_mode, v.layout_views, v.views.len(), v.width, v.height) == (4, 4, 4, 1920, 1080))
-    });
     // Back to one view (the coordinal phase checks its centre pixel).
     let set = Param::VideoOutput(VideoOutput {
         stream: StreamName::new("main").unwrap(),
@@ -657,7 +680,86 @@ fn digiview_parameters(c: &mut Ctx) {
     c.dv.send(&f);
     // The cancel is itself answered once; then silence.
     while c.dv.recv().is_some() {}
+    read_after_write(c);
     phase("DigiView parameters", t);
+}
+
+/// Every SET-able parameter: the GET sent right after the ACKNOWLEDGEMENT returns
+/// the value just set (then the old value is set back and read back the same way).
+fn read_after_write(c: &mut Ctx) {
+    let Param::Detection(det0) = c.dv.get(ParamType::Detection, [0; 64]) else {
+        panic!()
+    };
+    let det = digiview_proto::Detection {
+        creation_score: det0.creation_score + 5,
+        sorting_mode: (det0.sorting_mode + 1) % 3,
+        ..det0
+    };
+    for want in [det, det0] {
+        let got = c.dv.set_then_get(&Param::Detection(want), None);
+        let Param::Detection(got) = got else { panic!() };
+        assert_eq!(
+            (got.creation_score, got.sorting_mode),
+            (want.creation_score, want.sorting_mode),
+            "DETECTION read after write"
+        );
+    }
+
+    let Param::Ai(ai0) = c.dv.get(ParamType::Ai, [0; 64]) else {
+        panic!()
+    };
+    let ai = digiview_proto::Ai {
+        scan_model: digiview_proto::ModelName::new("motion-bg").unwrap(),
+        ..ai0
+    };
+    for want in [ai, ai0] {
+        let got = c.dv.set_then_get(&Param::Ai(want), None);
+        assert_eq!(got, Param::Ai(want), "AI read after write");
+    }
+
+    let Param::CamOpticsAndControl(opt0) = c.dv.get_stream(ParamType::CamOpticsAndControl, Some(0))
+    else {
+        panic!()
+    };
+    let opt = digiview_proto::CamOpticsAndControl {
+        fov: 50f64.to_radians(),
+        ..opt0
+    };
+    for want in [opt, opt0] {
+        let got =
+            c.dv.set_then_get(&Param::CamOpticsAndControl(want), Some(0));
+        let Param::CamOpticsAndControl(got) = got else {
+            panic!()
+        };
+        assert!(
+            (got.fov - want.fov).abs() < 1e-3 && got.zoom == want.zoom,
+            "CAM_OPTICS_AND_CONTROL read after write: set {want:?}, got {got:?}"
+        );
+    }
+
+    // The case: yaw/pitch 1500/-500 mrad read back 0 just after the ACK.
+    let Param::CamTargeting(aim0) = c.dv.get_stream(ParamType::CamTargeting, Some(0)) else {
+        panic!()
+    };
+    let aim = CamTargeting {
+        mode: 0,
+        euler_delta: false,
+        yaw: 1.5,
+        pitch: -0.5,
+        ..aim0
+    };
+    for want in [aim, aim0] {
+        let got = c.dv.set_then_get(&Param::CamTargeting(want), Some(0));
+        let Param::CamTargeting(got) = got else {
+            panic!()
+        };
+        assert!(
+            got.mode == want.mode
+                && (got.yaw - want.yaw).abs() < 1e-3
+                && (got.pitch - want.pitch).abs() < 1e-3,
+            "CAM_TARGETING read after write: set {want:?}, got {got:?}"
+        );
+    }
 }
 
 /// Every error reply of the protocol, on a fresh connection each where it closes.
@@ -744,7 +846,11 @@ fn single_target_and_targeting(c: &mut Ctx) {
         rel_frame: 0,
         ..Default::default()
     });
-    assert_eq!(c.dv.set(&stt), MessageType::Acknowledgement);
+    let got = c.dv.set_then_get(&stt, None);
+    assert!(
+        matches!(&got, Param::SingleTargetTracking(g) if (g.command, g.detection_id, g.zoom) == (2, target.id, 5)),
+        "GET right after the SET: {got:?}"
+    );
     // An id nobody has is refused.
     let unknown = (0..=253u8)
         .find(|id| st.detections().iter().all(|d| d.id != *id))
@@ -773,9 +879,6 @@ fn single_target_and_targeting(c: &mut Ctx) {
         (f64::from(d.yaw_global_rad), f64::from(d.pitch_global_rad)),
     );
     assert!(sep < 1.0, "STT direction {sep:.2}° from its detection");
-    c.dv.get_until(ParamType::SingleTargetTracking, None, |p| {
-        matches!(p, Param::SingleTargetTracking(g) if (g.command, g.detection_id, g.zoom) == (2, target.id, 5))
-    });
     // Camera 0 on the single target: the view's axis on the detection.
     let aim = Param::CamTargeting(CamTargeting {
         stream: StreamName::new("main").unwrap(),
@@ -784,7 +887,11 @@ fn single_target_and_targeting(c: &mut Ctx) {
         lock_flags: 0b111,
         ..Default::default()
     });
-    assert_eq!(c.dv.set(&aim), MessageType::Acknowledgement);
+    let got = c.dv.set_then_get(&aim, Some(0));
+    assert!(
+        matches!(&got, Param::CamTargeting(g) if (g.mode, g.lock_flags) == (3, 0b111)),
+        "GET right after the SET: {got:?}"
+    );
     let st = c.wait_vision("view on the single target", |s| {
         let cam = s.streams[0].cams[0];
         let stt = s.streams[0].stt;
@@ -797,11 +904,6 @@ fn single_target_and_targeting(c: &mut Ctx) {
                 ),
             ) < 1.0
     });
-    c.dv.get_until(
-        ParamType::CamTargeting,
-        Some(0),
-        |p| matches!(p, Param::CamTargeting(g) if (g.mode, g.lock_flags) == (3, 0b111)),
-    );
     // The output's centre shows the followed target's colour.
     let truth = c.truth();
     let (_, _, rgb) = c.output_centre();
@@ -864,11 +966,16 @@ fn coordinal_view_keeps_the_point_centred(c: &mut Ctx) {
         ..Default::default()
     });
     assert_eq!(c.dv.set(&set), MessageType::Acknowledgement);
+    // The state published with the SET's reply already says coordinal (read your
+    // writes); the view follows with the next frame processed after it.
+    let set_at = monotonic_ns();
     // Each check pairs a VisionState with the output frame of the same source frame,
     // so the expected direction is computed from where that frame was captured.
     let check = |c: &mut Ctx, label: &str| {
         let deadline = Instant::now() + PATIENCE;
-        let is_coordinal = |v: &VisionState| v.streams[0].cams[0].targeting_mode == 1;
+        let is_coordinal = |v: &VisionState| {
+            v.streams[0].cams[0].targeting_mode == 1 && v.streams[0].last_processed_mono_ns > set_at
+        };
         let mut st = c.wait_vision("coordinal aim", is_coordinal);
         let mut out = c.output_frame();
         let (st, from, rgb) = loop {
