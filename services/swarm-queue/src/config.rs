@@ -98,6 +98,11 @@ pub struct Settings {
     pub pose_timeout: Duration,
     /// No `VehicleStatus` for this long (or `link_up = 0`) → LINK_DOWN.
     pub link_timeout: Duration,
+    /// While a drone's current command flies a position target (`GoTo`, `Takeoff`),
+    /// a flight command goes to its vehicle at least this often (a
+    /// `GrabFlightAuthority` when nothing else was sent): the arbiter brakes a
+    /// position target whose source fell silent for its authority timeout.
+    pub authority_keepalive: Duration,
 }
 
 /// `[site_origin]`.
@@ -173,6 +178,7 @@ pub struct RawConfig {
     pub landed_alt_m: f64,
     pub pose_timeout_s: f64,
     pub link_timeout_s: f64,
+    pub authority_keepalive_ms: i64,
 }
 
 impl Default for RawConfig {
@@ -196,6 +202,7 @@ impl Default for RawConfig {
             landed_alt_m: 0.3,
             pose_timeout_s: 1.0,
             link_timeout_s: 3.0,
+            authority_keepalive_ms: 1_000,
         }
     }
 }
@@ -341,6 +348,12 @@ impl RawConfig {
             landed_alt_m: range_f("landed_alt_m", self.landed_alt_m, 0.05, 2.0)? as f32,
             pose_timeout: seconds("pose_timeout_s", self.pose_timeout_s, 0.1, 60.0)?,
             link_timeout: seconds("link_timeout_s", self.link_timeout_s, 0.5, 60.0)?,
+            authority_keepalive: Duration::from_millis(in_range(
+                "authority_keepalive_ms",
+                self.authority_keepalive_ms,
+                100,
+                2_500,
+            )? as u64),
         })
     }
 
@@ -448,6 +461,7 @@ mod tests {
         assert_eq!(s.tick_period, Duration::from_secs_f64(1.0 / 30.0));
         assert_eq!(s.bounding_box, BoxPolicy::Clamp);
         assert_eq!(s.hardware_drone, Some(1));
+        assert_eq!(s.authority_keepalive, Duration::from_secs(1));
         assert!((s.site.origin().0 - -35.363261).abs() < 1e-9);
     }
 
@@ -504,6 +518,8 @@ mod tests {
             ("takeoff_alt_m = nan", "takeoff_alt_m"),
             ("setpoint_hz = 50", "setpoint_hz"),
             ("[timeouts]\nack_s = 0", "timeouts.ack_s"),
+            ("authority_keepalive_ms = 99", "authority_keepalive_ms"),
+            ("authority_keepalive_ms = 2501", "authority_keepalive_ms"),
         ] {
             match parse_in(&format!("{base}{extra}\n")).unwrap_err() {
                 ConfigError::Invalid { field: f, .. } => assert_eq!(f, field, "{extra}"),

@@ -9,10 +9,20 @@
 //! the sender's, [`Command::ClearEmergency`] from operator or safety ends every one,
 //! and releasing flight authority never ends it. Geofences are answered with a
 //! `GeofenceUpdated` / `GeofenceInvalid` event carrying the sample's `request_id`.
+//!
+//! Flight authority as the arbiter keeps it: a flight command (or a grab) that
+//! passes takes it when free, pre-empts a lower source, refreshes the holder's; a
+//! lower source is refused `NoAuthority`. The holder loses it after
+//! [`FakeVehicle::authority_timeout_ns`] without a flight command (the vehicle's
+//! clock is the sum of its [`FakeVehicle::step`] times), and a holder that loses it
+//! (timeout or pre-emption) while its `GoTo` / `Takeoff` is the position target is
+//! braked: counted in [`FakeVehicle::target_brakes`], a `StaleBrake` event. Any
+//! other motion command of the holder ends the target, as in the arbiter.
 
 use skymesh_ipc_types::{
-    AckResult, ArbiterEvent, ArbiterEventKind, Command, CommandAck, CommandKind, CommandSource,
-    FixedStr, FlightMode, GeofenceSet, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, ArbiterEvent, ArbiterEventKind, AuthorityDomain, Command, CommandAck, CommandKind,
+    CommandSource, FixedStr, FlightMode, GeofenceSet, RefusalReason, VehicleCommand, VehicleState,
+    VehicleStatus,
 };
 
 use crate::core::Swarm;
@@ -48,7 +58,22 @@ pub struct FakeVehicle {
     pub ignore_fences: bool,
     /// Arbiter events not yet delivered.
     pub events: Vec<ArbiterEvent>,
+    /// The vehicle's clock: the sum of its steps, ns.
+    pub clock_ns: u64,
+    /// The arbiter's flight authority holder.
+    pub holder: Option<CommandSource>,
+    /// When the holder was last heard from (a flight command or grab), `clock_ns`.
+    pub heard_ns: u64,
+    /// The arbiter's `authority_timeout_s` (default 5 s), ns.
+    pub authority_timeout_ns: u64,
+    /// The source whose `GoTo` / `Takeoff` the vehicle flies.
+    pub position_target: Option<CommandSource>,
+    /// Position targets braked because their source lost flight authority.
+    pub target_brakes: u32,
 }
+
+/// autopilot-link's default `authority_timeout_s`, ns.
+pub const AUTHORITY_TIMEOUT_NS: u64 = 5_000_000_000;
 
 /// Climb rate, m/s.
 const CLIMB_MPS: f64 = 2.5;
@@ -77,6 +102,78 @@ impl FakeVehicle {
             refuse_fences: false,
             ignore_fences: false,
             events: Vec::new(),
+            clock_ns: 0,
+            holder: None,
+            heard_ns: 0,
+            authority_timeout_ns: AUTHORITY_TIMEOUT_NS,
+            position_target: None,
+            target_brakes: 0,
+        }
+    }
+
+    /// `source` lost flight authority (timeout or pre-emption): its position target
+    /// is braked, as the arbiter's `TargetBrake` does (a hover, in GUIDED).
+    fn lost_authority(&mut self, source: CommandSource, why: &str) {
+        if self.position_target != Some(source) {
+            return;
+        }
+        self.position_target = None;
+        self.target_brakes += 1;
+        if self.mode == FlightMode::Guided {
+            self.target = Some(self.pos);
+        }
+        let detail = format!("position target orphaned ({why}): braked to a hover");
+        self.event(ArbiterEventKind::StaleBrake, source.to_wire(), 0, &detail);
+    }
+
+    /// The arbiter's authority step for a command of `source` that passed the other
+    /// checks: `Err` when a higher source holds flight authority.
+    fn authority(
+        &mut self,
+        source: CommandSource,
+        kind: CommandKind,
+    ) -> Result<(), (RefusalReason, &'static str)> {
+        if kind.authority() != Some(AuthorityDomain::Flight) {
+            return Ok(());
+        }
+        if kind == CommandKind::ReleaseFlightAuthority {
+            if self.holder == Some(source) && !self.emergency() {
+                self.holder = None;
+            }
+            return Ok(());
+        }
+        match self.holder {
+            Some(h) if h == source => {}
+            Some(h) if h.priority() >= source.priority() => {
+                return Err((
+                    RefusalReason::NoAuthority,
+                    "flight authority held by another source",
+                ))
+            }
+            Some(h) => {
+                self.holder = Some(source);
+                self.lost_authority(h, "pre-empted");
+            }
+            None => self.holder = Some(source),
+        }
+        self.heard_ns = self.clock_ns;
+        Ok(())
+    }
+
+    /// The arbiter's position target after an executed command of `source`.
+    fn track_target(&mut self, source: CommandSource, kind: CommandKind) {
+        match kind {
+            CommandKind::GoTo | CommandKind::Takeoff => self.position_target = Some(source),
+            CommandKind::EmergencyStop => self.position_target = None,
+            CommandKind::VelocityNed
+            | CommandKind::SetYaw
+            | CommandKind::SetRoi
+            | CommandKind::ClearRoi
+            | CommandKind::SetHome => {}
+            k if k.authority() == Some(AuthorityDomain::Flight) && !k.is_authority_request() => {
+                self.position_target = None
+            }
+            _ => {}
         }
     }
 
@@ -133,7 +230,8 @@ impl FakeVehicle {
         if self.ignore.contains(&kind) {
             return None;
         }
-        let bit = CommandSource::try_from(c.source).map_or(0, |s| 1u8 << s.to_wire());
+        let source = CommandSource::try_from(c.source).ok();
+        let bit = source.map_or(0, |s| 1u8 << s.to_wire());
         let clearer = [CommandSource::Operator, CommandSource::Safety]
             .iter()
             .any(|s| s.to_wire() == c.source);
@@ -147,6 +245,8 @@ impl FakeVehicle {
             result = Err((RefusalReason::Denied, "test refusal"));
         } else if self.emergency() && !stop_kinds.contains(&kind) {
             result = Err((RefusalReason::Emergency, "emergency stop"));
+        } else if let Some(Err(e)) = source.map(|s| self.authority(s, kind)) {
+            result = Err(e);
         } else {
             match cmd {
                 Command::SetMode(m) => self.mode = m,
@@ -191,6 +291,7 @@ impl FakeVehicle {
                 Command::Brake => self.target = Some(self.pos),
                 Command::EmergencyStop => {
                     self.emergency_sources |= bit;
+                    self.holder = Some(CommandSource::Safety);
                     self.target = Some(self.pos);
                     self.event(ArbiterEventKind::EmergencyStop, c.source, 0, "engaged");
                 }
@@ -201,6 +302,7 @@ impl FakeVehicle {
                         self.emergency_sources &= !bit;
                         self.event(ArbiterEventKind::EmergencyReleased, c.source, 0, "released");
                         if self.emergency_sources == 0 {
+                            self.holder = None;
                             self.event(ArbiterEventKind::EmergencyCleared, c.source, 0, "ended");
                         }
                     }
@@ -210,6 +312,7 @@ impl FakeVehicle {
                 }
                 Command::ClearEmergency if self.emergency_sources != 0 => {
                     self.emergency_sources = 0;
+                    self.holder = None;
                     self.event(ArbiterEventKind::EmergencyCleared, c.source, 0, "cleared");
                 }
                 Command::SetYaw {
@@ -231,6 +334,9 @@ impl FakeVehicle {
                 _ => {}
             }
         }
+        if let (Ok(()), Some(s)) = (result, source) {
+            self.track_target(s, kind);
+        }
         let (res, reason, detail) = match result {
             Ok(()) => (AckResult::Accepted, RefusalReason::None, ""),
             Err((r, d)) => (AckResult::Refused, r, d),
@@ -250,6 +356,14 @@ impl FakeVehicle {
 
     /// Moves for `dt` seconds.
     pub fn step(&mut self, dt: f64) {
+        self.clock_ns += (dt.max(0.0) * 1e9) as u64;
+        if let Some(h) = self.holder {
+            let quiet = self.clock_ns.saturating_sub(self.heard_ns) >= self.authority_timeout_ns;
+            if quiet && !self.emergency() {
+                self.holder = None;
+                self.lost_authority(h, "authority timeout");
+            }
+        }
         let before = self.pos;
         if !self.armed {
             self.target = None;

@@ -41,6 +41,17 @@
 //! LOITER chosen since would make the vehicle ignore the target. A manual target that
 //! replaces a running position command asks only when the status shows another mode.
 //!
+//! Flight authority: the arbiter gives it to the source of each flight command it
+//! admits and takes it from a source silent for its `authority_timeout_s` (5 s by
+//! default), braking the position target (`GoTo`, `Takeoff`) that source was flying.
+//! While a drone's current command flies such a target (a climbing takeoff, a
+//! waypoint, a follow, `GO_HOME`'s flight home, a flown animation) and no flight
+//! command went to its vehicle for `authority_keepalive_ms` (1 s), the queue sends
+//! `GrabFlightAuthority`; nothing for a drone at rest, pausing or landing. A refused
+//! keep-alive (`NoAuthority`: a higher source such as the operator took the
+//! vehicle) ends the command `Refused` with the arbiter's reason, as any refused
+//! vehicle command does, and the queue sends nothing more for it.
+//!
 //! | command | execution | finishes (reply) |
 //! |---|---|---|
 //! | `EXT_GO_EXTERNAL` | `SetMode(Guided)` → `Arm` → `Takeoff(takeoff_alt_m)`, each after the previous one's acceptance | height above home ≥ `takeoff_alt_m − waypoint_tolerance_m`; at once if already flying (armed, above `landed_alt_m`); `Timeout` after `timeouts.takeoff_s` |

@@ -287,6 +287,13 @@ pub struct Drone {
     /// Geofences waiting for the arbiter's decision.
     pub fence_requests: Vec<FenceRequest>,
     pub stream: Stream,
+    /// The token of the command whose `GoTo` / `Takeoff` is the arbiter's position
+    /// target for this vehicle (the last one the queue sent, not ended since by
+    /// another motion command of the queue: the arbiter's own bookkeeping).
+    pub target_token: Option<u64>,
+    /// When the queue last sent this vehicle a command of the flight domain (each
+    /// one the arbiter admits refreshes the queue's flight authority).
+    pub flight_sent_ns: Option<u64>,
 }
 
 /// Acknowledgements remembered per drone; older ones are forgotten (their commands
@@ -327,6 +334,8 @@ impl Drone {
             side: Vec::new(),
             fence_requests: Vec::new(),
             stream: Stream::default(),
+            target_token: None,
+            flight_sent_ns: None,
         }
     }
 

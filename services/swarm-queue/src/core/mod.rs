@@ -18,10 +18,10 @@ use std::time::Duration;
 
 use skymesh_ipc_types::arbiter::{FencePolygon, MAX_FENCE_VERTICES};
 use skymesh_ipc_types::{
-    swarm_flags, AckResult, ArbiterEvent, ArbiterEventKind, Command, CommandAck, CommandKind,
-    CommandSource, FenceKind, FixedStr, FlightMode, GeofenceSet, HardwareOp, HardwareRequest,
-    LcdOp, RefusalReason, SwarmCommand, SwarmCommandKind, SwarmReply, SwarmResult, SwarmState,
-    VehicleCommand, VehicleState, VehicleStatus, ALL_DRONES, SWARM_MAX_DRONES,
+    swarm_flags, AckResult, ArbiterEvent, ArbiterEventKind, AuthorityDomain, Command, CommandAck,
+    CommandKind, CommandSource, FenceKind, FixedStr, FlightMode, GeofenceSet, HardwareOp,
+    HardwareRequest, LcdOp, RefusalReason, SwarmCommand, SwarmCommandKind, SwarmReply, SwarmResult,
+    SwarmState, VehicleCommand, VehicleState, VehicleStatus, ALL_DRONES, SWARM_MAX_DRONES,
 };
 
 use crate::anim::{AnimLibrary, Keyframe};
@@ -154,6 +154,24 @@ fn answered_once(kind: SwarmCommandKind) -> bool {
             | K::SetAnimColorIntensity
             | K::ResetAnimPosition
     )
+}
+
+/// A command of the queue's that ends its position target at the arbiter (which
+/// then no longer brakes when the queue's flight authority lapses): any motion or
+/// flight-state command but a heading, a region of interest or home, and the
+/// emergency stop. Mirrors the arbiter's own bookkeeping.
+fn ends_target(kind: CommandKind) -> bool {
+    kind == CommandKind::EmergencyStop
+        || (kind.authority() == Some(AuthorityDomain::Flight)
+            && !kind.is_authority_request()
+            && !matches!(
+                kind,
+                CommandKind::VelocityNed
+                    | CommandKind::SetYaw
+                    | CommandKind::SetRoi
+                    | CommandKind::ClearRoi
+                    | CommandKind::SetHome
+            ))
 }
 
 fn refusal_text(ack: &CommandAck) -> String {
@@ -315,12 +333,16 @@ impl Swarm {
 
     // ---- vehicle commands ----------------------------------------------------
 
+    /// Sends `command` to drone `idx`'s vehicle; `owner` waits for its ack. Keeps
+    /// the arbiter's view of the queue's position target and the time of the last
+    /// flight command (see [`Swarm::keepalive`]).
     fn send(
         &mut self,
         idx: usize,
         source: CommandSource,
         command: &Command,
         owner: Owner,
+        now: u64,
     ) -> Result<u32, String> {
         let id = self.next_command_id;
         self.next_command_id = self.next_command_id.wrapping_add(1).max(1);
@@ -328,6 +350,17 @@ impl Swarm {
         let c = VehicleCommand::new(d.vehicle_id, source, id, command)
             .map_err(|e| format!("{}: {e}", command.kind()))?;
         self.out.commands.push(c);
+        let kind = command.kind();
+        if kind.authority() == Some(AuthorityDomain::Flight) {
+            d.flight_sent_ns = Some(now);
+        }
+        match (kind, owner) {
+            (CommandKind::GoTo | CommandKind::Takeoff, Owner::Current(token)) => {
+                d.target_token = Some(token)
+            }
+            (k, _) if ends_target(k) => d.target_token = None,
+            _ => {}
+        }
         if d.pending.len() >= MAX_PENDING {
             d.pending.pop_front();
         }
@@ -363,7 +396,7 @@ impl Swarm {
             yaw_deg: yaw.map(heading_of_yaw),
             speed_mps: speed,
         };
-        let id = self.send(idx, CommandSource::SwarmQueue, &cmd, owner)?;
+        let id = self.send(idx, CommandSource::SwarmQueue, &cmd, owner, now)?;
         let s = &mut self.drones[idx].stream;
         s.last_ns = Some(now);
         if speed.is_some() {
@@ -399,7 +432,7 @@ impl Swarm {
         now: u64,
     ) {
         let token = self.token();
-        match self.send(idx, source, command, Owner::Side(token)) {
+        match self.send(idx, source, command, Owner::Side(token), now) {
             Ok(_) => {
                 let deadline_ns = now + secs(self.cfg.timeouts.ack);
                 self.drones[idx].side.push(SideOp {
@@ -416,13 +449,14 @@ impl Swarm {
     }
 
     /// Brakes drone `idx` unless it is known to be disarmed.
-    fn brake(&mut self, idx: usize) {
+    fn brake(&mut self, idx: usize, now: u64) {
         if self.drones[idx].armed() != Some(false) {
             if let Err(e) = self.send(
                 idx,
                 CommandSource::SwarmQueue,
                 &Command::Brake,
                 Owner::Nobody,
+                now,
             ) {
                 tracing::warn!(drone = self.drones[idx].id, error = %e, "brake not sent");
             }
@@ -512,7 +546,7 @@ impl Swarm {
                 };
                 if r.awaiting == Some(id) {
                     r.awaiting = None;
-                    if let Err(e) = self.next_takeoff_step(idx, &mut r) {
+                    if let Err(e) = self.next_takeoff_step(idx, &mut r, now) {
                         self.finish(idx, r, SwarmResult::Refused, &e);
                         return;
                     }
@@ -603,7 +637,7 @@ impl Swarm {
     }
 
     /// `GO_EXTERNAL`: the command after the one just accepted.
-    fn next_takeoff_step(&mut self, idx: usize, r: &mut Running) -> Result<(), String> {
+    fn next_takeoff_step(&mut self, idx: usize, r: &mut Running, now: u64) -> Result<(), String> {
         let Exec::Takeoff { step, .. } = &mut r.exec else {
             return Ok(());
         };
@@ -611,12 +645,14 @@ impl Swarm {
         let src = CommandSource::SwarmQueue;
         match *step {
             TakeoffStep::Mode => {
-                r.awaiting = Some(self.send(idx, src, &Command::Arm { force: false }, owner)?);
+                r.awaiting =
+                    Some(self.send(idx, src, &Command::Arm { force: false }, owner, now)?);
                 *step = TakeoffStep::Arm;
             }
             TakeoffStep::Arm => {
                 let alt_rel_m = self.cfg.takeoff_alt_m;
-                r.awaiting = Some(self.send(idx, src, &Command::Takeoff { alt_rel_m }, owner)?);
+                r.awaiting =
+                    Some(self.send(idx, src, &Command::Takeoff { alt_rel_m }, owner, now)?);
                 *step = TakeoffStep::Takeoff;
             }
             TakeoffStep::Takeoff => *step = TakeoffStep::Climb,
@@ -689,11 +725,11 @@ impl Swarm {
             K::SetManualTarget => self.manual_target(idx, cmd, now),
             K::ExtPlaybackAnim => self.playback(idx, cmd, now),
             K::ExtHalt => {
-                self.halt(idx, false, "halted");
+                self.halt(idx, false, "halted", now);
                 self.success(cmd, id);
             }
             K::ExtHaltAndSaveCurCmd => {
-                self.halt(idx, true, "halted");
+                self.halt(idx, true, "halted", now);
                 self.success(cmd, id);
             }
             K::ExtPushSavedCmd => self.push_saved(idx, cmd, now),
@@ -1034,7 +1070,7 @@ impl Swarm {
     }
 
     /// Clears the current command (saved when `save`) and the queue, and brakes.
-    fn halt(&mut self, idx: usize, save: bool, why: &str) {
+    fn halt(&mut self, idx: usize, save: bool, why: &str, now: u64) {
         let id = self.drones[idx].id;
         let current = self.drones[idx].current.take();
         let queued: Vec<Queued> = self.drones[idx].queue.drain(..).collect();
@@ -1055,7 +1091,7 @@ impl Swarm {
         for q in queued {
             self.refuse(&q.cmd, id, why);
         }
-        self.brake(idx);
+        self.brake(idx, now);
     }
 
     fn push_saved(&mut self, idx: usize, cmd: &SwarmCommand, now: u64) {
@@ -1317,6 +1353,7 @@ impl Swarm {
             self.expire_side(idx, now);
             self.step_current(idx, now);
             self.advance(idx, now);
+            self.keepalive(idx, now);
             let d = &self.drones[idx];
             if d.armed() == Some(true)
                 && d.pose
@@ -1331,6 +1368,41 @@ impl Swarm {
         }
         self.metrics.flying.set(f64::from(flying));
         self.leds(now);
+    }
+
+    /// Keeps the queue's flight authority while drone `idx`'s current command flies
+    /// a position target: the arbiter takes authority from a source silent for its
+    /// authority timeout (5 s by default) and then brakes that source's `GoTo` /
+    /// `Takeoff`, so a climb or a waypoint leg longer than that would stop halfway.
+    /// A `GrabFlightAuthority` goes out when no flight command was sent for
+    /// `authority_keepalive` (a tenth early: ticks jitter); streamed targets (a
+    /// follow being dragged, an animation) are their own keep-alive. Owned by the
+    /// command: refused (`NoAuthority` when a higher source holds authority, or an
+    /// emergency stop), it ends the command with the arbiter's reason, as any
+    /// refused command of it does. Nothing is sent for a drone without such a
+    /// command (at rest, pausing, landing).
+    fn keepalive(&mut self, idx: usize, now: u64) {
+        let period = secs(self.cfg.authority_keepalive);
+        let d = &self.drones[idx];
+        let Some(token) = d.current.as_ref().map(|r| r.token) else {
+            return;
+        };
+        if d.target_token != Some(token)
+            || d.flight_sent_ns
+                .is_some_and(|t| now.saturating_sub(t) < period - period / 10)
+        {
+            return;
+        }
+        let grab = Command::GrabFlightAuthority;
+        if let Err(e) = self.send(
+            idx,
+            CommandSource::SwarmQueue,
+            &grab,
+            Owner::Current(token),
+            now,
+        ) {
+            tracing::warn!(drone = self.drones[idx].id, error = %e, "authority keep-alive not sent");
+        }
     }
 
     fn expire_side(&mut self, idx: usize, now: u64) {
@@ -1592,7 +1664,13 @@ impl Swarm {
             _ => None,
         };
         if let Some(cmd) = first {
-            match self.send(idx, CommandSource::SwarmQueue, &cmd, Owner::Current(token)) {
+            match self.send(
+                idx,
+                CommandSource::SwarmQueue,
+                &cmd,
+                Owner::Current(token),
+                now,
+            ) {
                 Ok(cid) => {
                     if !matches!(cmd, Command::Land) {
                         r.awaiting = Some(cid);
@@ -1695,6 +1773,7 @@ impl Swarm {
                             CommandSource::SwarmQueue,
                             &Command::Land,
                             Owner::Current(token),
+                            now,
                         ) {
                             return Some((SwarmResult::Refused, e));
                         }

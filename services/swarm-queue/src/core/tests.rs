@@ -325,10 +325,15 @@ fn a_waypoint_asks_for_guided_even_when_the_last_status_says_guided() {
     assert!(h.run_until(30.0, |h| h.answered(r, 1)));
     assert_eq!(h.reply(r, 1).unwrap().0, SwarmResult::Success);
     assert_eq!(h.fleet.vehicles[0].mode, FlightMode::Guided);
+    let kinds: Vec<_> = h
+        .sent_kinds(11)
+        .into_iter()
+        .filter(|k| *k != CommandKind::GrabFlightAuthority)
+        .collect();
     assert_eq!(
-        h.sent_kinds(11)[3..],
+        kinds[3..],
         [CommandKind::SetMode, CommandKind::GoTo],
-        "after the takeoff's three"
+        "after the takeoff's three (keep-alives aside)"
     );
 
     // A dragged manual target (each replacing the last before it is reached) asks
@@ -898,8 +903,12 @@ fn emergency_mode_stops_under_the_queues_own_source_and_withdraws_only_its_own()
     // A second end has no stop of the queue's to withdraw: the arbiter's answer.
     let again = h.send(1, K::EmergencyMode, |c| c.int1 = 0);
     assert_eq!(h.reply(again, 1).unwrap().0, SwarmResult::Refused);
-    // Once the pilot's stop is cleared, the drone flies again.
-    h.fleet.vehicles[0].emergency_sources = 0;
+    // Once an operator cleared the pilot's stop, the drone flies again.
+    let clear =
+        VehicleCommand::new(11, CommandSource::Operator, 901, &Command::ClearEmergency).unwrap();
+    let now = h.now;
+    h.fleet.deliver(&mut h.swarm, &[clear], now);
+    assert!(!h.fleet.vehicles[0].emergency());
     let back = h.waypoint(1, [0.0, 0.0, 3.0]);
     assert!(h.run_until(20.0, |h| h.answered(back, 1)));
     assert_eq!(h.reply(back, 1).unwrap().0, SwarmResult::Success);
@@ -1417,4 +1426,113 @@ fn many_drones_take_off_fly_and_answer() {
         .replies_to(r)
         .iter()
         .all(|r| r.result().unwrap() == SwarmResult::Success));
+}
+
+/// The times (`h.now`) at which each GrabFlightAuthority went out while `f` ran.
+fn grabs_during(h: &mut H, mut f: impl FnMut(&mut H) -> bool) -> Vec<u64> {
+    let mut times = Vec::new();
+    let mut seen = h.sent.len();
+    while f(h) {
+        h.step();
+        let new = h.sent[seen..]
+            .iter()
+            .filter(|c| c.kind == CommandKind::GrabFlightAuthority.to_wire())
+            .count();
+        times.extend(std::iter::repeat_n(h.now, new));
+        seen = h.sent.len();
+    }
+    times
+}
+
+/// Issue 42 finding 11: the arbiter brakes a position target whose source fell
+/// silent for its authority timeout (5 s). A climb to 20 m takes 8 s: the queue keeps
+/// its authority alive every second while climbing, and sends nothing at rest.
+#[test]
+fn a_takeoff_longer_than_the_authority_timeout_is_kept_alive() {
+    let mut h = H::with(1, "takeoff_alt_m = 20\n");
+    let r = h.send(1, K::ExtGoExternal, |_| {});
+    let start = h.now;
+    let grabs = grabs_during(&mut h, |h| {
+        !h.answered(r, 1) && h.now - start < 20 * 1_000_000_000
+    });
+    assert_eq!(h.reply(r, 1), Some((SwarmResult::Success, String::new())));
+    let took = (h.now - start) as f64 / 1e9;
+    assert!(took > 7.0, "a climb longer than the timeout: {took:.1} s");
+    let v = &h.fleet.vehicles[0];
+    assert_eq!(v.target_brakes, 0, "never braked");
+    assert!(v.alt_rel() > 19.4, "{}", v.alt_rel());
+    assert_eq!(v.holder, Some(CommandSource::SwarmQueue));
+    // One a second: the first a second after the Takeoff, none closer than 0.9 s nor
+    // further apart than a second and a tick.
+    assert!(grabs.len() >= 6, "{grabs:?}");
+    for w in grabs.windows(2) {
+        let gap = w[1] - w[0];
+        assert!(
+            (900_000_000..=1_000_000_000 + TICK_NS).contains(&gap),
+            "keep-alive gap {gap} ns"
+        );
+    }
+    // Each keep-alive is owned by the takeoff and answered: nothing piles up.
+    assert!(h.swarm.drone(0).pending.is_empty());
+    // At rest: nothing goes out, the authority lapses at the arbiter.
+    let before = h.sent.len();
+    h.run(8.0);
+    assert_eq!(h.sent.len(), before, "{:?}", &h.sent[before..]);
+    assert!(h.swarm.at_rest());
+    assert_eq!(h.fleet.vehicles[0].holder, None);
+}
+
+/// The fake arbiter brakes a target whose source is quieter than its timeout: a
+/// keep-alive slower than the arbiter's timeout does not keep the climb going.
+#[test]
+fn a_keepalive_slower_than_the_arbiters_timeout_is_braked() {
+    let mut h = H::with(
+        1,
+        "takeoff_alt_m = 20\nauthority_keepalive_ms = 2500\n[timeouts]\ntakeoff_s = 10\n",
+    );
+    h.fleet.vehicles[0].authority_timeout_ns = 2_000_000_000;
+    let r = h.send(1, K::ExtGoExternal, |_| {});
+    assert!(h.run_until(15.0, |h| h.answered(r, 1)));
+    assert_eq!(h.reply(r, 1).unwrap().0, SwarmResult::Timeout);
+    let v = &h.fleet.vehicles[0];
+    assert!(v.target_brakes >= 1);
+    assert!(v.alt_rel() < 10.0, "stopped climbing: {}", v.alt_rel());
+}
+
+/// A 20 m leg at 2 m/s (10 s) is flown to the end; a higher source taking flight
+/// authority during the next leg ends it at the next keep-alive (refused
+/// `NoAuthority`), and the queue stops sending for that drone.
+#[test]
+fn a_long_waypoint_keeps_authority_until_a_higher_source_takes_it() {
+    let mut h = H::new(1);
+    h.take_off(1);
+    let w = h.waypoint(1, [20.0, 0.0, 3.0]);
+    let start = h.now;
+    let grabs = grabs_during(&mut h, |h| {
+        !h.answered(w, 1) && h.now - start < 30 * 1_000_000_000
+    });
+    assert_eq!(h.reply(w, 1), Some((SwarmResult::Success, String::new())));
+    assert!(grabs.len() >= 8, "{grabs:?}");
+    assert_eq!(h.fleet.vehicles[0].target_brakes, 0);
+
+    let back = h.waypoint(1, [0.0, 0.0, 3.0]);
+    h.run(1.5);
+    let grab = VehicleCommand::new(
+        11,
+        CommandSource::Operator,
+        902,
+        &Command::GrabFlightAuthority,
+    )
+    .unwrap();
+    let now = h.now;
+    h.fleet.deliver(&mut h.swarm, &[grab], now);
+    assert_eq!(h.fleet.vehicles[0].holder, Some(CommandSource::Operator));
+    assert!(h.run_until(1.2, |h| h.answered(back, 1)));
+    let (result, why) = h.reply(back, 1).unwrap();
+    assert_eq!(result, SwarmResult::Refused);
+    assert!(why.contains("no_authority"), "{why}");
+    let before = h.sent.len();
+    h.run(3.0);
+    assert_eq!(h.sent.len(), before, "{:?}", &h.sent[before..]);
+    assert!(h.swarm.drone(0).idle());
 }
