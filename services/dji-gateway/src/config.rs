@@ -62,6 +62,10 @@ pub struct LimitSettings {
 pub struct CommandSettings {
     /// How long a `VehicleCommand` may wait for its `CommandAck`.
     pub ack_timeout: Duration,
+    /// How long an emergency stop may wait for its `CommandAck`: autopilot-link
+    /// answers it once the autopilot confirmed the stop, which may take up to its
+    /// `stop_confirm_timeout_s` (5 s by default).
+    pub stop_ack_timeout: Duration,
     /// While the cloud holds an authority it grabbed and no command of that domain
     /// went out for this long, the grab is re-sent (the arbiter drops a silent holder
     /// after its `authority_timeout_s`). Zero: never.
@@ -159,6 +163,7 @@ impl Default for RawLimits {
 #[serde(deny_unknown_fields, default)]
 pub struct RawCommands {
     pub ack_timeout_ms: i64,
+    pub stop_ack_timeout_ms: i64,
     pub authority_keepalive_ms: i64,
 }
 
@@ -166,6 +171,7 @@ impl Default for RawCommands {
     fn default() -> Self {
         RawCommands {
             ack_timeout_ms: 3000,
+            stop_ack_timeout_ms: 6000,
             authority_keepalive_ms: 2000,
         }
     }
@@ -428,6 +434,12 @@ impl ServiceConfig for RawConfig {
         let c = &self.commands;
         let commands = CommandSettings {
             ack_timeout: millis("commands.ack_timeout_ms", c.ack_timeout_ms, 100, 60_000)?,
+            stop_ack_timeout: millis(
+                "commands.stop_ack_timeout_ms",
+                c.stop_ack_timeout_ms,
+                100,
+                60_000,
+            )?,
             authority_keepalive: millis(
                 "commands.authority_keepalive_ms",
                 c.authority_keepalive_ms,
@@ -544,6 +556,7 @@ mod tests {
         assert_eq!(shipped.broker.tls_ca_file, None);
         assert_eq!(shipped.limits.max_payload_bytes, 65_536);
         assert_eq!(shipped.commands.ack_timeout, Duration::from_secs(3));
+        assert_eq!(shipped.commands.stop_ack_timeout, Duration::from_secs(6));
         assert_eq!(shipped.payload.payload_index, "39-0-7");
         assert_eq!(shipped.payload.pano_stations, 8);
         assert_eq!(shipped.payload.pano_pitch_deg, 0.0);

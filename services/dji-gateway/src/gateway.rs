@@ -341,7 +341,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
     let link = VehicleLink::open(
         &ctx.bus,
         settings.vehicle_id,
-        settings.commands.ack_timeout,
+        &settings.commands,
         ctx.shutdown.clone(),
     )?;
     let metrics = Metrics::new(&ctx.stats);

@@ -182,6 +182,10 @@ pub struct VehicleLink {
     latest: Arc<Latest>,
     events: broadcast::Sender<ArbiterEvent>,
     ack_timeout: Duration,
+    /// How long an emergency stop may wait for its ack: autopilot-link answers it
+    /// only once the autopilot confirmed the stop (BRAKE or the measured speed), up
+    /// to its `stop_confirm_timeout_s`.
+    stop_ack_timeout: Duration,
     /// `CLOCK_MONOTONIC` ns of the last flight / payload command published (0 = none).
     last_sent_ns: Arc<[AtomicU64; 2]>,
 }
@@ -199,7 +203,7 @@ impl VehicleLink {
     pub fn open(
         bus: &Bus,
         vehicle_id: u8,
-        ack_timeout: Duration,
+        timeouts: &crate::config::CommandSettings,
         shutdown: CancellationToken,
     ) -> anyhow::Result<VehicleLink> {
         let commands = bus
@@ -256,7 +260,8 @@ impl VehicleLink {
             snapshot: rx,
             latest: latest.clone(),
             events: events.clone(),
-            ack_timeout,
+            ack_timeout: timeouts.ack_timeout,
+            stop_ack_timeout: timeouts.stop_ack_timeout,
             last_sent_ns: Arc::new([AtomicU64::new(0), AtomicU64::new(0)]),
         };
         tokio::spawn(async move {
@@ -353,7 +358,8 @@ impl VehicleLink {
     }
 
     /// Publishes `command` and waits for its `CommandAck`: `Ok(ack)` when accepted
-    /// (or accepted-limited), else the failure.
+    /// (or accepted-limited), else the failure. An emergency stop waits
+    /// `stop_ack_timeout`, every other command `ack_timeout`.
     pub async fn command(
         &self,
         command: &Command,
@@ -366,12 +372,17 @@ impl VehicleLink {
             self.lock_pending().remove(&id);
             return Err(e);
         }
-        match tokio::time::timeout(self.ack_timeout, rx).await {
+        let wait = if matches!(command, Command::EmergencyStop) {
+            self.stop_ack_timeout
+        } else {
+            self.ack_timeout
+        };
+        match tokio::time::timeout(wait, rx).await {
             Ok(Ok(ack)) if ack.is_accepted() => Ok(ack),
             Ok(Ok(ack)) => Err(CommandFailure::Refused(ack)),
             Ok(Err(_)) | Err(_) => {
                 self.lock_pending().remove(&id);
-                Err(CommandFailure::NoAck(self.ack_timeout))
+                Err(CommandFailure::NoAck(wait))
             }
         }
     }
