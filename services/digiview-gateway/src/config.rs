@@ -33,7 +33,8 @@ pub struct Settings {
     pub partial_frame_timeout: Duration,
     /// How long a SET waits for the pipeline's `VisionReply` (then UNKNOWN).
     pub set_timeout: Duration,
-    /// A `VisionState` older than this means the pipeline is down (GETs: UNKNOWN).
+    /// A `VisionState` older than this means the pipeline is down (GETs: UNKNOWN);
+    /// also the longest wait at start for the first state before reporting ready.
     pub state_timeout: Duration,
     /// DETECTED_ROI `rel_frame_of_reference` of the replies' relative angles:
     /// 0 global, 1 vehicle heading, 2 camera axis.
