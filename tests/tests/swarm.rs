@@ -20,8 +20,8 @@ use std::time::Duration;
 use gc_proto::{NetCmdType as T, Record, RECORD_LEN};
 use skymesh_e2e::{Mesh, MeshOptions, HOME};
 use skymesh_ipc_types::{
-    drone_flags, topics, AckResult, Command, CommandAck, CommandSource, FlightMode, SwarmState,
-    VehicleCommand, VehicleState,
+    drone_flags, topics, AckResult, ArbiterEvent, ArbiterEventKind, Command, CommandAck,
+    CommandSource, FlightMode, SwarmState, VehicleCommand, VehicleState,
 };
 use skymesh_runtime::{Bus, Subscriber};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -779,5 +779,75 @@ fn five_drones_on_the_groundcontrol_protocol() {
         }
         let refused_now = mesh.metric(refused).unwrap().unwrap_or(0.0);
         assert_eq!(refused_now, 1.0, "only the one refusal");
+    });
+}
+
+/// Issue 42 finding 11: the arbiter brakes a position target whose source fell
+/// silent for its authority timeout (1.5 s here, 5 s by default). A takeoff to 10 m
+/// climbs for about 4 s: the queue keeps its flight authority alive while climbing,
+/// so the drone reaches the height, GO_EXTERNAL is acknowledged, and the arbiter
+/// never brakes the queue's target (no StaleBrake event). Without the keep-alive the
+/// climb stops near 4 m and the command times out.
+#[test]
+fn a_takeoff_longer_than_the_authority_timeout_is_not_braked() {
+    const ALT: f32 = 10.0;
+    let opts = MeshOptions {
+        swarm: true,
+        autopilot_link_extra: "[arbiter]\nauthority_timeout_s = 1.5\n".to_string(),
+        swarm_queue_extra: format!("takeoff_alt_m = {ALT}\n"),
+        ..Default::default()
+    };
+    let mut mesh = Mesh::start(opts).unwrap();
+    for s in [
+        "vehicle-sim",
+        "autopilot-link",
+        "swarm-queue",
+        "groundcontrol-gateway",
+    ] {
+        mesh.wait_running(s, STARTUP).unwrap();
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let gc_port = mesh.gc_port;
+    rt.block_on(async {
+        let bus = mesh.bus("e2e-swarm-keepalive").unwrap();
+        let events = bus
+            .subscriber::<ArbiterEvent>(&topics::vehicle_arbiter_events(1))
+            .unwrap();
+        let mut swarm = bus
+            .subscriber::<SwarmState>(&topics::swarm_state())
+            .unwrap();
+        swarm_until(&mut swarm, STARTUP, "drone 1 on the ground", |s| {
+            let d = swarm_drone(s, 1);
+            d.drone_state == 5 && d.flags & drone_flags::POSE_VALID != 0
+        })
+        .await;
+        let mut ext = GcClient::connect_from(Ipv4Addr::LOCALHOST, gc_port).await;
+        let sent = Instant::now();
+        ext.send(&[cmd(T::CmdExtGoExternal, 1, 0, 0, [0.0; 4])])
+            .await;
+        let acked = ext.ack(1, T::CmdExtGoExternal, WAIT).await;
+        let climb = acked - sent;
+        assert!(
+            climb > Duration::from_secs(3),
+            "the climb outlasts the 1.5 s authority timeout: {climb:?}"
+        );
+        let s = swarm_until(&mut swarm, WAIT, "drone 1 at the takeoff height", |s| {
+            (swarm_drone(s, 1).tracking[2] - ALT).abs() < 0.6
+        })
+        .await;
+        assert_eq!(swarm_drone(&s, 1).flags & drone_flags::EMERGENCY, 0);
+        let mut brakes = Vec::new();
+        while let Some(e) = events.try_recv().unwrap() {
+            if e.event_kind() == Some(ArbiterEventKind::StaleBrake)
+                && e.source == CommandSource::SwarmQueue.to_wire()
+            {
+                brakes.push(e.detail.as_str().to_string());
+            }
+        }
+        assert!(brakes.is_empty(), "the climb was braked: {brakes:?}");
     });
 }
