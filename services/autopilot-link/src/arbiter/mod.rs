@@ -334,6 +334,34 @@ fn names(sources: &[CommandSource]) -> String {
         .join(", ")
 }
 
+/// A position target in flight: who flies it and where to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Target {
+    source: CommandSource,
+    /// Latitude, longitude (`GoTo`); `None` for a take-off (altitude only).
+    at: Option<(f64, f64)>,
+    alt_rel_m: f32,
+}
+
+impl Target {
+    const ARRIVED_M: f64 = 1.5;
+    const ARRIVED_ALT_M: f32 = 1.0;
+    const ARRIVED_MPS: f32 = 0.5;
+
+    fn reached(&self, k: &Kinematics) -> bool {
+        let [n, e, d] = k.vel_ned_mps;
+        let slow = n.hypot(e).hypot(d) < Self::ARRIVED_MPS;
+        let level = (k.alt_rel_m - self.alt_rel_m).abs() < Self::ARRIVED_ALT_M;
+        let there = self.at.is_none_or(|(lat, lon)| {
+            geofence::LocalFrame::new(lat, lon)
+                .to_local(k.lat_deg, k.lon_deg)
+                .norm()
+                < Self::ARRIVED_M
+        });
+        slow && level && there
+    }
+}
+
 /// The arbiter of one vehicle. `Clone`: the service decides a retransmission
 /// again on a copy, which changes nothing here.
 #[derive(Debug, Clone)]
@@ -348,9 +376,9 @@ pub struct Arbiter {
     /// The last velocity setpoint was reduced by the fence (events on the edges only).
     fence_limiting: bool,
     link_up: bool,
-    /// Who flies to a position target (`GoTo`, `Takeoff`) now: braked when it loses
-    /// flight authority by timeout or pre-emption.
-    position_target: Option<CommandSource>,
+    /// Who flies to a position target (`GoTo`, `Takeoff`) now, and where: braked
+    /// when it loses flight authority by timeout or pre-emption before arriving.
+    position_target: Option<Target>,
     /// Sources told (`FailsafeHeld`) during the current autopilot failsafe, as a
     /// bitmask (one event per source and failsafe, not one per refused setpoint).
     failsafe_told: u8,
@@ -535,7 +563,7 @@ impl Arbiter {
         }
         let change = self.authority.act(domain, source, now_ns);
         if domain == AuthorityDomain::Flight {
-            self.track_target(kind, source);
+            self.track_target(&command, source);
         }
         self.authority_changed(change, effects);
         match (stream_until, command) {
@@ -612,9 +640,9 @@ impl Arbiter {
             AuthorityChange::Timeout | AuthorityChange::Preempted
         );
         if c.domain == AuthorityDomain::Flight && lost && c.from.is_some() {
-            if let Some(source) = self.position_target.filter(|t| Some(*t) == c.from) {
+            if let Some(t) = self.position_target.filter(|t| Some(t.source) == c.from) {
                 self.position_target = None;
-                effects.push(Effect::TargetBrake { source });
+                effects.push(Effect::TargetBrake { source: t.source });
             }
         }
         effects.push(Effect::Authority(c));
@@ -623,12 +651,42 @@ impl Arbiter {
     /// An executed flight command of `source`: a `GoTo` or `Takeoff` is now the
     /// position target; anything else that moves the vehicle replaces it (a velocity
     /// setpoint, `Brake`, `Land`, RTL, a mode change...). Yaw, ROI and home leave it.
-    fn track_target(&mut self, kind: CommandKind, source: CommandSource) {
-        match kind {
-            CommandKind::GoTo | CommandKind::Takeoff => self.position_target = Some(source),
-            CommandKind::VelocityNed => self.position_target = None,
-            k if ends_stream(k) => self.position_target = None,
+    fn track_target(&mut self, command: &Command, source: CommandSource) {
+        match *command {
+            Command::GoTo {
+                lat_deg,
+                lon_deg,
+                alt_rel_m,
+                ..
+            } => {
+                self.position_target = Some(Target {
+                    source,
+                    at: Some((lat_deg, lon_deg)),
+                    alt_rel_m,
+                })
+            }
+            Command::Takeoff { alt_rel_m } => {
+                self.position_target = Some(Target {
+                    source,
+                    at: None,
+                    alt_rel_m,
+                })
+            }
+            Command::VelocityNed { .. } => self.position_target = None,
+            ref c if ends_stream(c.kind()) => self.position_target = None,
             _ => {}
+        }
+    }
+
+    /// A new measurement of the vehicle: a position target it has reached (within
+    /// [`Target::ARRIVED_M`] horizontally and [`Target::ARRIVED_ALT_M`] vertically,
+    /// slower than [`Target::ARRIVED_MPS`]) is over, so its source going quiet
+    /// afterwards is not braked (the autopilot holds the point by itself).
+    pub fn observe(&mut self, vehicle: &VehicleView) {
+        if let (Some(t), Some(k)) = (self.position_target, vehicle.position) {
+            if t.reached(&k) {
+                self.position_target = None;
+            }
         }
     }
 

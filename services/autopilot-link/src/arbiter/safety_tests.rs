@@ -275,6 +275,35 @@ fn target_brakes(effects: &[Effect]) -> Vec<CommandSource> {
 }
 
 #[test]
+fn a_position_target_reached_is_over_and_its_source_may_go_quiet() {
+    let moving = flying(0.0, 0.0, [2.0, 0.0, 0.0]);
+    let mut a = Arbiter::new(settings());
+    executed(&a.decide(S, &sample(SwarmQueue, goto_ne(40.0, 0.0, 10.0), S), &moving));
+    // Close but still moving, or at rest short of the point: not reached.
+    a.observe(&flying(39.5, 0.0, [1.0, 0.0, 0.0]));
+    a.observe(&flying(30.0, 0.0, [0.0; 3]));
+    let fx = a.poll(7 * S);
+    assert_eq!(
+        target_brakes(&fx),
+        [SwarmQueue],
+        "quiet before arriving: braked"
+    );
+    // At rest within 1.5 m and 1 m of altitude: over, no brake when it goes quiet.
+    let mut a = Arbiter::new(settings());
+    executed(&a.decide(S, &sample(SwarmQueue, goto_ne(40.0, 0.0, 10.0), S), &moving));
+    a.observe(&flying(39.2, 0.5, [0.1, 0.0, 0.0]));
+    let fx = a.poll(7 * S);
+    assert_eq!(authority_changes(&fx), [AuthorityChange::Timeout]);
+    assert!(target_brakes(&fx).is_empty(), "arrived, then quiet: {fx:?}");
+    // A take-off is reached at its altitude (wherever it drifted horizontally).
+    let mut a = Arbiter::new(settings());
+    let climb = Command::Takeoff { alt_rel_m: 10.0 };
+    executed(&a.decide(S, &sample(SwarmQueue, climb, S), &moving));
+    a.observe(&flying(3.0, 3.0, [0.0, 0.0, -0.2]));
+    assert!(target_brakes(&a.poll(7 * S)).is_empty());
+}
+
+#[test]
 fn a_position_target_is_braked_when_its_source_loses_authority() {
     let v = flying(0.0, 0.0, [2.0, 0.0, 0.0]);
     // Pre-empted by a command that does not replace the target (a yaw).
