@@ -378,7 +378,7 @@ async fn nan_inf_and_out_of_range_values_are_refused_and_limits_applied() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn emergency_stop_brakes_and_holds_and_motor_kill_needs_the_emergency_flag_in_the_air() {
-    use CommandSource::{Operator, Safety, ShotEngine};
+    use CommandSource::{Operator, Safety, ShotEngine, Vision};
     let sim = Sim::start(0).await;
     let mut mesh = Mesh::start_with(settings(sim.port)).await;
     let mut arb = ArbiterPorts::open(&mesh);
@@ -429,6 +429,12 @@ async fn emergency_stop_brakes_and_holds_and_motor_kill_needs_the_emergency_flag
     assert_eq!(state.flight(), Some(Safety));
     assert_eq!(state.flight_previous, Operator.to_wire());
     assert_eq!(state.flight_change, AuthorityChange::Emergency.to_wire());
+    assert!(
+        state.emergency_by(ShotEngine),
+        "{:#x}",
+        state.emergency_sources
+    );
+    assert_eq!(state.emergency_sources, 1 << ShotEngine.to_wire());
     let e = arb.wait_event(ArbiterEventKind::EmergencyStop).await;
     assert_eq!(e.source, ShotEngine.to_wire());
 
@@ -437,15 +443,44 @@ async fn emergency_stop_brakes_and_holds_and_motor_kill_needs_the_emergency_flag
         .command_as(Safety, Command::MotorKill { emergency: false })
         .await;
     assert_eq!(ack.reason(), Some(RefusalReason::InAir), "{:?}", ack.detail);
-    // Safety releases; the operator may command again.
-    assert_accepted(
-        &mesh
-            .command_as(Safety, Command::ReleaseFlightAuthority)
-            .await,
-        "release",
-    );
-    arb.wait_authority("no emergency", |a| a.emergency == 0)
+    // The stop is the shot engine's: safety releasing its flight authority, a
+    // source that did not engage it releasing "its" stop, or a clear from below
+    // operator/safety end nothing; the operator is still locked out.
+    let _ = mesh
+        .command_as(Safety, Command::ReleaseFlightAuthority)
         .await;
+    let _ = mesh.command_as(Operator, Command::ReleaseEmergency).await;
+    let ack = mesh.command_as(Vision, Command::ClearEmergency).await;
+    assert_eq!(
+        ack.reason(),
+        Some(RefusalReason::Denied),
+        "{:?}",
+        ack.detail
+    );
+    let ack = mesh.command_as(Operator, velocity(1.0, 0.0, 0.0)).await;
+    assert_eq!(
+        ack.reason(),
+        Some(RefusalReason::Emergency),
+        "{:?}",
+        ack.detail
+    );
+    let _ = arb.authority.latest();
+    let state = arb.wait_authority("a fresh state", |_| true).await;
+    assert_eq!(state.emergency, 1);
+    assert_eq!(state.flight(), Some(Safety));
+    assert_eq!(state.emergency_sources, 1 << ShotEngine.to_wire());
+    // Its engager releases it: the stop ends, the operator may command again.
+    assert_accepted(
+        &mesh.command_as(ShotEngine, Command::ReleaseEmergency).await,
+        "release emergency",
+    );
+    let e = arb.wait_event(ArbiterEventKind::EmergencyCleared).await;
+    assert_eq!(e.source, ShotEngine.to_wire());
+    let state = arb
+        .wait_authority("no emergency", |a| a.emergency == 0)
+        .await;
+    assert_eq!(state.emergency_sources, 0);
+    assert_eq!(state.flight(), None);
     let ack = mesh
         .command_as(Operator, Command::MotorKill { emergency: false })
         .await;

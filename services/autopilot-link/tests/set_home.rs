@@ -25,8 +25,9 @@ async fn set_home_moves_home_and_rtl_flies_to_the_new_one() {
     let before = mesh.wait_status("home", |s| s.home_valid == 1).await;
     let frame = LocalFrame::new(HOME.0, HOME.1);
     let unit = frame.to_local(HOME.0 + 1e-3, HOME.1 + 1e-3);
-    // 50 m east of the old home, at the same altitude above sea level.
-    let east = 50.0 / unit.y * 1e-3;
+    // 40 m east of the old home (within the arbiter's `max_home_move_m`, 50 m by
+    // default), at the same altitude above sea level.
+    let east = 40.0 / unit.y * 1e-3;
     let (lat, lon, alt_msl) = (
         before.home_lat_deg,
         before.home_lon_deg + east,
@@ -52,7 +53,7 @@ async fn set_home_moves_home_and_rtl_flies_to_the_new_one() {
     assert!((status.home_alt_msl_m - alt_msl).abs() < 0.01);
     let moved = frame.to_local(status.home_lat_deg, status.home_lon_deg);
     assert!(
-        (moved.y - 50.0).abs() < 0.5 && moved.x.abs() < 0.5,
+        (moved.y - 40.0).abs() < 0.5 && moved.x.abs() < 0.5,
         "{moved:?}"
     );
     assert!(
@@ -60,6 +61,41 @@ async fn set_home_moves_home_and_rtl_flies_to_the_new_one() {
             "skymesh_autopilot_commands_total",
             "kind=set_home,result=accepted"
         ) >= 1.0
+    );
+
+    // A home the arbiter bounds: lat = lon = 0 (ArduPilot's "here"; the plan
+    // refuses it `unsupported`, see commands.rs) is thousands of km away, and a
+    // home 5 m above the current one's altitude would make RTL fly elsewhere.
+    // Both refused before anything is sent.
+    let sent = mesh.metric(
+        "skymesh_autopilot_commands_total",
+        "kind=set_home,result=accepted",
+    );
+    for (what, lat, lon, alt) in [
+        ("0/0", 0.0, 0.0, 100.0),
+        ("5 m up", lat, lon, alt_msl + 5.0),
+    ] {
+        let ack = mesh
+            .command(Command::SetHome {
+                lat_deg: lat,
+                lon_deg: lon,
+                alt_msl_m: alt,
+            })
+            .await;
+        assert_eq!(ack.result(), Some(AckResult::Refused), "{what}");
+        assert_eq!(
+            ack.reason(),
+            Some(RefusalReason::Denied),
+            "{what}: {:?}",
+            ack.detail
+        );
+    }
+    assert_eq!(
+        mesh.metric(
+            "skymesh_autopilot_commands_total",
+            "kind=set_home,result=accepted"
+        ),
+        sent
     );
 
     // RTL now returns to the new home, not to where the vehicle took off.
@@ -73,19 +109,8 @@ async fn set_home_moves_home_and_rtl_flies_to_the_new_one() {
         })
         .await;
     let p = frame.to_local(over_home.lat_deg, over_home.lon_deg);
-    assert!(p.norm() > 45.0, "away from the take-off point: {p:?}");
+    assert!(p.norm() > 35.0, "away from the take-off point: {p:?}");
     assert!(over_home.alt_rel_m > 5.0, "still in the air, returning");
-
-    // lat = lon = 0 would be "here" to ArduPilot: never sent.
-    let ack = mesh
-        .command(Command::SetHome {
-            lat_deg: 0.0,
-            lon_deg: 0.0,
-            alt_msl_m: 100.0,
-        })
-        .await;
-    assert_eq!(ack.result(), Some(AckResult::Refused));
-    assert_eq!(ack.reason(), Some(RefusalReason::Unsupported));
     mesh.stop().await;
     sim.stop().await;
 }

@@ -150,10 +150,12 @@ async fn an_orbit_flies_the_simulated_vehicle_around_its_roi_and_fly_hands_it_ba
         Default::default(),
         sim_stop.clone(),
     ));
-    let link_settings = skymesh_autopilot_link::Settings::with_connection(Endpoint::TcpOut {
+    let mut link_settings = skymesh_autopilot_link::Settings::with_connection(Endpoint::TcpOut {
         host: "127.0.0.1".into(),
         port,
     });
+    // The arbiter's state file of this test, not the machine-wide default.
+    link_settings.state_file = dir.path().join("autopilot-link-1.json");
     let link_bus = Bus::open(
         &domain,
         "autopilot-link",

@@ -107,10 +107,25 @@ impl Mesh {
             &self.command(Command::Takeoff { alt_rel_m: alt_m }).await,
             "takeoff",
         );
-        self.wait_state("the take-off altitude", Duration::from_secs(90), |s| {
-            s.alt_rel_m >= alt_m - 0.3
-        })
-        .await
+        // A source flying to a position target keeps flight authority, as a real
+        // client must: one silent for the authority timeout (5 s) loses it, and the
+        // arbiter brakes its orphaned target (a 10 m climb at 2.5 m/s takes longer).
+        let deadline = Instant::now() + Duration::from_secs(90);
+        let mut next_grab = Instant::now() + Duration::from_secs(1);
+        loop {
+            let now = Instant::now();
+            assert!(now < deadline, "no take-off altitude {alt_m} m within 90 s");
+            if now >= next_grab {
+                self.send_as(CommandSource::Operator, Command::GrabFlightAuthority, 0);
+                next_grab = now + Duration::from_secs(1);
+            }
+            let wait = next_grab.min(deadline).saturating_duration_since(now);
+            if let Some(s) = self.state.recv_timeout(wait).await.expect("state") {
+                if s.alt_rel_m >= alt_m - 0.3 {
+                    return s;
+                }
+            }
+        }
     }
 }
 

@@ -43,6 +43,8 @@ pub struct Mesh {
     pub status: Subscriber<VehicleStatus>,
     pub payload: Subscriber<PayloadState>,
     pub next_command_id: u32,
+    /// Holds the test's own arbiter state file (see [`Mesh::start_routed`]).
+    pub state_dir: Option<tempfile::TempDir>,
 }
 
 impl Mesh {
@@ -61,10 +63,24 @@ impl Mesh {
 
     /// Like [`Mesh::start_with`], with router endpoints already bound (port 0 →
     /// read the ports from `Bound::local_addrs` before handing them over).
+    ///
+    /// The arbiter persists its emergency latch and fences: a test whose settings
+    /// still name the default state file (shared by every test of every crate on
+    /// this machine, `/tmp/skymesh-skymesh/autopilot-link-1.json`) gets a file in a
+    /// temp dir of its own instead, so a test that ends latched cannot latch the
+    /// next one. A test that sets `state_file` itself keeps it.
     pub async fn start_routed(
-        settings: Settings,
+        mut settings: Settings,
         endpoints: Option<skymesh_autopilot_link::endpoints::Bound>,
     ) -> Mesh {
+        let default_state_file = Settings::with_connection(settings.connection.clone()).state_file;
+        let state_dir = if settings.state_file == default_state_file {
+            let dir = tempfile::tempdir().expect("state dir");
+            settings.state_file = dir.path().join(format!("autopilot-link-{VEHICLE}.json"));
+            Some(dir)
+        } else {
+            None
+        };
         let domain = unique_domain();
         let stats = Stats::new();
         let bus = Bus::open(
@@ -122,6 +138,7 @@ impl Mesh {
             status,
             payload,
             next_command_id: 1,
+            state_dir,
         }
     }
 
