@@ -611,6 +611,9 @@ impl<L: Lifecycle> Service<L> {
             .arbiter
             .link_changed(change == LinkChange::Up, monotonic_ns());
         self.apply(effects)?;
+        if change == LinkChange::Up && self.arbiter.authority().in_emergency() {
+            self.rebrake(now)?;
+        }
         Ok(self.publish_status(now)?)
     }
 
@@ -729,6 +732,19 @@ impl<L: Lifecycle> Service<L> {
         let joins = self.stop.is_active();
         tracing::warn!(source, command_id = origin.command_id, mode = %mode, joins, "emergency stop: braking until the autopilot confirms");
         let actions = self.stop.engage(origin, now, mode);
+        self.run_stop(actions)
+    }
+
+    /// The link is up (first time since start, with a latch restored from the
+    /// state file, or again after a loss) while an emergency latch is in force:
+    /// the drive that braked the vehicle, if any, ended with the link or the
+    /// process, so brake again as for a fresh stop ([`stop::StopTracker::rebrake`];
+    /// a failsafe descent is held).
+    fn rebrake(&mut self, now: Instant) -> anyhow::Result<()> {
+        let mode = self.telemetry.flight_mode();
+        let engagers = self.arbiter.authority().engagements();
+        tracing::warn!(mode = %mode, engagers = ?engagers, "emergency stop in force at link up: braking until the autopilot confirms");
+        let actions = self.stop.rebrake(now, mode);
         self.run_stop(actions)
     }
 

@@ -24,6 +24,14 @@
 //! stopped, or at that deadline. The emergency latch itself is the arbiter's; a
 //! failed stop leaves it in force (a source may send the stop again).
 //!
+//! A latch with nobody left braking for it gets an *unowned* drive
+//! ([`StopTracker::rebrake`]): when autopilot-link starts with an emergency latch
+//! restored from its state file, or the link comes back up while a latch is in
+//! force, the vehicle may be moving (the drive that braked it ended with the link
+//! or the process). The drive is the same as for a fresh stop (BRAKE and
+//! zero-velocity setpoints until confirmed, at most `confirm_timeout`; nothing in
+//! a failsafe descent) with no stop command to answer.
+//!
 //! Speed is the norm of the measured NED velocity (horizontal and vertical): a
 //! vehicle still sinking or climbing has not stopped. Only measurements taken
 //! after the stop arrived count (the service feeds each new one), and a mode is
@@ -113,6 +121,24 @@ struct Drive {
 }
 
 impl Drive {
+    /// A drive starting at `now` in `mode`, sending until `until`, nobody waiting.
+    fn new(now: Instant, until: Instant, mode: FlightMode) -> Drive {
+        Drive {
+            waiters: Vec::new(),
+            until,
+            started: now,
+            mode_confirmed: mode == FlightMode::Brake,
+            next_mode: now,
+            mode_sends: 0,
+            refusal: None,
+            stopped: false,
+            next_setpoint: now,
+            slow_since: None,
+            speed: None,
+            mode,
+        }
+    }
+
     fn confirmation(&self) -> Option<String> {
         if self.mode_confirmed {
             Some("BRAKE confirmed by the autopilot".to_string())
@@ -169,22 +195,25 @@ impl StopTracker {
             return out;
         }
         let deadline = now + self.policy.confirm_timeout;
-        let drive = self.drive.get_or_insert_with(|| Drive {
-            waiters: Vec::new(),
-            until: deadline,
-            started: now,
-            mode_confirmed: mode == FlightMode::Brake,
-            next_mode: now,
-            mode_sends: 0,
-            refusal: None,
-            stopped: false,
-            next_setpoint: now,
-            slow_since: None,
-            speed: None,
-            mode,
-        });
+        let drive = self
+            .drive
+            .get_or_insert_with(|| Drive::new(now, deadline, mode));
         drive.until = drive.until.max(deadline);
         drive.waiters.push(Waiter { origin, deadline });
+        self.step(now)
+    }
+
+    /// An emergency latch is in force with no drive behind it (restored at start,
+    /// or the link came back up): brake as for a fresh stop, with no stop command to
+    /// answer. In a failsafe descent (`mode` RTL, LAND, SmartRTL) nothing is sent.
+    /// A drive already running just goes on.
+    pub fn rebrake(&mut self, now: Instant, mode: FlightMode) -> Vec<StopAction> {
+        if self.drive.is_none() {
+            if is_failsafe(mode) {
+                return Vec::new();
+            }
+            self.drive = Some(Drive::new(now, now + self.policy.confirm_timeout, mode));
+        }
         self.step(now)
     }
 
@@ -579,6 +608,60 @@ mod tests {
         let a = t.poll(ms(7000));
         assert_eq!(answers(&a)[0].origin.command_id, 2);
         assert!(!t.is_active());
+    }
+
+    #[test]
+    fn a_latch_without_a_drive_is_braked_until_confirmed_answering_nobody() {
+        let t0 = Instant::now();
+        let ms = |n: u64| t0 + Duration::from_millis(n);
+        let mut t = tracker();
+        // Restored latch, link up, the vehicle flying GUIDED: BRAKE and a setpoint
+        // at once, repeated like a fresh stop's.
+        let a = t.rebrake(t0, FlightMode::Guided);
+        assert_eq!(brakes(&a), vec![0]);
+        assert_eq!(setpoints(&a), 1);
+        assert!(answers(&a).is_empty());
+        assert!(t.is_active());
+        assert_eq!(setpoints(&t.poll(ms(100))), 1);
+        t.on_velocity(ms(150), MOVING);
+        assert_eq!(brakes(&t.poll(ms(1000))), vec![1], "BRAKE retried");
+        // Confirmed by the mode and the speed: the drive ends, nothing answered.
+        let a = t.on_heartbeat(ms(1100), FlightMode::Brake);
+        assert!(answers(&a).is_empty(), "{a:?}");
+        t.on_velocity(ms(1200), STILL);
+        let a = t.on_velocity(ms(1400), STILL);
+        assert!(answers(&a).is_empty(), "{a:?}");
+        assert!(!t.is_active());
+        assert!(t.poll(ms(1500)).is_empty());
+
+        // Never confirmed: nothing is sent after `confirm_timeout`.
+        let mut t = tracker();
+        t.rebrake(t0, FlightMode::Loiter);
+        assert_eq!(setpoints(&t.poll(ms(4900))), 1);
+        let a = t.poll(ms(5000));
+        assert!(a.is_empty(), "{a:?}");
+        assert!(!t.is_active());
+
+        // Already in BRAKE: only the setpoints, until stopped.
+        let mut t = tracker();
+        let a = t.rebrake(t0, FlightMode::Brake);
+        assert!(brakes(&a).is_empty());
+        assert_eq!(setpoints(&a), 1);
+
+        // A failsafe descent is held: nothing at all.
+        for mode in [FlightMode::Rtl, FlightMode::Land, FlightMode::SmartRtl] {
+            let mut t = tracker();
+            assert!(t.rebrake(t0, mode).is_empty(), "{mode}");
+            assert!(!t.is_active());
+        }
+
+        // A drive already running goes on; its stop is still answered by it.
+        let mut t = tracker();
+        t.engage(origin(CommandSource::DjiDrc, 1), t0, FlightMode::Guided);
+        let a = t.rebrake(ms(10), FlightMode::Guided);
+        assert!(brakes(&a).is_empty() && setpoints(&a) == 0, "{a:?}");
+        let a = t.on_heartbeat(ms(300), FlightMode::Brake);
+        assert_eq!(answers(&a).len(), 1);
     }
 
     #[test]
