@@ -34,6 +34,7 @@ use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::{MavHeader, Message};
+use skymesh_runtime::Backoff;
 use tokio::io::unix::AsyncFd;
 use tokio::io::Interest;
 use tokio::sync::mpsc;
@@ -246,7 +247,9 @@ async fn supervise(
     hub: Arc<Hub>,
     shutdown: CancellationToken,
 ) {
-    let mut delay = config.reconnect_min;
+    // No jitter: one link to its own flight controller, nobody to fall into lockstep
+    // with; the delays are exactly reconnect_min, doubling to reconnect_max.
+    let mut backoff = Backoff::new(config.reconnect_min, config.reconnect_max);
     let mut failures = FailureLog::default();
     let mut listener: Option<Arc<TcpListener>> = None;
     let mut connections: u64 = 0;
@@ -276,7 +279,7 @@ async fn supervise(
                 }
                 let attempts = failures.connected();
                 tracing::info!(endpoint = %config.endpoint, failed_attempts = attempts, "MAVLink connection open");
-                delay = config.reconnect_min;
+                backoff.reset();
                 let reason =
                     serve(&config, halves, &events, &metrics, &hub, &stop, &shutdown).await;
                 if shutdown.is_cancelled() {
@@ -293,13 +296,16 @@ async fn supervise(
                 // Reconnect at once: a peer that restarted is usually back already.
                 continue;
             }
-            Err(e) => failures.failed(&config.endpoint, &e, delay),
+            Err(e) => {
+                // Without jitter the unit (where in the jitter band) plays no part.
+                let delay = backoff.next_delay(0.5);
+                failures.failed(&config.endpoint, &e, delay);
+                tokio::select! {
+                    _ = tokio::time::sleep(delay) => {}
+                    _ = shutdown.cancelled() => return,
+                }
+            }
         }
-        tokio::select! {
-            _ = tokio::time::sleep(delay) => {}
-            _ = shutdown.cancelled() => return,
-        }
-        delay = (delay * 2).min(config.reconnect_max);
     }
 }
 

@@ -7,7 +7,7 @@
 //! | module | role |
 //! |---|---|
 //! | [`config`] | TOML → [`Settings`] |
-//! | [`mqtt`], [`tls`], [`backoff`] | the cloud broker connection: credentials, TLS (rustls/ring), reconnect with jittered backoff |
+//! | [`mqtt`], [`tls`] | the cloud broker connection: credentials, TLS (rustls/ring), reconnect with the runtime's jittered backoff |
 //! | [`outbox`], [`ratelimit`] | outbound queue kept across reconnects, need_reply re-sends; inbound rate limit (pure) |
 //! | [`inbound`] | the checks of one inbound message, in order (pure) |
 //! | `gateway` | the one loop: MQTT in/out, replies and events, authority keep-alive |
@@ -25,7 +25,6 @@
 //! Entry point: [`run`].
 #![forbid(unsafe_code)]
 
-pub mod backoff;
 pub mod cloud;
 pub mod config;
 pub mod dispatch;

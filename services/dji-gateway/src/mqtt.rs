@@ -1,7 +1,7 @@
 //! The connection to the cloud's broker: one task owns the rumqttc `EventLoop`,
 //! connects (credentials, TLS), subscribes `services` and `events_reply` (QoS 1) on
 //! every (re)connect, forwards what arrives, and when the broker goes away waits a
-//! jittered, doubling [`Backoff`] and connects again. The gateway's state lives
+//! jittered, doubling [`Backoff`] ([`RECONNECT_JITTER`]) and connects again. The gateway's state lives
 //! elsewhere and is untouched by reconnects.
 //!
 //! QoS: we subscribe at 1 and publish replies and events at 1. FACTS.md notes the
@@ -12,14 +12,18 @@
 use std::time::Duration;
 
 use rumqttc::{AsyncClient, ConnectReturnCode, Event, EventLoop, MqttOptions, Packet, QoS};
-use skymesh_runtime::CancellationToken;
+use skymesh_runtime::{Backoff, CancellationToken};
 use tokio::sync::mpsc;
 
-use crate::backoff::Backoff;
 use crate::config::BrokerSettings;
 
 /// Requests the client queues towards the event loop.
 const CLIENT_CAPACITY: usize = 64;
+/// Relative jitter of the broker links' reconnect delays (cloud and DRC): each delay
+/// is drawn from ±50 % of the doubled delay (never above the configured maximum), so
+/// gateways that lost the same broker do not come back in lockstep. The shortest
+/// delay is half the doubled one, as with the equal jitter used before.
+pub const RECONNECT_JITTER: f64 = 0.5;
 /// Largest packet accepted from the broker: far above any message we accept, so an
 /// oversized one reaches us to be counted and dropped instead of killing the link.
 const MAX_INCOMING_PACKET: usize = 4 * 1024 * 1024;
@@ -67,7 +71,7 @@ pub fn spawn(
     net.set_connection_timeout(CONNECT_TIMEOUT_S);
     eventloop.set_network_options(net);
     let (tx, rx) = mpsc::channel(1024);
-    let backoff = Backoff::new(b.reconnect_initial, b.reconnect_max);
+    let backoff = Backoff::new(b.reconnect_initial, b.reconnect_max).with_jitter(RECONNECT_JITTER);
     let task_client = client.clone();
     tokio::spawn(
         async move { run(task_client, eventloop, subscriptions, backoff, tx, shutdown).await },

@@ -16,7 +16,9 @@
 #![deny(unsafe_code)]
 
 pub mod addresses;
+pub mod angle;
 mod anticipate;
+pub mod backoff;
 mod blocking;
 pub mod clock;
 pub mod config;
@@ -37,6 +39,7 @@ pub mod timer;
 pub mod warn_limit;
 
 pub use anticipate::AnticipationStats;
+pub use backoff::Backoff;
 pub use blocking::BlockingSubscriber;
 pub use config::{ConfigError, ServiceConfig};
 pub use frames::{EarlyWakeStats, FrameError, FramePublisher, FrameSubscriber};

@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use skymesh_runtime::exit;
+use skymesh_runtime::{exit, Backoff};
 
 /// When a service that exited is started again.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,13 +29,21 @@ pub struct RestartPolicy {
     pub backoff_initial: Duration,
     /// The delay doubles per consecutive failure up to this.
     pub backoff_max: Duration,
-    /// Relative jitter (0.2 = ±20 %), so services that failed together restart apart.
+    /// Relative jitter (0.2 = ±20 %), so services that failed together restart apart
+    /// (the runtime's [`Backoff`] rule: never above `backoff_max`).
     pub jitter: f64,
     /// A run at least this long resets the backoff.
     pub stable_after: Duration,
     /// Restarts allowed within `window`; one more failure and the service is `failed`.
     pub max_restarts: u32,
     pub window: Duration,
+}
+
+impl RestartPolicy {
+    /// The restart delays: `backoff_initial` doubling to `backoff_max`, `jitter`.
+    pub fn backoff(&self) -> Backoff {
+        Backoff::new(self.backoff_initial, self.backoff_max).with_jitter(self.jitter)
+    }
 }
 
 impl Default for RestartPolicy {
@@ -93,16 +101,6 @@ pub enum Decision {
     Stopped,
 }
 
-/// The delay before restart number `attempt` (1-based) of a streak, with `rand01` in
-/// `[0, 1)` picking the jitter. Never more than `backoff_max`.
-pub fn backoff(policy: &RestartPolicy, attempt: u32, rand01: f64) -> Duration {
-    let doublings = attempt.saturating_sub(1).min(40);
-    let base = policy.backoff_initial.as_secs_f64() * 2f64.powi(doublings as i32);
-    let base = base.min(policy.backoff_max.as_secs_f64());
-    let factor = 1.0 + policy.jitter * (2.0 * rand01.clamp(0.0, 1.0) - 1.0);
-    Duration::from_secs_f64((base * factor).clamp(0.0, policy.backoff_max.as_secs_f64()))
-}
-
 /// One service's restart history.
 #[derive(Debug, Clone)]
 pub struct RestartTracker {
@@ -155,7 +153,7 @@ impl RestartTracker {
         self.streak = self.streak.saturating_add(1);
         self.recent.push_back(now);
         Decision::Restart {
-            after: backoff(&self.policy, self.streak, rand01),
+            after: self.policy.backoff().delay(self.streak, rand01),
         }
     }
 }
@@ -177,26 +175,17 @@ mod tests {
     }
 
     #[test]
-    fn backoff_doubles_from_100ms_to_30s() {
-        let p = no_jitter();
-        let got: Vec<u128> = (1..=11).map(|n| backoff(&p, n, 0.5).as_millis()).collect();
-        assert_eq!(
-            got,
-            [100, 200, 400, 800, 1600, 3200, 6400, 12800, 25600, 30000, 30000]
-        );
-        assert_eq!(backoff(&p, u32::MAX, 0.5), Duration::from_secs(30));
-    }
-
-    #[test]
-    fn jitter_stays_within_twenty_percent_and_below_the_cap() {
+    fn the_policy_paces_restarts_with_its_settings() {
+        // The rule itself is tested in skymesh_runtime::backoff.
         let p = RestartPolicy::default();
-        assert_eq!(backoff(&p, 1, 0.0), ms(80));
-        assert_eq!(backoff(&p, 1, 1.0), ms(120));
-        assert_eq!(backoff(&p, 3, 0.5), ms(400));
-        for r in [0.0, 0.25, 0.5, 0.75, 0.999] {
-            let d = backoff(&p, 4, r);
-            assert!(d >= ms(640) && d <= ms(960), "{d:?}");
-            assert!(backoff(&p, 30, r) <= Duration::from_secs(30));
+        assert_eq!(p.backoff().delay(1, 0.0), ms(80));
+        assert_eq!(p.backoff().delay(1, 1.0), ms(120));
+        assert_eq!(
+            no_jitter().backoff().delay(11, 0.5),
+            Duration::from_secs(30)
+        );
+        for r in [0.0, 0.5, 1.0] {
+            assert!(p.backoff().delay(30, r) <= Duration::from_secs(30));
         }
     }
 

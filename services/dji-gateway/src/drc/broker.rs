@@ -5,7 +5,7 @@
 //! The driver is the only code that polls the event loop (rumqttc's `poll` must not
 //! be dropped half-way through a reconnect), so the DRC task can wait on timers
 //! freely. It forwards `drc/down` messages stamped with their arrival, reconnects
-//! with the gateway's jittered exponential backoff ([`crate::backoff`]), subscribes again after every reconnect (clean
+//! with the gateway's jittered exponential backoff ([`crate::mqtt::RECONNECT_JITTER`]), subscribes again after every reconnect (clean
 //! sessions), and says when the link goes down and comes back up.
 //!
 //! TLS: [`crate::tls`] (rustls, `ring`) with the roots of `[drc] ca_file` (PEM); the
@@ -24,7 +24,7 @@ use skymesh_runtime::CancellationToken;
 use tokio::sync::mpsc;
 
 use super::DrcConfig;
-use crate::backoff::Backoff;
+use skymesh_runtime::Backoff;
 
 /// MQTT keep-alive of the DRC connection (a dead broker is noticed within ~1.5×).
 pub const KEEP_ALIVE: Duration = Duration::from_secs(10);
@@ -226,7 +226,8 @@ pub async fn drive(
         down,
         ..
     } = conn;
-    let mut backoff = Backoff::new(limits.initial, limits.max);
+    let mut backoff =
+        Backoff::new(limits.initial, limits.max).with_jitter(crate::mqtt::RECONNECT_JITTER);
     let mut connected = true;
     loop {
         let polled = tokio::select! {
