@@ -739,12 +739,13 @@ impl<L: Lifecycle> Service<L> {
     /// state file, or again after a loss) while an emergency latch is in force:
     /// the drive that braked the vehicle, if any, ended with the link or the
     /// process, so brake again as for a fresh stop ([`stop::StopTracker::rebrake`];
-    /// a failsafe descent is held).
+    /// a failsafe descent is held, a disarmed vehicle left alone).
     fn rebrake(&mut self, now: Instant) -> anyhow::Result<()> {
         let mode = self.telemetry.flight_mode();
+        let armed = self.telemetry.is_armed();
         let engagers = self.arbiter.authority().engagements();
-        tracing::warn!(mode = %mode, engagers = ?engagers, "emergency stop in force at link up: braking until the autopilot confirms");
-        let actions = self.stop.rebrake(now, mode);
+        tracing::warn!(mode = %mode, armed, engagers = ?engagers, "emergency stop in force at link up: braking an armed vehicle until the autopilot confirms");
+        let actions = self.stop.rebrake(now, mode, armed);
         self.run_stop(actions)
     }
 

@@ -12,12 +12,14 @@ use std::time::{Duration, Instant};
 use common::arbiter::{assert_result, ground_speed, ArbiterPorts};
 use common::sim::Sim;
 use common::{assert_accepted, Mesh, PATIENCE, VEHICLE};
+use skymesh_autopilot_link::arbiter::authority::Engagement;
 use skymesh_autopilot_link::arbiter::geofence::LocalFrame;
+use skymesh_autopilot_link::arbiter::persist::{Persisted, Store};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::Settings;
 use skymesh_ipc_types::{
-    AckResult, ArbiterEventKind, AuthorityChange, Command, CommandSource, FenceKind, GeofenceSet,
-    RefusalReason, VehicleCommand, VehicleStatus, NO_HOLDER,
+    AckResult, ArbiterEventKind, AuthorityChange, Command, CommandSource, FenceKind, FlightMode,
+    GeofenceSet, RefusalReason, VehicleCommand, VehicleStatus, NO_HOLDER,
 };
 use skymesh_runtime::clock::monotonic_ns;
 
@@ -490,6 +492,58 @@ async fn emergency_stop_brakes_and_holds_and_motor_kill_needs_the_emergency_flag
         .await;
     assert_accepted(&ack, "emergency kill");
     mesh.wait_status("disarmed", |s| !s.is_armed()).await;
+    drop(arb);
+    mesh.stop().await;
+    sim.stop().await;
+}
+
+/// Finding 2 + the stop driver: a run killed during a stop leaves the latch in its
+/// state file; the next run restores it and, at link up, brakes the vehicle it
+/// finds flying GUIDED (the latch alone would only refuse commands).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_latch_restored_at_start_brakes_the_vehicle_it_finds_flying() {
+    use CommandSource::{DjiDrc, Operator};
+    let sim = Sim::start(0).await;
+    // A first run takes off and flies north, then goes away (no stop).
+    let mut first = Mesh::start_with(settings(sim.port)).await;
+    first.wait_link_up().await;
+    first.take_off(3.0).await;
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
+    for _ in 0..15 {
+        tick.tick().await;
+        first.send_as(Operator, velocity(3.0, 0.0, 0.0), 0);
+    }
+    first.stop().await;
+    // The state file a run killed during the DJI pilot's stop leaves behind.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("autopilot-link-1.json");
+    let (mut store, _) = Store::open(&path, VEHICLE);
+    let engaged = Engagement {
+        source: DjiDrc,
+        command_id: 7,
+    };
+    store.save(&Persisted::of(&[engaged], &[])).unwrap();
+    let mut s = settings(sim.port);
+    s.state_file = path;
+    let mut mesh = Mesh::start_with(s).await;
+    let mut arb = ArbiterPorts::open(&mesh);
+    // The link comes up on a vehicle still in GUIDED...
+    let up = mesh.wait_link_up().await;
+    assert_eq!(up.flight_mode(), FlightMode::Guided, "{up:?}");
+    // ... and nobody but the restored latch puts it in BRAKE and stops it.
+    mesh.wait_status("BRAKE", |s| s.flight_mode() == FlightMode::Brake)
+        .await;
+    let _ = mesh.state.latest();
+    mesh.wait_state("stopped", PATIENCE, |s| {
+        s.position_valid == 1 && ground_speed(s) < 0.3
+    })
+    .await;
+    let a = arb
+        .wait_authority("the restored stop", |a| a.emergency == 1)
+        .await;
+    assert_eq!(a.emergency_sources, 1 << DjiDrc.to_wire());
+    let ack = mesh.command_as(Operator, velocity(1.0, 0.0, 0.0)).await;
+    assert_eq!(ack.reason(), Some(RefusalReason::Emergency));
     drop(arb);
     mesh.stop().await;
     sim.stop().await;

@@ -30,7 +30,8 @@
 //! force, the vehicle may be moving (the drive that braked it ended with the link
 //! or the process). The drive is the same as for a fresh stop (BRAKE and
 //! zero-velocity setpoints until confirmed, at most `confirm_timeout`; nothing in
-//! a failsafe descent) with no stop command to answer.
+//! a failsafe descent) with no stop command to answer; a disarmed vehicle gets
+//! nothing.
 //!
 //! Speed is the norm of the measured NED velocity (horizontal and vertical): a
 //! vehicle still sinking or climbing has not stopped. Only measurements taken
@@ -205,11 +206,12 @@ impl StopTracker {
 
     /// An emergency latch is in force with no drive behind it (restored at start,
     /// or the link came back up): brake as for a fresh stop, with no stop command to
-    /// answer. In a failsafe descent (`mode` RTL, LAND, SmartRTL) nothing is sent.
-    /// A drive already running just goes on.
-    pub fn rebrake(&mut self, now: Instant, mode: FlightMode) -> Vec<StopAction> {
+    /// answer. Nothing is sent to a disarmed vehicle (it is not moving; BRAKE would
+    /// only be a mode it cannot arm in) or in a failsafe descent (`mode` RTL, LAND,
+    /// SmartRTL). A drive already running just goes on.
+    pub fn rebrake(&mut self, now: Instant, mode: FlightMode, armed: bool) -> Vec<StopAction> {
         if self.drive.is_none() {
-            if is_failsafe(mode) {
+            if !armed || is_failsafe(mode) {
                 return Vec::new();
             }
             self.drive = Some(Drive::new(now, now + self.policy.confirm_timeout, mode));
@@ -617,7 +619,7 @@ mod tests {
         let mut t = tracker();
         // Restored latch, link up, the vehicle flying GUIDED: BRAKE and a setpoint
         // at once, repeated like a fresh stop's.
-        let a = t.rebrake(t0, FlightMode::Guided);
+        let a = t.rebrake(t0, FlightMode::Guided, true);
         assert_eq!(brakes(&a), vec![0]);
         assert_eq!(setpoints(&a), 1);
         assert!(answers(&a).is_empty());
@@ -636,7 +638,7 @@ mod tests {
 
         // Never confirmed: nothing is sent after `confirm_timeout`.
         let mut t = tracker();
-        t.rebrake(t0, FlightMode::Loiter);
+        t.rebrake(t0, FlightMode::Loiter, true);
         assert_eq!(setpoints(&t.poll(ms(4900))), 1);
         let a = t.poll(ms(5000));
         assert!(a.is_empty(), "{a:?}");
@@ -644,21 +646,25 @@ mod tests {
 
         // Already in BRAKE: only the setpoints, until stopped.
         let mut t = tracker();
-        let a = t.rebrake(t0, FlightMode::Brake);
+        let a = t.rebrake(t0, FlightMode::Brake, true);
         assert!(brakes(&a).is_empty());
         assert_eq!(setpoints(&a), 1);
 
         // A failsafe descent is held: nothing at all.
         for mode in [FlightMode::Rtl, FlightMode::Land, FlightMode::SmartRtl] {
             let mut t = tracker();
-            assert!(t.rebrake(t0, mode).is_empty(), "{mode}");
+            assert!(t.rebrake(t0, mode, true).is_empty(), "{mode}");
             assert!(!t.is_active());
         }
+        // A disarmed vehicle (a restart on the ground) is left alone.
+        let mut t = tracker();
+        assert!(t.rebrake(t0, FlightMode::Loiter, false).is_empty());
+        assert!(!t.is_active());
 
         // A drive already running goes on; its stop is still answered by it.
         let mut t = tracker();
         t.engage(origin(CommandSource::DjiDrc, 1), t0, FlightMode::Guided);
-        let a = t.rebrake(ms(10), FlightMode::Guided);
+        let a = t.rebrake(ms(10), FlightMode::Guided, true);
         assert!(brakes(&a).is_empty() && setpoints(&a) == 0, "{a:?}");
         let a = t.on_heartbeat(ms(300), FlightMode::Brake);
         assert_eq!(answers(&a).len(), 1);
