@@ -5,6 +5,7 @@
 //! centimetre accuracy within a few kilometres, which is all a shot covers.
 
 use nalgebra::Vector3;
+pub(crate) use skymesh_runtime::angle::{wrap_180, wrap_360};
 
 /// WGS-84 semi-major axis, metres.
 const WGS84_A: f64 = 6_378_137.0;
@@ -77,22 +78,6 @@ fn metres_per_degree(lat_deg: f64) -> (f64, f64) {
     let rad = std::f64::consts::PI / 180.0;
     // Near the poles a degree of longitude shrinks to nothing; keep the division finite.
     (meridian * rad, (prime_vertical * c).max(1.0) * rad)
-}
-
-/// Degrees into [-180, 180).
-pub(crate) fn wrap_180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
-}
-
-/// Degrees into [0, 360).
-pub(crate) fn wrap_360(deg: f64) -> f64 {
-    let w = deg.rem_euclid(360.0);
-    // rem_euclid of a tiny negative number rounds to exactly 360.0.
-    if w >= 360.0 {
-        0.0
-    } else {
-        w
-    }
 }
 
 /// North and east metres from `a` to `b`, flat earth at their mid latitude.
@@ -247,14 +232,5 @@ mod tests {
         };
         assert!((distance_m(&CMAC, &up) - 50.0).abs() < 0.01);
         assert!((ground_distance_m(&CMAC, &up) - 30.0).abs() < 0.01);
-    }
-
-    #[test]
-    fn wraps() {
-        assert_eq!(wrap_180(190.0), -170.0);
-        assert_eq!(wrap_180(-180.0), -180.0);
-        assert_eq!(wrap_360(-10.0), 350.0);
-        assert_eq!(wrap_360(-1e-20), 0.0);
-        assert_eq!(wrap_360(720.0), 0.0);
     }
 }

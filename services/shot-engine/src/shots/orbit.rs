@@ -2,6 +2,7 @@
 //! orbit began, at the cruise speed, camera on the ROI.
 
 use nalgebra::{Vector2, Vector3};
+use skymesh_runtime::angle::wrap_pi;
 
 use super::geo::{GeoPoint, LocalFrame};
 use super::motion::{
@@ -138,10 +139,4 @@ impl Orbit {
             gimbal_pitch_deg: None,
         }
     }
-}
-
-/// Radians into [-π, π).
-fn wrap_pi(a: f64) -> f64 {
-    use std::f64::consts::PI;
-    (a + PI).rem_euclid(2.0 * PI) - PI
 }

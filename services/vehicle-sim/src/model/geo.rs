@@ -6,6 +6,8 @@
 //! simulated flight covers.
 
 use nalgebra::Vector3;
+use skymesh_runtime::angle::wrap_180;
+pub use skymesh_runtime::angle::{wrap_2pi, wrap_pi};
 
 /// Metres per degree of latitude (ArduPilot `LOCATION_SCALING_FACTOR` × 1e7).
 const METRES_PER_DEGREE: f64 = 111_318.845_021_450_34;
@@ -82,22 +84,6 @@ impl LocalFrame {
     }
 }
 
-/// Wrap degrees into [-180, 180).
-fn wrap_180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
-}
-
-/// Wrap radians into [-π, π).
-pub fn wrap_pi(rad: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    (rad + PI).rem_euclid(TAU) - PI
-}
-
-/// Wrap radians into [0, 2π).
-pub fn wrap_2pi(rad: f64) -> f64 {
-    rad.rem_euclid(std::f64::consts::TAU)
-}
-
 /// Bearing from `from` to `to` in the NE plane, radians clockwise from north.
 pub fn bearing(from: &Vector3<f64>, to: &Vector3<f64>) -> f64 {
     (to.y - from.y).atan2(to.x - from.x)
@@ -145,10 +131,8 @@ mod tests {
     }
 
     #[test]
-    fn wraps() {
+    fn bearing_is_clockwise_from_north() {
         use std::f64::consts::PI;
-        assert!((wrap_pi(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
-        assert!((wrap_2pi(-PI / 2.0) - 3.0 * PI / 2.0).abs() < 1e-12);
         let b = bearing(&Vector3::zeros(), &Vector3::new(0.0, 1.0, 0.0));
         assert!((b - PI / 2.0).abs() < 1e-12);
     }

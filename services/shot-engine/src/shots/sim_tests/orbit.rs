@@ -1,4 +1,5 @@
 use nalgebra::Vector3;
+use skymesh_runtime::angle::wrap_pi;
 
 use super::*;
 use crate::shots::orbit::{Orbit, MIN_ORBIT_RADIUS_M};
@@ -6,11 +7,6 @@ use crate::shots::orbit::{Orbit, MIN_ORBIT_RADIUS_M};
 /// Bearing of `p` seen from `c`, radians clockwise from north.
 fn angle(c: &Vector3<f64>, p: &Vector3<f64>) -> f64 {
     (p.y - c.y).atan2(p.x - c.x)
-}
-
-fn wrap(a: f64) -> f64 {
-    use std::f64::consts::PI;
-    (a + PI).rem_euclid(2.0 * PI) - PI
 }
 
 /// Orbit for `secs`, returning (max radial error, max altitude error, turned
@@ -33,7 +29,7 @@ fn orbit_for(
         max_r = max_r.max((ground(&m.pos, roi) - radius).abs());
         max_alt = max_alt.max((-m.pos.z - alt).abs());
         let a = angle(roi, &m.pos);
-        turned += wrap(a - last);
+        turned += wrap_pi(a - last);
         last = a;
     }
     (max_r, max_alt, turned)

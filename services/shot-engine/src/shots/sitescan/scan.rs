@@ -2,6 +2,7 @@
 //! contract in `sitescan.rs`).
 
 use nalgebra::{Vector2, Vector3};
+use skymesh_runtime::angle::wrap_pi;
 
 use super::{check, photo_spacing_m, SiteScanError, SiteStep, ON_STATION_M};
 use crate::shots::geo::{GeoPoint, LocalFrame};
@@ -282,10 +283,4 @@ impl StructureScan {
             done: self.phase == ScanPhase::Done,
         }
     }
-}
-
-/// Radians into [-π, π).
-fn wrap_pi(a: f64) -> f64 {
-    use std::f64::consts::PI;
-    (a + PI).rem_euclid(2.0 * PI) - PI
 }

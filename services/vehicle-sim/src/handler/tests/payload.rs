@@ -118,12 +118,8 @@ fn earth_frame_yaw_holds_a_heading() {
     // YAW_LOCK: 10° east of north, whatever the nose does.
     assert_eq!(pitchyaw(&h, &mut v, 0., 10., 16.), OK);
     run(&mut v, 3.0);
-    let expected = geo_wrap_180(10.0 - heading);
+    let expected = skymesh_runtime::angle::wrap_180(10.0 - heading);
     assert!((pitch_yaw_deg(&v).1 - expected).abs() < 1e-6);
-}
-
-fn geo_wrap_180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
 }
 
 /// ROI location `north_m` north of home on the ground (COMMAND_LONG, degrees).
