@@ -5,8 +5,9 @@
 //! - two engagers (dji_drc and operator): the stop stays until both released it,
 //!   and a forced disarm in the air is refused `in_air`;
 //! - autopilot-link SIGKILLed during a stop: after the restart the stop is in force
-//!   again (from its state file) and a source that kept streaming cannot move the
-//!   vehicle until the engager releases it.
+//!   again (from its state file), the restarted link brakes the vehicle it finds
+//!   out of BRAKE, and a source that kept streaming cannot move the vehicle until
+//!   the engager releases it.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -109,6 +110,19 @@ impl Ground {
     async fn command(&mut self, source: CommandSource, cmd: &Command) -> CommandAck {
         let id = self.send(source, cmd);
         self.ack(id).await
+    }
+
+    /// The next VehicleStatus that satisfies `ok` (published on change and at 1 Hz).
+    async fn wait_status(&mut self, what: &str, ok: impl Fn(&VehicleStatus) -> bool) {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.status.recv_timeout(left).await.unwrap() {
+                Some(s) if ok(&s) => return,
+                Some(_) => {}
+                None => panic!("no VehicleStatus with {what} within {PATIENCE:?}"),
+            }
+        }
     }
 
     /// The next AuthorityState that satisfies `ok` (it is published on every change
@@ -242,6 +256,15 @@ fn a_stop_survives_a_sigkill_of_autopilot_link_and_a_streaming_source_cannot_mov
         assert_eq!(outcome(&a), ACCEPTED, "stop: {a:?}");
         g.wait_authority("operator's stop", |s| s.emergency_by(Operator))
             .await;
+        // The vehicle leaves BRAKE (safety may command in a stop; a pilot's mode
+        // switch would do the same): after the restart only the restored latch
+        // puts it back.
+        let a = g
+            .command(CommandSource::Safety, &Command::SetMode(FlightMode::Loiter))
+            .await;
+        assert_eq!(outcome(&a), ACCEPTED, "LOITER: {a:?}");
+        g.wait_status("LOITER", |s| s.flight_mode() == FlightMode::Loiter)
+            .await;
         g
     });
     let saved = std::fs::read_to_string(dir.path().join("autopilot-link.json")).unwrap();
@@ -281,6 +304,12 @@ fn a_stop_survives_a_sigkill_of_autopilot_link_and_a_streaming_source_cannot_mov
                 "no emergency refusal after the restart"
             );
         }
+        // The restarted link found a latch and an armed vehicle in LOITER: it
+        // brakes it, with no stop command sent since.
+        g.wait_status("BRAKE after the restart", |s| {
+            s.is_link_up() && s.flight_mode() == FlightMode::Brake
+        })
+        .await;
         let st = g
             .wait_authority("restored stop", |s| s.emergency == 1)
             .await;
