@@ -32,6 +32,7 @@ use mavlink::dialects::ardupilotmega::{
 use mavlink::MavHeader;
 use nalgebra::{Quaternion, UnitQuaternion};
 use skymesh_ipc_types::{GoProStatus, PayloadState};
+use skymesh_runtime::angle::wrap_180_upper;
 
 use crate::telemetry::AUTOPILOT_COMPONENT;
 
@@ -64,16 +65,6 @@ pub enum AttitudeError {
     BadQuaternion,
     #[error("the gimbal yaw is in the earth frame and the vehicle heading is unknown")]
     NoHeading,
-}
-
-/// `deg` wrapped to (−180, 180].
-fn wrap_180(deg: f64) -> f64 {
-    let w = (deg + 180.0).rem_euclid(360.0) - 180.0;
-    if w == -180.0 {
-        180.0
-    } else {
-        w
-    }
 }
 
 /// Whether GIMBAL_DEVICE_ATTITUDE_STATUS `flags` put the yaw in the earth frame.
@@ -115,7 +106,7 @@ pub fn camera_angles(
     Ok(CameraAngles {
         pitch_deg: pitch.to_degrees() as f32,
         roll_deg: roll.to_degrees() as f32,
-        yaw_deg: wrap_180(yaw_deg) as f32,
+        yaw_deg: wrap_180_upper(yaw_deg) as f32,
     })
 }
 
@@ -292,7 +283,8 @@ impl Payload {
 
 /// A change worth publishing at once.
 fn differs(last: &PayloadState, now: &PayloadState) -> bool {
-    let moved = |a: f32, b: f32| wrap_180(f64::from(a - b)).abs() > f64::from(ANGLE_CHANGE_DEG);
+    let moved =
+        |a: f32, b: f32| wrap_180_upper(f64::from(a - b)).abs() > f64::from(ANGLE_CHANGE_DEG);
     last.gimbal_valid != now.gimbal_valid
         || last.gopro_status != now.gopro_status
         || last.gopro_capture_mode != now.gopro_capture_mode

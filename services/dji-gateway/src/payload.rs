@@ -93,14 +93,7 @@ pub fn aim_offsets(x: f64, y: f64, hfov_deg: f64, vfov_deg: f64) -> (f64, f64) {
 }
 
 /// Degrees into (−180, 180].
-pub fn wrap180(deg: f64) -> f64 {
-    let w = (deg + 180.0).rem_euclid(360.0) - 180.0;
-    if w <= -180.0 {
-        w + 360.0
-    } else {
-        w
-    }
-}
+pub use skymesh_runtime::angle::wrap_180_upper as wrap180;
 
 fn clamp_pitch(p: f64) -> f32 {
     p.clamp(GIMBAL_PITCH_RANGE.0, GIMBAL_PITCH_RANGE.1) as f32

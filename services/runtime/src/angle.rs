@@ -35,6 +35,17 @@ pub fn wrap_180(deg: f64) -> f64 {
     }
 }
 
+/// Degrees into `(−180, 180]`: [`wrap_180`] keeping +180 rather than −180, for yaws
+/// reported in that range (the gimbal yaw in `PayloadState`, DJI gimbal payloads).
+pub fn wrap_180_upper(deg: f64) -> f64 {
+    let w = wrap_180(deg);
+    if w <= -180.0 {
+        w + 360.0
+    } else {
+        w
+    }
+}
+
 /// Degrees into `[0, 360)`.
 pub fn wrap_360(deg: f64) -> f64 {
     let w = deg.rem_euclid(360.0);
@@ -77,12 +88,18 @@ mod tests {
         assert_eq!(wrap_180(-180.0), -180.0);
         assert_eq!(wrap_180(180.0), -180.0);
         assert_eq!(wrap_180(-190.0), 170.0);
+        assert_eq!(wrap_180_upper(180.0), 180.0);
+        assert_eq!(wrap_180_upper(-180.0), 180.0);
+        assert_eq!(wrap_180_upper(-190.0), 170.0);
+        assert_eq!(wrap_180_upper(190.0), -170.0);
         assert_eq!(wrap_360(-10.0), 350.0);
         assert_eq!(wrap_360(-1e-20), 0.0);
         assert_eq!(wrap_360(720.0), 0.0);
         for x in [-1e-20, -1e-14, 180.0 - 1e-14, -180.0 - 1e-14, 1e-20] {
             let w = wrap_180(x);
             assert!((-180.0..180.0).contains(&w), "{x} → {w}");
+            let w = wrap_180_upper(x);
+            assert!(w > -180.0 && w <= 180.0, "{x} → {w}");
             let w = wrap_360(x);
             assert!((0.0..360.0).contains(&w), "{x} → {w}");
         }

@@ -24,6 +24,7 @@
 use std::time::Duration;
 
 use dji_proto::{DelayInfoPush, HsiInfoPush, OsdInfoPush};
+use skymesh_runtime::angle::wrap_180;
 
 use crate::link::Snapshot;
 
@@ -32,9 +33,9 @@ pub const NO_OBSTACLE_DATA_MM: i64 = 60_000;
 /// Horizontal obstacle directions of hsi_info_push (one per degree).
 pub const AROUND_DIRECTIONS: usize = 360;
 
-/// Degrees into −180..180.
+/// Degrees into −180..180; an unknown (non-finite) angle is pushed as 0.
 fn wrap_deg(deg: f64) -> f64 {
-    let d = (deg + 180.0).rem_euclid(360.0) - 180.0;
+    let d = wrap_180(deg);
     if d.is_finite() {
         d
     } else {
