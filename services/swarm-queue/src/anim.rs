@@ -78,12 +78,7 @@ pub enum AnimError {
 }
 
 fn shortest(from: f32, to: f32) -> f32 {
-    let d = (to - from + 180.0).rem_euclid(360.0) - 180.0;
-    if d == -180.0 {
-        180.0
-    } else {
-        d
-    }
+    crate::site::wrap_deg(to - from)
 }
 
 impl Animation {

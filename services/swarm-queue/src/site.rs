@@ -17,6 +17,7 @@
 //! rest reads yaw 90°.
 
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
+use skymesh_runtime::angle;
 
 /// WGS-84 semi-major axis, metres.
 const WGS84_A: f64 = 6_378_137.0;
@@ -35,13 +36,12 @@ pub struct SiteFrame {
     m_per_deg_lon: f64,
 }
 
-/// `lon` wrapped into −180..180.
+/// `lon` wrapped into −180..180; the antimeridian reached from the east is +180.
 fn wrap_180(lon: f64) -> f64 {
-    let w = (lon + 180.0).rem_euclid(360.0) - 180.0;
-    if w == -180.0 && lon > 0.0 {
-        180.0
+    if lon > 0.0 {
+        angle::wrap_180_upper(lon)
     } else {
-        w
+        angle::wrap_180(lon)
     }
 }
 
@@ -101,14 +101,9 @@ impl SiteFrame {
     }
 }
 
-/// Normalises degrees into −180..=180.
+/// Normalises degrees into −180..=180 (−180 excluded).
 pub fn wrap_deg(d: f32) -> f32 {
-    let w = (d + 180.0).rem_euclid(360.0) - 180.0;
-    if w == -180.0 {
-        180.0
-    } else {
-        w
-    }
+    angle::wrap_180_upper(f64::from(d)) as f32
 }
 
 /// GroundControl yaw (CCW degrees from east) → compass heading (CW from north, 0..360).
