@@ -553,6 +553,9 @@ impl<L: Lifecycle> Service<L> {
                     self.stream_retries = 0;
                     self.ports.state.publish(state)?;
                     self.last_state = Some(state);
+                    // A position target reached is over (its source may go quiet).
+                    let view = self.vehicle_view(monotonic_ns());
+                    self.arbiter.observe(&view);
                 }
                 self.publish_status_if_changed(now)?;
                 // After the samples: a source that reads the stop's answer finds

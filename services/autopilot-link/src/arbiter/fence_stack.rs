@@ -14,7 +14,7 @@
 
 use skymesh_ipc_types::{ArbiterEventKind, CommandSource, GeofenceSet, NO_HOLDER};
 
-use super::geofence::{stoppable, Envelope, Fence, Limit, Ne, MAX_FIX_AGE_S};
+use super::geofence::{point_segment_dist2, stoppable, Envelope, Fence, Limit, Ne, MAX_FIX_AGE_S};
 use super::{Arbiter, Effect, Kinematics};
 
 /// One source's fence: the compiled geometry and the sample it came from (kept for
@@ -114,7 +114,7 @@ impl FenceStack {
 /// Fences at most: one per source.
 const MAX_FENCES: usize = CommandSource::ALL.len();
 /// Segments of one stopping-trajectory check (see [`FenceStack::limit_velocity`]).
-const MAX_SEGMENTS: usize = 5 + 2 * MAX_CHORDS;
+const MAX_SEGMENTS: usize = 5 + 3 * MAX_CHORDS;
 /// The transition from the current velocity to the command is followed in at most
 /// this many chords...
 const MAX_CHORDS: usize = 16;
@@ -126,6 +126,11 @@ const BISECT_STEPS: u32 = 10;
 const BACK_IN_MPS: f64 = 1.0;
 /// Slack for rounding in "no closer than the start" comparisons, m.
 const EPS_M: f64 = 1e-6;
+/// Added to the margin when the vehicle is outside it: the trajectory models are
+/// followed in chords and a vehicle between them may stray a few centimetres
+/// further (the property test found 4 cm on a long, slightly turning change of
+/// velocity); the margin itself is what the tests assert.
+pub const MODEL_SLACK_M: f64 = 0.1;
 
 /// A segment of a stopping trajectory, as offsets from the vehicle, m.
 type Segment = (Ne, Ne);
@@ -176,17 +181,36 @@ fn stopping_trajectory(
     let dir = dv / dv.norm();
     let chords = ((tau / CHORD_S).ceil() as usize).clamp(1, MAX_CHORDS);
     let dt = tau / chords as f64;
-    let mut prev = o1;
+    let at = |t: f64| {
+        let q = o1 + c * t + dir * (0.5 * a * t * t);
+        (q, q + brake(c + dir * (a * t)))
+    };
+    let (mut prev, mut prev_end) = (o1, o1 + brake(c));
+    let mut slack: f64 = 0.0;
     for i in 1..=chords {
         let t = dt * i as f64;
-        let q = o1 + c * t + dir * (0.5 * a * t * t);
-        let u = if i == chords { w } else { c + dir * (a * t) };
+        let (q, end) = if i == chords {
+            let q = o1 + c * t + dir * (0.5 * a * t * t);
+            (q, q + brake(w))
+        } else {
+            at(t)
+        };
         push((prev, q), &mut n);
-        push((q, q + brake(u)), &mut n);
+        push((q, end), &mut n);
+        // A brake begun between two chord points ends between their stopping
+        // points: the curve of stopping points, followed in chords too.
+        push((prev_end, end), &mut n);
+        // How far each curve strays from its chord, measured at the middle: exact
+        // for the path (a parabola: constant second derivative), and with half
+        // again for the stopping points, whose second derivative varies (≤ 3a).
+        let (q_mid, end_mid) = at(t - 0.5 * dt);
+        slack = slack
+            .max(point_segment_dist2(q_mid, prev, q).sqrt())
+            .max(1.5 * point_segment_dist2(end_mid, prev_end, end).sqrt());
         prev = q;
+        prev_end = end;
     }
-    // A chord is at most a·dt²/8 from the parabola it stands for.
-    (n, a * dt * dt / 8.0)
+    (n, slack)
 }
 
 impl FenceStack {
@@ -290,7 +314,7 @@ impl FenceStack {
                 // The chords' slack, but never more than the start has (in the band
                 // the rule is "no closer than now").
                 let r = if d0 >= env.margin_m {
-                    r + slack
+                    (r + slack + MODEL_SLACK_M).min(d0 - EPS_M).max(r)
                 } else {
                     (r + slack).min(d0 - EPS_M).max(0.0)
                 };
@@ -1282,9 +1306,9 @@ mod tests {
             let env = envelope();
             let (p, c, w) = (Ne::new(pos.0, pos.1), Ne::new(vel.0, vel.1), Ne::new(cmd.0, cmd.1));
             // Started at least margin + epsilon inside, and able to stop there.
-            prop_assume!(true_clearance(stack, p) >= env.margin_m + 0.05);
+            prop_assume!(true_clearance(stack, p) >= env.margin_m + MODEL_SLACK_M + 0.05);
             let zero = simulate(stack, (p, c, Ne::zeros()), (env.response_s, 0.0), Some(env.decel_mps2), env.decel_mps2);
-            prop_assume!(zero >= env.margin_m);
+            prop_assume!(zero >= env.margin_m + MODEL_SLACK_M);
             let (out, why) = stack.limit_velocity(&env, &at(p, c, 0.0), [cmd.0 as f32, cmd.1 as f32, 0.0], 12.0);
             let v = Ne::new(out[0].into(), out[1].into());
             prop_assert!(!matches!(why, Some(Limit::BackIn { .. })), "{why:?}");
@@ -1300,10 +1324,8 @@ mod tests {
                 let hold = hold_frac.min(1.0) * tau;
                 simulate(stack, (p, c, v), (lag, hold), Some(env.decel_mps2), env.decel_mps2)
             };
-            // 2.5 cm: sampled runs came within 1.8 cm of the margin on long
-            // reversing changes of velocity (chords 0.3 s apart); not explained yet.
             prop_assert!(
-                worst >= env.margin_m - 0.025,
+                worst >= env.margin_m - 1e-6,
                 "closest {worst:.3} m; command {w:?} -> {v:?} ({why:?}), hold {hold_frac:.2}, instant {instant}"
             );
         }

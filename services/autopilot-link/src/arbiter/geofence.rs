@@ -74,7 +74,7 @@ fn cross(a: Ne, b: Ne) -> f64 {
 }
 
 /// Squared distance from `p` to the segment `a`–`b`.
-fn point_segment_dist2(p: Ne, a: Ne, b: Ne) -> f64 {
+pub(super) fn point_segment_dist2(p: Ne, a: Ne, b: Ne) -> f64 {
     let e = b - a;
     let len2 = e.norm_squared();
     let u = if len2 > 0.0 {
