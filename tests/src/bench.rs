@@ -307,7 +307,22 @@ pub async fn take_off(mesh: &Mesh, alt: f32) -> Result<()> {
             }
         }
         if matches!(cmd, Command::Takeoff { .. }) {
+            // Keep flight authority while the take-off flies (a grab each second):
+            // the arbiter brakes a position target whose source went quiet.
+            let mut grab = Instant::now();
+            let mut keep_id = 9100;
             loop {
+                if Instant::now() >= grab {
+                    grab += Duration::from_secs(1);
+                    keep_id += 1;
+                    let keep = Command::GrabFlightAuthority;
+                    cmds.publish(VehicleCommand::new(
+                        1,
+                        CommandSource::Operator,
+                        keep_id,
+                        &keep,
+                    )?)?;
+                }
                 let s = state
                     .recv_timeout(Duration::from_secs(5))
                     .await?

@@ -124,7 +124,22 @@ fn guided_arm_takeoff_climbs_to_10_metres() {
         let deadline = std::time::Instant::now() + Duration::from_secs(40);
         let mut alt = 0.0;
         let mut stable = 0;
+        // The operator keeps its flight authority while the take-off flies (a grab
+        // each second), as a source flying a position target must.
+        let mut grab = std::time::Instant::now();
+        let mut keep_id = 200;
         while std::time::Instant::now() < deadline {
+            if std::time::Instant::now() >= grab {
+                grab += Duration::from_secs(1);
+                keep_id += 1;
+                let keep = VehicleCommand::new(
+                    1,
+                    CommandSource::Operator,
+                    keep_id,
+                    &Command::GrabFlightAuthority,
+                );
+                cmds.publish(keep.unwrap()).unwrap();
+            }
             alt = next_state(&mut state, Duration::from_secs(2))
                 .await
                 .alt_rel_m;

@@ -160,7 +160,7 @@ impl Vehicle {
         self.operator(Command::SetMode(FlightMode::Guided)).await;
         self.operator(Command::Arm { force: false }).await;
         self.operator(Command::Takeoff { alt_rel_m: alt }).await;
-        self.wait_until(Duration::from_secs(30), "take-off", |s| {
+        self.fly_until(Duration::from_secs(30), "take-off", |s| {
             s.alt_rel_m > alt - 0.5
         })
         .await;
@@ -179,12 +179,45 @@ impl Vehicle {
             speed_mps: Some(6.0),
         })
         .await;
-        self.wait_until(Duration::from_secs(30), "arrival", |s| {
+        self.fly_until(Duration::from_secs(30), "arrival", |s| {
             let (n, e) = ne(p, (s.lat_deg, s.lon_deg));
             n.hypot(e) < 1.0 && (s.alt_rel_m - alt).abs() < 0.7 && speed(s) < 0.3
         })
         .await;
         self.operator(Command::ReleaseFlightAuthority).await;
+    }
+
+    /// [`Vehicle::wait_until`] while the operator flies a position target: as any
+    /// source flying one must, it keeps its flight authority (a grab each second),
+    /// else the arbiter brakes the target when the authority times out.
+    pub async fn fly_until(
+        &mut self,
+        timeout: Duration,
+        what: &str,
+        mut f: impl FnMut(&VehicleState) -> bool,
+    ) -> VehicleState {
+        let deadline = Instant::now() + timeout;
+        let mut grab = Instant::now();
+        let mut last = None;
+        while Instant::now() < deadline {
+            if Instant::now() >= grab {
+                grab += Duration::from_secs(1);
+                self.next_id += 1;
+                let keep = VehicleCommand::new(
+                    1,
+                    CommandSource::Operator,
+                    self.next_id,
+                    &Command::GrabFlightAuthority,
+                );
+                self.cmds.publish(keep.unwrap()).unwrap();
+            }
+            let s = self.now().await;
+            if f(&s) {
+                return s;
+            }
+            last = Some(s);
+        }
+        panic!("{what}: not reached within {timeout:?}; last state {last:?}");
     }
 
     pub async fn wait_until(
