@@ -43,7 +43,7 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use skymesh_runtime::refusals::{self, Admit, Refusals};
-use skymesh_runtime::Stats;
+use skymesh_runtime::{Backoff, Stats};
 use tokio::io::unix::AsyncFd;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, Interest};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
@@ -555,7 +555,7 @@ async fn udp_out(
     shutdown: CancellationToken,
 ) {
     let metrics = &hub.metrics(index);
-    let mut delay = RECONNECT_MIN;
+    let mut backoff = Backoff::new(RECONNECT_MIN, RECONNECT_MAX);
     let (socket, sink) = loop {
         let opened = async {
             let to = resolve(&host, port).await?;
@@ -578,11 +578,12 @@ async fn udp_out(
         match opened {
             Ok(v) => break v,
             Err(e) => {
+                // No jitter (one endpoint, one destination): the unit plays no part.
+                let delay = backoff.next_delay(0.5);
                 tracing::warn!(endpoint = metrics.label(), error = %e, retry_in_s = delay.as_secs_f32(), "cannot open udp endpoint; retrying");
                 if !pause(delay, &shutdown).await {
                     return;
                 }
-                delay = (delay * 2).min(RECONNECT_MAX);
             }
         }
     };
@@ -694,7 +695,7 @@ async fn tcp_out(
 ) {
     let signing = signing.as_deref();
     let metrics = &hub.metrics(index);
-    let mut delay = RECONNECT_MIN;
+    let mut backoff = Backoff::new(RECONNECT_MIN, RECONNECT_MAX);
     metrics.peers(0);
     loop {
         let connect = async {
@@ -707,10 +708,10 @@ async fn tcp_out(
             _ = shutdown.cancelled() => return,
             c = connect => c,
         };
-        match connected {
+        let delay = match connected {
             Ok(stream) => {
                 tracing::info!(endpoint = metrics.label(), "tcp endpoint connected");
-                delay = RECONNECT_MIN;
+                backoff.reset();
                 metrics.peers(1);
                 let (tx, crx) = mpsc::channel(ENDPOINT_QUEUE);
                 let serve = serve_stream(
@@ -746,12 +747,15 @@ async fn tcp_out(
                     reason,
                     "tcp endpoint disconnected; reconnecting"
                 );
+                RECONNECT_MIN
             }
             Err(e) => {
+                // No jitter (one endpoint, one destination): the unit plays no part.
+                let delay = backoff.next_delay(0.5);
                 tracing::debug!(endpoint = metrics.label(), error = %e, retry_in_s = delay.as_secs_f32(), "cannot connect tcp endpoint; retrying");
-                delay = (delay * 2).min(RECONNECT_MAX);
+                delay
             }
-        }
+        };
         if !idle(delay, &mut rx, &shutdown).await {
             return;
         }
