@@ -67,6 +67,7 @@
 
 use nalgebra::{Point2, Quaternion, Unit, UnitQuaternion, Vector3};
 use skymesh_ipc_types::frame::{CameraIntrinsics, CapturePose, FrameHeader, LensModel};
+use skymesh_runtime::angle::wrap_180;
 
 /// WGS-84 semi-major axis, metres.
 const WGS84_A: f64 = 6_378_137.0;
@@ -549,17 +550,8 @@ impl YawPitch {
     }
 }
 
-/// Wraps an angle to −π..π.
-pub fn wrap_pi(angle: f64) -> f64 {
-    let tau = std::f64::consts::TAU;
-    let wrapped = (angle + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI;
-    // rem_euclid can return exactly tau for tiny negative inputs.
-    if wrapped >= std::f64::consts::PI {
-        wrapped - tau
-    } else {
-        wrapped
-    }
-}
+/// Wraps an angle in radians to [−π, π) (the runtime's one implementation).
+pub use skymesh_runtime::angle::wrap_pi;
 
 /// How the camera is mounted on the vehicle: the rotation of camera-frame vectors into
 /// the body frame (a gimbal's current attitude relative to the body, or a fixed mount).
@@ -787,11 +779,6 @@ fn metres_per_degree(lat_deg: f64) -> (f64, f64) {
     let rad = std::f64::consts::PI / 180.0;
     // Near the poles a degree of longitude shrinks to nothing; keep the division finite.
     (meridian * rad, (prime_vertical * c).max(1.0) * rad)
-}
-
-/// Wraps degrees to −180..180.
-fn wrap_180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
 }
 
 /// Where a ray meets the ground (DETECTED_ROI's latitude, longitude, altitude and
