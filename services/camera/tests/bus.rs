@@ -277,7 +277,10 @@ async fn frames_are_made_only_for_a_subscriber() {
             let first = t.elapsed();
             eprintln!("camera: first frame {first:?} after the subscription (period {period:?})");
             assert_eq!(got, 1);
-            assert!(first < period * 2 + Duration::from_millis(100), "first frame after {first:?}");
+            assert!(
+                first < period * 2 + Duration::from_millis(100),
+                "first frame after {first:?}"
+            );
             assert_eq!(stats.value("skymesh_camera_active", ""), Some(1.0));
 
             drop(frames);
