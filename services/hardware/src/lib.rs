@@ -23,7 +23,6 @@
 pub mod backend;
 pub mod config;
 pub mod core;
-mod fsutil;
 mod ipc;
 pub mod metrics;
 pub mod persist;

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::fsutil::write_atomic;
+pub use skymesh_runtime::state_file::Loaded;
+use skymesh_runtime::state_file::{load, write_atomic};
 
 /// The file's name inside the state directory.
 pub const SAVED_FILE_NAME: &str = "power_channels.json";
@@ -38,22 +39,6 @@ pub enum PersistError {
     Encode(#[from] serde_json::Error),
 }
 
-/// What [`SavedStates::load`] found, for the start-up log.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Loaded {
-    /// No file: nothing saved yet.
-    Fresh,
-    /// Read and parsed.
-    Existing,
-    /// Not parseable: moved to `kept` (when the move worked); nothing restored.
-    Corrupt {
-        error: String,
-        kept: Option<PathBuf>,
-    },
-    /// Could not be read (permissions, I/O): nothing restored, the file left alone.
-    Unreadable { error: String },
-}
-
 /// The saved states and their file.
 #[derive(Debug)]
 pub struct SavedStates {
@@ -65,30 +50,17 @@ impl SavedStates {
     /// Reads `state_dir/power_channels.json`; never fails (see [`Loaded`]).
     pub fn load(state_dir: &Path) -> (SavedStates, Loaded) {
         let path = state_dir.join(SAVED_FILE_NAME);
-        let (channels, loaded) = match std::fs::read_to_string(&path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => (BTreeMap::new(), Loaded::Fresh),
-            Err(e) => (
-                BTreeMap::new(),
-                Loaded::Unreadable {
-                    error: e.to_string(),
-                },
-            ),
-            Ok(text) => match serde_json::from_str::<SavedFile>(&text) {
-                Ok(f) if f.version == FORMAT_VERSION => (f.channels, Loaded::Existing),
-                other => {
-                    let error = match other {
-                        Ok(f) => format!(
-                            "format version {} (this build reads {FORMAT_VERSION})",
-                            f.version
-                        ),
-                        Err(e) => e.to_string(),
-                    };
-                    let kept = path.with_file_name(format!("{SAVED_FILE_NAME}.corrupt"));
-                    let kept = std::fs::rename(&path, &kept).ok().map(|()| kept);
-                    (BTreeMap::new(), Loaded::Corrupt { error, kept })
-                }
-            },
-        };
+        let (channels, loaded) = load(&path, |text| {
+            let f = serde_json::from_str::<SavedFile>(text).map_err(|e| e.to_string())?;
+            if f.version != FORMAT_VERSION {
+                return Err(format!(
+                    "format version {} (this build reads {FORMAT_VERSION})",
+                    f.version
+                ));
+            }
+            Ok(f.channels)
+        });
+        let channels = channels.unwrap_or_default();
         (SavedStates { path, channels }, loaded)
     }
 

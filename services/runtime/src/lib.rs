@@ -33,6 +33,7 @@ pub mod realtime;
 pub mod refusals;
 mod service;
 pub mod signals;
+pub mod state_file;
 pub mod stats;
 pub mod systemd;
 pub mod timer;

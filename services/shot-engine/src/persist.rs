@@ -10,8 +10,9 @@
 //! The active shot is recorded so that a restart can tell the app that its shot
 //! ended; a restarted engine never resumes a shot (see `engine`).
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
+
+use skymesh_runtime::state_file;
 
 use serde::{Deserialize, Serialize};
 
@@ -94,21 +95,8 @@ pub enum PersistError {
     Encode(#[from] serde_json::Error),
 }
 
-/// What [`Store::open`] found.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Loaded {
-    /// No file yet: defaults.
-    Fresh,
-    /// Read and parsed.
-    Existing,
-    /// Could not be parsed; moved to `kept` (when the move worked) and defaults used.
-    Corrupt {
-        error: String,
-        kept: Option<PathBuf>,
-    },
-    /// Could not be read (permissions, I/O); defaults used, the file left alone.
-    Unreadable { error: String },
-}
+/// What [`Store::open`] found (defaults are used unless `Existing`).
+pub use skymesh_runtime::state_file::Loaded;
 
 /// The state file and its current content.
 #[derive(Debug)]
@@ -136,37 +124,12 @@ fn parse(text: &str) -> Result<Persisted, String> {
     Ok(p)
 }
 
-/// `<file>.<suffix>` next to `path`.
-fn sibling(path: &Path, suffix: &str) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(".");
-    name.push(suffix);
-    path.with_file_name(name)
-}
-
 impl Store {
     /// Reads `path`; never fails (see [`Loaded`]).
     pub fn open(path: impl Into<PathBuf>) -> (Store, Loaded) {
         let path = path.into();
-        let (state, loaded) = match std::fs::read_to_string(&path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                (Persisted::default(), Loaded::Fresh)
-            }
-            Err(e) => (
-                Persisted::default(),
-                Loaded::Unreadable {
-                    error: e.to_string(),
-                },
-            ),
-            Ok(text) => match parse(&text) {
-                Ok(p) => (p, Loaded::Existing),
-                Err(error) => {
-                    let target = sibling(&path, "corrupt");
-                    let kept = std::fs::rename(&path, &target).ok().map(|()| target);
-                    (Persisted::default(), Loaded::Corrupt { error, kept })
-                }
-            },
-        };
+        let (state, loaded) = state_file::load(&path, parse);
+        let state = state.unwrap_or_default();
         (Store { path, state }, loaded)
     }
 
@@ -201,13 +164,7 @@ impl Store {
         if let Some(dir) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(io("creating directory", dir))?;
         }
-        let tmp = sibling(&self.path, "tmp");
-        let mut file = std::fs::File::create(&tmp).map_err(io("creating", &tmp))?;
-        file.write_all(text.as_bytes())
-            .map_err(io("writing", &tmp))?;
-        file.sync_all().map_err(io("syncing", &tmp))?;
-        drop(file);
-        std::fs::rename(&tmp, &self.path).map_err(io("renaming into", &self.path))?;
+        state_file::write_atomic(&self.path, text.as_bytes()).map_err(io("writing", &self.path))?;
         Ok(())
     }
 }
@@ -242,7 +199,11 @@ mod tests {
         let (again, loaded) = Store::open(&path);
         assert_eq!(loaded, Loaded::Existing);
         assert_eq!(again.state(), store.state());
-        assert!(!sibling(&path, "tmp").exists());
+        let files: Vec<_> = std::fs::read_dir(dir.path().join("nested"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(files, ["s.json"], "no temporary file left");
     }
 
     #[test]

@@ -21,12 +21,12 @@
 //!   file that cannot be read at all is left alone and also starts latched. A
 //!   missing file is a first start: nothing is restored.
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use skymesh_ipc_types::arbiter::MAX_FENCE_POLYGONS;
 use skymesh_ipc_types::{ArbiterEventKind, CommandSource, FenceKind, GeofenceSet, NO_HOLDER};
+use skymesh_runtime::state_file;
 
 use super::authority::Engagement;
 use super::{Arbiter, ArbiterSettings, Effect};
@@ -225,34 +225,19 @@ pub struct Store {
     written: Option<Persisted>,
 }
 
-/// `<file>.<suffix>` next to `path`.
-fn sibling(path: &Path, suffix: &str) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(".");
-    name.push(suffix);
-    path.with_file_name(name)
-}
-
 impl Store {
     /// Reads `path` (checked for `vehicle_id`); never fails (see [`Loaded`]).
     pub fn open(path: impl Into<PathBuf>, vehicle_id: u8) -> (Store, Loaded) {
         let path = path.into();
-        let loaded = match std::fs::read_to_string(&path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Loaded::Fresh,
-            Err(e) => Loaded::Unreadable {
-                error: e.to_string(),
-            },
-            Ok(text) => match serde_json::from_str::<Persisted>(&text)
-                .map_err(|e| e.to_string())
-                .and_then(|p| p.restore(vehicle_id).map(|_| p))
-            {
-                Ok(p) => Loaded::Existing(p),
-                Err(error) => {
-                    let target = sibling(&path, "corrupt");
-                    let kept = std::fs::rename(&path, &target).ok().map(|()| target);
-                    Loaded::Corrupt { error, kept }
-                }
-            },
+        let (state, loaded) = state_file::load(&path, |text| {
+            let p = serde_json::from_str::<Persisted>(text).map_err(|e| e.to_string())?;
+            p.restore(vehicle_id).map(|_| p)
+        });
+        let loaded = match (state, loaded) {
+            (Some(p), _) => Loaded::Existing(p),
+            (None, state_file::Loaded::Corrupt { error, kept }) => Loaded::Corrupt { error, kept },
+            (None, state_file::Loaded::Unreadable { error }) => Loaded::Unreadable { error },
+            (None, _) => Loaded::Fresh,
         };
         (
             Store {
@@ -288,19 +273,7 @@ impl Store {
         if let Some(dir) = dir {
             std::fs::create_dir_all(dir).map_err(io("creating directory", dir))?;
         }
-        let tmp = sibling(&self.path, "tmp");
-        let mut file = std::fs::File::create(&tmp).map_err(io("creating", &tmp))?;
-        file.write_all(text.as_bytes())
-            .map_err(io("writing", &tmp))?;
-        file.sync_all().map_err(io("syncing", &tmp))?;
-        drop(file);
-        std::fs::rename(&tmp, &self.path).map_err(io("renaming into", &self.path))?;
-        // The rename itself is durable once the directory is synced.
-        if let Some(dir) = dir {
-            if let Ok(d) = std::fs::File::open(dir) {
-                let _ = d.sync_all();
-            }
-        }
+        state_file::write_atomic(&self.path, text.as_bytes()).map_err(io("writing", &self.path))?;
         Ok(())
     }
 }
@@ -415,10 +388,11 @@ mod tests {
         let (mut store, loaded) = Store::open(&path, 1);
         assert_eq!(loaded, Loaded::Fresh);
         store.save(&a.persisted()).unwrap();
-        assert!(
-            !sibling(&path, "tmp").exists(),
-            "the temporary file is renamed"
-        );
+        let files: Vec<_> = std::fs::read_dir(dir.path().join("nested"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(files, ["link.json"], "the temporary file is renamed");
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(
             text.contains("\"dji_drc\"") && text.contains("\"keep_out\""),

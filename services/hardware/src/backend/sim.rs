@@ -14,7 +14,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{BackendError, Lcd, Led, Line, LineUse};
-use crate::fsutil::write_atomic;
+use skymesh_runtime::state_file::write_atomic;
 
 /// One number in one file.
 #[derive(Debug)]
