@@ -114,7 +114,12 @@ struct Gate {
     refused_since_probe: bool,
     /// When the next probe is due (`CLOCK_MONOTONIC` ns).
     next_probe_ns: u64,
+    /// When the log last said this destination is not listening.
+    told_ns: u64,
 }
+
+/// While a destination keeps refusing, the log says so again this often.
+const REMINDER_NS: u64 = 60_000_000_000;
 
 impl Gate {
     /// A refusal reported at `now_ns`; true if it closes an open gate.
@@ -125,6 +130,16 @@ impl Gate {
         }
         self.refused = true;
         self.next_probe_ns = now_ns.saturating_add(period_ns);
+        self.told_ns = now_ns;
+        true
+    }
+
+    /// Still refused at `now_ns` and the log has not said so for a minute.
+    fn reminder_due(&mut self, now_ns: u64) -> bool {
+        if !self.refused || now_ns.saturating_sub(self.told_ns) < REMINDER_NS {
+            return false;
+        }
+        self.told_ns = now_ns;
         true
     }
 
@@ -274,21 +289,32 @@ impl Refusals {
             return;
         }
         let period_ns = self.period_ns;
-        let closed = match self.gate_mut(report.destination) {
-            Some(gate) => gate.refused(now_ns, period_ns),
+        let (closed, remind) = match self.gate_mut(report.destination) {
+            Some(gate) => {
+                let closed = gate.refused(now_ns, period_ns);
+                (closed, !closed && gate.reminder_due(now_ns))
+            }
             None => {
                 let mut gate = Gate::default();
                 gate.refused(now_ns, period_ns);
                 self.gates.push((report.destination, gate));
-                true
+                (true, false)
             }
         };
+        // A ground station or pose listener that is simply not there is normal
+        // (INFO, reminded once a minute), not a fault to warn about.
         if closed {
-            tracing::warn!(
+            tracing::info!(
                 sender = %self.label,
                 destination = %report.destination,
                 probe_every_s = self.period_ns as f64 / 1e9,
                 "udp destination not listening (ICMP port unreachable): one datagram a second until it is"
+            );
+        } else if remind {
+            tracing::info!(
+                sender = %self.label,
+                destination = %report.destination,
+                "udp destination still not listening"
             );
         }
     }
@@ -311,6 +337,17 @@ mod tests {
     use std::net::UdpSocket;
 
     const S: u64 = 1_000_000_000;
+
+    #[test]
+    fn a_refusing_destination_is_reminded_once_a_minute() {
+        let mut g = Gate::default();
+        assert!(g.refused(10, S));
+        assert!(!g.reminder_due(30 * S), "not before a minute");
+        assert!(!g.refused(59 * S, S));
+        assert!(g.reminder_due(61 * S));
+        assert!(!g.reminder_due(62 * S), "once, then a minute again");
+        assert!(g.reminder_due(122 * S));
+    }
 
     #[test]
     fn a_refused_gate_skips_until_its_probe_and_reopens_after_a_quiet_probe() {
