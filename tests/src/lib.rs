@@ -23,6 +23,7 @@ use skymesh_runtime::{Bus, Domain, Stats};
 
 pub mod bench;
 pub mod fault_link;
+pub mod ground;
 pub mod sitl;
 pub mod transport_bench;
 

@@ -13,24 +13,12 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use skymesh_e2e::bench::take_off;
-use skymesh_e2e::{Mesh, MeshBus, MeshOptions};
+use skymesh_e2e::ground::{runtime, Ground, PATIENCE};
+use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
-    topics, AckResult, AuthorityState, Command, CommandAck, CommandSource, FlightMode,
-    RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, Command, CommandAck, CommandSource, FlightMode, RefusalReason, VehicleState,
 };
-use skymesh_runtime::{Publisher, Subscriber};
 use CommandSource::{DjiDrc, Operator};
-
-/// Waiting for something that should happen (never a latency claim).
-const PATIENCE: Duration = Duration::from_secs(30);
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 /// A mesh with vehicle-sim and autopilot-link, its state file in `dir`.
 fn mesh(dir: &Path) -> Mesh {
@@ -47,105 +35,6 @@ fn mesh(dir: &Path) -> Mesh {
 fn speed(s: &VehicleState) -> f32 {
     let [n, e, _] = s.vel_ned_mps;
     n.hypot(e)
-}
-
-/// The test's bus ports for vehicle 1.
-struct Ground {
-    _bus: MeshBus,
-    cmds: Publisher<VehicleCommand>,
-    acks: Subscriber<CommandAck>,
-    authority: Subscriber<AuthorityState>,
-    state: Subscriber<VehicleState>,
-    status: Subscriber<VehicleStatus>,
-    next_id: u32,
-    /// Acks read while waiting for another.
-    early: Vec<CommandAck>,
-}
-
-impl Ground {
-    fn new(mesh: &Mesh) -> Ground {
-        let bus = mesh.bus("safety-emergency").unwrap();
-        Ground {
-            cmds: bus.publisher(&topics::vehicle_command(1)).unwrap(),
-            acks: bus.subscriber(&topics::vehicle_command_ack(1)).unwrap(),
-            authority: bus.subscriber(&topics::vehicle_authority(1)).unwrap(),
-            state: bus.subscriber(&topics::vehicle_state(1)).unwrap(),
-            status: bus.subscriber(&topics::vehicle_status(1)).unwrap(),
-            _bus: bus,
-            next_id: 100,
-            early: Vec::new(),
-        }
-    }
-
-    fn send(&mut self, source: CommandSource, cmd: &Command) -> u32 {
-        self.next_id += 1;
-        let id = self.next_id;
-        self.cmds
-            .publish(VehicleCommand::new(1, source, id, cmd).unwrap())
-            .unwrap();
-        id
-    }
-
-    async fn ack(&mut self, id: u32) -> CommandAck {
-        if let Some(i) = self.early.iter().position(|a| a.command_id == id) {
-            return self.early.remove(i);
-        }
-        // An emergency stop's ack waits for the autopilot's confirmation (≤ 5 s).
-        let deadline = Instant::now() + Duration::from_secs(10);
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            let a = self
-                .acks
-                .recv_timeout(left)
-                .await
-                .unwrap()
-                .unwrap_or_else(|| panic!("no ack for command {id}"));
-            if a.command_id == id {
-                return a;
-            }
-            self.early.push(a);
-        }
-    }
-
-    async fn command(&mut self, source: CommandSource, cmd: &Command) -> CommandAck {
-        let id = self.send(source, cmd);
-        self.ack(id).await
-    }
-
-    /// The next VehicleStatus that satisfies `ok` (published on change and at 1 Hz).
-    async fn wait_status(&mut self, what: &str, ok: impl Fn(&VehicleStatus) -> bool) {
-        let deadline = Instant::now() + PATIENCE;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.status.recv_timeout(left).await.unwrap() {
-                Some(s) if ok(&s) => return,
-                Some(_) => {}
-                None => panic!("no VehicleStatus with {what} within {PATIENCE:?}"),
-            }
-        }
-    }
-
-    /// The next AuthorityState that satisfies `ok` (it is published on every change
-    /// and once a second).
-    async fn wait_authority(
-        &mut self,
-        what: &str,
-        ok: impl Fn(&AuthorityState) -> bool,
-    ) -> AuthorityState {
-        let deadline = Instant::now() + PATIENCE;
-        loop {
-            let s = self
-                .authority
-                .recv_timeout(PATIENCE)
-                .await
-                .unwrap()
-                .expect("authority state");
-            if ok(&s) {
-                return s;
-            }
-            assert!(Instant::now() < deadline, "{what}: last {s:?}");
-        }
-    }
 }
 
 fn outcome(a: &CommandAck) -> (Option<AckResult>, Option<RefusalReason>) {
@@ -165,7 +54,7 @@ fn two_engagers_hold_the_stop_until_both_release_and_a_forced_disarm_in_the_air_
     let mesh = mesh(dir.path());
     runtime().block_on(async {
         take_off(&mesh, 8.0).await.unwrap();
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-emergency");
 
         // Finding 9: a forced disarm in flight is a motor kill, refused.
         let a = g.command(Operator, &Command::Disarm { force: true }).await;
@@ -237,7 +126,7 @@ fn a_stop_survives_a_sigkill_of_autopilot_link_and_a_streaming_source_cannot_mov
     let rt = runtime();
     let mut g = rt.block_on(async {
         take_off(&mesh, 8.0).await.unwrap();
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-emergency");
         // The DJI pilot flies north at 3 m/s (10 Hz stream), the operator stops it.
         let push = Command::VelocityNed {
             vel_ned_mps: [3.0, 0.0, 0.0],

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use skymesh_autopilot_link::arbiter::geofence::LocalFrame;
 use skymesh_e2e::bench::take_off;
+use skymesh_e2e::ground::runtime;
 use skymesh_e2e::{Mesh, MeshOptions, HOME};
 use skymesh_ipc_types::{
     topics, ArbiterEvent, ArbiterEventKind, Command, CommandSource, FenceKind, GeofenceSet,
@@ -26,14 +27,6 @@ const MARGIN: f64 = 2.0;
 const PATIENCE: Duration = Duration::from_secs(30);
 /// Setpoint stream period.
 const PERIOD: Duration = Duration::from_millis(50);
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 /// The arbiter's own projection, so the test measures what it enforces.
 fn frame() -> LocalFrame {

@@ -19,25 +19,14 @@ use std::time::{Duration, Instant};
 use mavlink::dialects::ardupilotmega::{MavCmd, MavMessage};
 use skymesh_e2e::bench::take_off;
 use skymesh_e2e::fault_link::{start_faulty_mesh, Dir, FaultLink, Seen};
-use skymesh_e2e::{Mesh, MeshBus, MeshOptions};
+use skymesh_e2e::ground::{runtime, Ground, PATIENCE};
+use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, RefusalReason,
-    VehicleCommand, VehicleState, VehicleStatus,
+    AckResult, Command, CommandAck, CommandSource, FlightMode, RefusalReason, VehicleState,
 };
-use skymesh_runtime::{Publisher, Subscriber};
 
-/// Waiting for something that should happen (never a latency claim).
-const PATIENCE: Duration = Duration::from_secs(30);
 /// autopilot-link's default `stop_confirm_timeout_s`.
 const STOP_CONFIRM: Duration = Duration::from_secs(5);
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 fn faulty_mesh() -> (Mesh, FaultLink) {
     start_faulty_mesh(MeshOptions::default(), &["vehicle-sim", "autopilot-link"]).unwrap()
@@ -72,106 +61,6 @@ fn is_arm(msg: &MavMessage) -> bool {
         if c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && c.param1 == 1.0)
 }
 
-/// The test's own bus ports for vehicle 1: commands out from any source, acks,
-/// state and status in.
-struct Ground {
-    _bus: MeshBus,
-    cmds: Publisher<VehicleCommand>,
-    acks: Subscriber<CommandAck>,
-    state: Subscriber<VehicleState>,
-    status: Subscriber<VehicleStatus>,
-    next_id: u32,
-    /// Acks read while waiting for another, by arrival.
-    early: Vec<(Instant, CommandAck)>,
-}
-
-impl Ground {
-    fn new(mesh: &Mesh) -> Ground {
-        let bus = mesh.bus("safety-stop").unwrap();
-        Ground {
-            cmds: bus.publisher(&topics::vehicle_command(1)).unwrap(),
-            acks: bus.subscriber(&topics::vehicle_command_ack(1)).unwrap(),
-            state: bus.subscriber(&topics::vehicle_state(1)).unwrap(),
-            status: bus.subscriber(&topics::vehicle_status(1)).unwrap(),
-            _bus: bus,
-            next_id: 100,
-            early: Vec::new(),
-        }
-    }
-
-    fn send(&mut self, source: CommandSource, cmd: &Command) -> u32 {
-        self.next_id += 1;
-        let id = self.next_id;
-        self.cmds
-            .publish(VehicleCommand::new(1, source, id, cmd).unwrap())
-            .unwrap();
-        id
-    }
-
-    /// The ack of command `id` and when it was read.
-    async fn ack(&mut self, id: u32, within: Duration) -> (Instant, CommandAck) {
-        if let Some(i) = self.early.iter().position(|(_, a)| a.command_id == id) {
-            return self.early.remove(i);
-        }
-        let deadline = Instant::now() + within;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            let a = self
-                .acks
-                .recv_timeout(left)
-                .await
-                .unwrap()
-                .unwrap_or_else(|| panic!("no ack for command {id} within {within:?}"));
-            let at = Instant::now();
-            if a.command_id == id {
-                return (at, a);
-            }
-            self.early.push((at, a));
-        }
-    }
-
-    async fn command(&mut self, source: CommandSource, cmd: &Command) -> CommandAck {
-        let id = self.send(source, cmd);
-        self.ack(id, Duration::from_secs(10)).await.1
-    }
-
-    async fn wait_state(&mut self, what: &str, ok: impl Fn(&VehicleState) -> bool) -> VehicleState {
-        let deadline = Instant::now() + PATIENCE;
-        loop {
-            let s = self
-                .state
-                .recv_timeout(PATIENCE)
-                .await
-                .unwrap()
-                .expect("state");
-            if ok(&s) {
-                return s;
-            }
-            assert!(Instant::now() < deadline, "{what}: last {s:?}");
-        }
-    }
-
-    async fn wait_status(
-        &mut self,
-        what: &str,
-        ok: impl Fn(&VehicleStatus) -> bool,
-    ) -> VehicleStatus {
-        let deadline = Instant::now() + PATIENCE;
-        loop {
-            let s = self
-                .status
-                .recv_timeout(PATIENCE)
-                .await
-                .unwrap()
-                .expect("status");
-            if ok(&s) {
-                return s;
-            }
-            assert!(Instant::now() < deadline, "{what}: last {s:?}");
-        }
-    }
-}
-
 fn assert_accepted(a: &CommandAck, what: &str) {
     assert_eq!(a.result(), Some(AckResult::Accepted), "{what}: {a:?}");
 }
@@ -184,7 +73,7 @@ fn a_dropped_brake_is_retried_and_the_ack_waits_for_the_autopilot() {
     let (mesh, link) = faulty_mesh();
     runtime().block_on(async {
         take_off(&mesh, 8.0).await.unwrap();
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-stop");
         let push = Command::VelocityNed {
             vel_ned_mps: [5.0, 0.0, 0.0],
             yaw_rate_dps: None,
@@ -288,7 +177,7 @@ fn a_dropped_brake_is_retried_and_the_ack_waits_for_the_autopilot() {
 fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
     let (mesh, link) = faulty_mesh();
     runtime().block_on(async {
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-stop");
         g.wait_status("EKF healthy", |s| s.ekf_healthy != 0).await;
         assert_accepted(
             &g.command(
@@ -312,17 +201,19 @@ fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
         tokio::time::sleep(Duration::from_millis(300)).await;
         let stop = g.send(CommandSource::SwarmQueue, &Command::EmergencyStop);
         let stopped_at = Instant::now();
-        let (_, a) = g.ack(arm, Duration::from_secs(5)).await;
+        let (_, a) = g.ack_within(arm, Duration::from_secs(5)).await;
         assert_eq!(
             (a.result(), a.reason()),
             (Some(AckResult::Refused), Some(RefusalReason::Cancelled)),
             "{a:?}"
         );
-        let (_, s) = g.ack(stop, STOP_CONFIRM + Duration::from_secs(2)).await;
+        let (_, s) = g
+            .ack_within(stop, STOP_CONFIRM + Duration::from_secs(2))
+            .await;
         assert_accepted(&s, "emergency stop on the ground");
         // The servo is payload: not cancelled by the stop, but its retransmission is
         // decided again, and the arbiter refuses it now.
-        let (_, a) = g.ack(servo, Duration::from_secs(5)).await;
+        let (_, a) = g.ack_within(servo, Duration::from_secs(5)).await;
         assert_eq!(
             (a.result(), a.reason()),
             (Some(AckResult::Refused), Some(RefusalReason::Emergency)),
@@ -351,7 +242,7 @@ fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
     // Pre-emption: the swarm queue's lost ARM, the operator takes flight authority.
     let (mesh, link) = faulty_mesh();
     runtime().block_on(async {
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-stop");
         g.wait_status("EKF healthy", |s| s.ekf_healthy != 0).await;
         assert_accepted(
             &g.command(
@@ -370,7 +261,7 @@ fn a_lost_arm_is_not_retransmitted_after_a_stop_or_a_preemption() {
             "operator grab",
         );
         let grabbed_at = Instant::now();
-        let (_, a) = g.ack(arm, Duration::from_secs(5)).await;
+        let (_, a) = g.ack_within(arm, Duration::from_secs(5)).await;
         assert_eq!(
             (a.result(), a.reason()),
             (Some(AckResult::Refused), Some(RefusalReason::Preempted)),
@@ -392,7 +283,7 @@ fn a_failsafe_landing_is_held_not_braked() {
     let (mesh, link) = faulty_mesh();
     runtime().block_on(async {
         take_off(&mesh, 6.0).await.unwrap();
-        let mut g = Ground::new(&mesh);
+        let mut g = Ground::new(&mesh, "safety-stop");
         assert_accepted(
             &g.command(CommandSource::Operator, &Command::SetMode(FlightMode::Land))
                 .await,
