@@ -1,5 +1,6 @@
-//! The supervisor's HTTP endpoint (hyper 1): `GET /metrics` (Prometheus text) and
-//! `GET /status` (JSON array of services); 404 for anything else.
+//! The supervisor's HTTP endpoint (hyper 1): `GET /metrics` (Prometheus text),
+//! `GET /status` (JSON array of services) and `GET /healthz` (200 when every service
+//! runs, else 503; a short JSON [`health::Report`]); 404 for anything else.
 
 use std::convert::Infallible;
 use std::sync::Arc;
@@ -16,8 +17,8 @@ use tokio::net::TcpListener;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
-use crate::metrics;
 use crate::state::Mesh;
+use crate::{health, metrics};
 
 /// What the handlers read.
 #[derive(Debug, Clone)]
@@ -44,11 +45,11 @@ impl App {
     /// Answers one request.
     pub fn handle<B>(&self, req: &Request<B>) -> Response<Full<Bytes>> {
         let path = req.uri().path();
-        if !matches!(path, "/metrics" | "/status") {
+        if !matches!(path, "/metrics" | "/status" | "/healthz") {
             return reply(
                 StatusCode::NOT_FOUND,
                 TEXT,
-                "not found: try /metrics or /status\n",
+                "not found: try /metrics, /status or /healthz\n",
             );
         }
         if req.method() != Method::GET && req.method() != Method::HEAD {
@@ -72,6 +73,21 @@ impl App {
                         format!("encoding metrics failed: {e}\n"),
                     )
                 }
+            }
+        } else if path == "/healthz" {
+            let report = health::report(&self.mesh.status());
+            let status = StatusCode::from_u16(report.health.http_status())
+                .unwrap_or(StatusCode::SERVICE_UNAVAILABLE);
+            match serde_json::to_vec(&report) {
+                Ok(mut body) => {
+                    body.push(b'\n');
+                    reply(status, "application/json", body)
+                }
+                Err(e) => reply(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    TEXT,
+                    format!("encoding health failed: {e}\n"),
+                ),
             }
         } else {
             match serde_json::to_vec(&self.mesh.status()) {
@@ -148,5 +164,63 @@ mod tests {
         assert_eq!(get("/metricsx").status(), StatusCode::NOT_FOUND);
         let post = app.handle(&Request::post("/status").body(()).unwrap());
         assert_eq!(post.status(), StatusCode::METHOD_NOT_ALLOWED);
+    }
+
+    fn body_json(r: Response<Full<Bytes>>) -> serde_json::Value {
+        use http_body_util::BodyExt as _;
+        let bytes = block_on(r.into_body().collect()).unwrap().to_bytes();
+        serde_json::from_slice(&bytes).unwrap()
+    }
+
+    fn block_on<F: std::future::Future>(f: F) -> F::Output {
+        tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap()
+            .block_on(f)
+    }
+
+    #[test]
+    fn healthz_is_200_only_when_every_service_runs() {
+        use crate::state::Phase;
+        let mesh = Arc::new(Mesh::new(&[("a".into(), true), ("b".into(), false)], false));
+        let app = App {
+            registry: metrics::registry(mesh.clone()).unwrap(),
+            mesh: mesh.clone(),
+        };
+        let get = || app.handle(&Request::get("/healthz").body(()).unwrap());
+
+        // Both still starting.
+        let r = get();
+        assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(r.headers()[CONTENT_TYPE], "application/json");
+        assert_eq!(body_json(r)["health"], "degraded");
+
+        mesh.set_phase(0, Phase::Running);
+        mesh.set_phase(1, Phase::Running);
+        let r = get();
+        assert_eq!(r.status(), StatusCode::OK);
+        let v = body_json(r);
+        assert_eq!(v["health"], "ok");
+        assert_eq!(v["exit_code"], 0);
+        assert_eq!(v["running"], 2);
+
+        mesh.set_phase(1, Phase::Backoff);
+        let r = get();
+        assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
+        let v = body_json(r);
+        assert_eq!(
+            (v["health"].as_str(), v["exit_code"].as_u64()),
+            (Some("degraded"), Some(1))
+        );
+        assert_eq!(v["not_running"][0]["name"], "b");
+
+        mesh.set_phase(0, Phase::Failed);
+        let r = get();
+        assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
+        let v = body_json(r);
+        assert_eq!(
+            (v["health"].as_str(), v["exit_code"].as_u64()),
+            (Some("critical"), Some(2))
+        );
     }
 }

@@ -15,12 +15,14 @@
 //! Layout: [`config`] (TOML → settings), [`policy`] (pure restart decisions),
 //! [`child`] (spawn/stop/reap), [`adopt`] (finding and watching survivors), [`monitor`] (heartbeats and stats), [`supervise`]
 //! (one task per service), [`state`] (the shared view), [`procfs`], [`metrics`]
-//! (the Prometheus collector), [`http`], [`table`], [`status_cmd`].
+//! (the Prometheus collector, `skymesh_build_info`), [`http`], [`health`] (the 0/1/2 and
+//! 200/503 verdict of `skymesh status` and `/healthz`), [`table`], [`status_cmd`].
 #![forbid(unsafe_code)]
 
 pub mod adopt;
 pub mod child;
 pub mod config;
+pub mod health;
 pub mod http;
 pub mod metrics;
 pub mod monitor;
@@ -50,6 +52,12 @@ use crate::config::Settings;
 use crate::monitor::LivenessRule;
 use crate::state::Mesh;
 use crate::supervise::{clean_dead_nodes, Shared};
+
+/// The version this binary was built as (the workspace version).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// The commit it was built from (`git rev-parse --short HEAD` at build time), or
+/// `unknown` when built without git (see `build.rs`).
+pub const GIT: &str = env!("SKYMESH_GIT");
 
 /// Name of the supervisor's own iceoryx2 node.
 pub const NODE_NAME: &str = "skymesh-supervisor";
@@ -203,7 +211,9 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         config = %settings.origin,
         services = services.len(),
         monitor_only,
-        "skymesh supervisor listening on http://{addr} (/metrics, /status)"
+        version = VERSION,
+        git = GIT,
+        "skymesh supervisor listening on http://{addr} (/metrics, /status, /healthz)"
     );
     for name in &settings.disabled {
         tracing::info!(service = %name, "disabled in the config; not started");

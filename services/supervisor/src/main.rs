@@ -17,7 +17,7 @@ use tokio_util::sync::CancellationToken;
 #[derive(Debug, Parser)]
 #[command(
     name = "skymesh",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (git ", env!("SKYMESH_GIT"), ")"),
     about = "Starts, watches and restarts the skymesh services; exports Prometheus metrics",
     arg_required_else_help = true
 )]
@@ -36,7 +36,7 @@ struct Cli {
 enum Command {
     /// Start every service of the config in dependency order and supervise them (Ctrl-C or SIGTERM stops the mesh).
     Up(UpArgs),
-    /// Show the state of the running mesh (asks the supervisor's /status endpoint).
+    /// Show the state of the running mesh (asks the supervisor's /status endpoint); exits 0 all running, 1 degraded/restarting, 2 a critical service down or no supervisor.
     Status(StatusArgs),
     /// Print the commented default deploy/skymesh.toml.
     PrintDefaultConfig,
@@ -258,13 +258,12 @@ fn status(args: StatusArgs) -> ExitCode {
             return ExitCode::from(exit::FAILURE);
         }
     };
-    match rt.block_on(status_cmd::run(addr, args.json)) {
-        Ok(()) => ExitCode::from(exit::OK),
-        Err(e) => {
-            eprintln!("skymesh status: {e:#}");
-            ExitCode::from(exit::FAILURE)
-        }
+    // 0 every service runs, 1 degraded/restarting, 2 a critical one down or no answer.
+    let outcome = rt.block_on(status_cmd::run(addr, args.json));
+    if let Err(e) = &outcome {
+        eprintln!("skymesh status: {e:#}");
     }
+    ExitCode::from(status_cmd::exit_code(&outcome))
 }
 
 fn main() -> ExitCode {

@@ -74,10 +74,24 @@ pub struct MeshCollector {
     shm_low: AtomicBool,
 }
 
-/// A [`Registry`] holding the mesh's collector.
+/// `skymesh_build_info{version, git} 1`.
+pub const BUILD_INFO: &str = "skymesh_build_info";
+
+/// A [`Registry`] holding the mesh's collector and `skymesh_build_info`.
 pub fn registry(mesh: Arc<Mesh>) -> prometheus::Result<Registry> {
     let registry = Registry::new();
     registry.register(Box::new(MeshCollector::new(mesh)))?;
+    let build_info = prometheus::IntGaugeVec::new(
+        prometheus::Opts::new(
+            BUILD_INFO,
+            "Always 1; labels: the skymesh version and the git commit it was built from.",
+        ),
+        &["version", "git"],
+    )?;
+    build_info
+        .with_label_values(&[crate::VERSION, crate::GIT])
+        .set(1);
+    registry.register(Box::new(build_info))?;
     Ok(registry)
 }
 
@@ -335,7 +349,7 @@ impl MeshCollector {
             }
             _ => raw_name.clone(),
         };
-        if OWN.iter().any(|(n, _, _)| *n == name) {
+        if name == BUILD_INFO || OWN.iter().any(|(n, _, _)| *n == name) {
             return fail("name reserved for the supervisor's own metrics");
         }
         if entry.labels.try_as_str().is_none() {
@@ -636,6 +650,32 @@ mod tests {
             text.matches(r#"skymesh_service_up{service="a"}"#).count(),
             1
         );
+    }
+
+    #[test]
+    fn build_info_is_exported_once_with_version_and_commit() {
+        let mesh = Arc::new(Mesh::new(&[("a".into(), false)], false));
+        // A service cannot shadow it.
+        mesh.update(0, |e| {
+            e.phase = Phase::Running;
+            e.pid = Some(std::process::id());
+            e.stats = Some(stats(&[entry(
+                StatKind::Gauge,
+                "skymesh_build_info",
+                "",
+                7.0,
+            )]));
+        });
+        let text = render(&registry(mesh).unwrap()).unwrap();
+        check_exposition(&text);
+        let line = format!(
+            r#"skymesh_build_info{{git="{}",version="{}"}} 1"#,
+            crate::GIT,
+            crate::VERSION
+        );
+        assert!(text.contains(&line), "{line} missing in\n{text}");
+        assert_eq!(text.matches("skymesh_build_info{").count(), 1, "{text}");
+        assert!(!crate::GIT.is_empty() && !crate::VERSION.is_empty());
     }
 
     #[test]

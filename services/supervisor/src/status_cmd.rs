@@ -1,5 +1,7 @@
 //! `skymesh status`: asks the running supervisor's `/status` endpoint and prints a
-//! table, or the JSON array with `--json`.
+//! table, or the JSON array with `--json`; its exit code is the mesh's
+//! [`Health`](crate::health::Health): 0 every service runs, 1 some is degraded or
+//! restarting, 2 a critical one is down or the supervisor does not answer.
 
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::time::Duration;
@@ -12,6 +14,7 @@ use hyper::{Request, StatusCode};
 use hyper_util::rt::TokioIo;
 use tokio::net::TcpStream;
 
+use crate::health::{self, Health};
 use crate::state::StatusEntry;
 use crate::table;
 
@@ -68,8 +71,10 @@ pub async fn fetch(addr: SocketAddr) -> anyhow::Result<Vec<StatusEntry>> {
         .with_context(|| format!("{addr}/status is not a skymesh status array"))
 }
 
-/// Runs `skymesh status`: prints the table (or the JSON array) of the supervisor at `addr`.
-pub async fn run(addr: SocketAddr, json: bool) -> anyhow::Result<()> {
+/// Runs `skymesh status`: prints the table (or the JSON array) of the supervisor at
+/// `addr` and returns the mesh's health. An error means the supervisor did not answer
+/// (or not with a status array): exit 2.
+pub async fn run(addr: SocketAddr, json: bool) -> anyhow::Result<Health> {
     let addr = connect_addr(addr);
     let rows = fetch(addr)
         .await
@@ -80,8 +85,17 @@ pub async fn run(addr: SocketAddr, json: bool) -> anyhow::Result<()> {
         println!("the supervisor at {addr} runs no services");
     } else {
         print!("{}", table::render(&rows));
+        println!("{}", health::summary(&rows));
     }
-    Ok(())
+    Ok(health::of(&rows))
+}
+
+/// The exit code of `skymesh status` for the outcome of [`run`].
+pub fn exit_code(outcome: &anyhow::Result<Health>) -> u8 {
+    match outcome {
+        Ok(h) => h.exit_code(),
+        Err(_) => Health::Critical.exit_code(),
+    }
 }
 
 #[cfg(test)]
@@ -109,10 +123,59 @@ mod tests {
         let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
         let addr = l.local_addr().unwrap();
         drop(l);
-        let e = run(addr, false).await.unwrap_err();
+        let outcome = run(addr, false).await;
+        assert_eq!(exit_code(&outcome), 2);
+        let e = outcome.unwrap_err();
         assert!(
             format!("{e:#}").contains("no skymesh supervisor answers"),
             "{e:#}"
         );
+    }
+
+    /// A real HTTP server on the supervisor's handler: `run` (what `skymesh status`
+    /// does) maps the mesh to 0/1/2, and `/healthz` agrees over the wire.
+    #[tokio::test]
+    async fn exit_code_follows_the_mesh_and_agrees_with_healthz() {
+        use crate::state::{Mesh, Phase};
+        use std::sync::Arc;
+        use tokio_util::sync::CancellationToken;
+        use tokio_util::task::TaskTracker;
+
+        let mesh = Arc::new(Mesh::new(&[("a".into(), true), ("b".into(), false)], false));
+        let app = crate::http::App {
+            registry: crate::metrics::registry(mesh.clone()).unwrap(),
+            mesh: mesh.clone(),
+        };
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let stop = CancellationToken::new();
+        let tracker = TaskTracker::new();
+        let server = tokio::spawn(crate::http::serve(listener, app, stop.clone(), tracker));
+
+        let check = |want_exit: u8, want_http: StatusCode| async move {
+            let outcome = run(addr, true).await;
+            assert_eq!(exit_code(&outcome), want_exit, "{outcome:?}");
+            let (status, body) = http_get(addr, "/healthz").await.unwrap();
+            assert_eq!(status, want_http, "{body}");
+            let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+            assert_eq!(v["exit_code"], want_exit, "{body}");
+        };
+
+        mesh.set_phase(0, Phase::Running);
+        mesh.set_phase(1, Phase::Running);
+        check(0, StatusCode::OK).await;
+        mesh.set_phase(1, Phase::Degraded);
+        check(1, StatusCode::SERVICE_UNAVAILABLE).await;
+        mesh.set_phase(1, Phase::Failed); // not critical
+        check(1, StatusCode::SERVICE_UNAVAILABLE).await;
+        mesh.set_phase(0, Phase::Backoff); // critical, restarting
+        check(1, StatusCode::SERVICE_UNAVAILABLE).await;
+        mesh.set_phase(0, Phase::Failed); // critical, down for good
+        check(2, StatusCode::SERVICE_UNAVAILABLE).await;
+
+        stop.cancel();
+        server.await.unwrap();
+        // Nobody answers any more.
+        assert_eq!(exit_code(&run(addr, false).await), 2);
     }
 }

@@ -737,7 +737,7 @@ fn cli_exit_codes_for_config_problems() {
     let out = skymesh().arg("--help").output().unwrap();
     assert!(String::from_utf8_lossy(&out.stdout).contains("status"));
 
-    // Nobody listening: exit 1 with a clear message.
+    // Nobody listening: exit 2 (as bad as a critical service down) with a clear message.
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -746,7 +746,7 @@ fn cli_exit_codes_for_config_problems() {
         .args(["status", "--metrics", &port.to_string()])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no skymesh supervisor answers"));
 }
 
@@ -812,7 +812,28 @@ fn skymesh_up_binary_serves_and_stops_cleanly_on_sigterm() {
         .args(["status", "--metrics", &addr.to_string()])
         .output()
         .unwrap();
-    assert!(out.status.success());
+    // Every service runs: exit 0, /healthz 200, and the build is stamped.
+    assert_eq!(out.status.code(), Some(0));
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("health: ok (2/2 running)"), "{table}");
+    let (code, body) = rt.block_on(status_cmd::http_get(addr, "/healthz")).unwrap();
+    assert_eq!(code, 200, "{body}");
+    assert!(body.contains(r#""health":"ok""#), "{body}");
+    let (_, metrics) = rt.block_on(status_cmd::http_get(addr, "/metrics")).unwrap();
+    assert!(
+        metrics.contains(&format!(
+            r#"skymesh_build_info{{git="{}",version="{}"}} 1"#,
+            skymesh_supervisor::GIT,
+            skymesh_supervisor::VERSION
+        )),
+        "{metrics}"
+    );
+    let out = skymesh().arg("--version").output().unwrap();
+    let version = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && version.contains(skymesh_supervisor::GIT),
+        "{version}"
+    );
 
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
