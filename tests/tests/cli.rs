@@ -32,6 +32,12 @@ fn every_service_has_help_and_a_default_config_that_checks() {
     for bin in SERVICES {
         let help = run(bin, &["--help"]);
         assert!(help.status.success(), "{bin} --help");
+        let version = run(bin, &["--version"]);
+        let printed = String::from_utf8_lossy(&version.stdout);
+        assert!(
+            version.status.success() && printed.contains(env!("CARGO_PKG_VERSION")),
+            "{bin} --version: {version:?}"
+        );
         let text = String::from_utf8_lossy(&help.stdout);
         for flag in ["--config", "--check-config", "--print-default-config"] {
             assert!(text.contains(flag), "{bin} --help lacks {flag}:\n{text}");

@@ -9,7 +9,7 @@ use gc_proto::{pack_text, NetCmdType, Params, PoseRecord, Record};
 /// Drive a swarm through skymesh's GroundControl state server and watch its pose
 /// broadcast. DRONES is an id, a list or ranges: `3`, `0,2`, `0-4,7`.
 #[derive(Debug, Parser)]
-#[command(name = "skymesh-gc")]
+#[command(name = "skymesh-gc", version)]
 pub struct Cli {
     /// The state server (groundcontrol-gateway's `listen`).
     #[arg(long, default_value = "127.0.0.1:8000")]

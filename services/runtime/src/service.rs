@@ -171,7 +171,10 @@ where
     F: FnOnce(C::Settings, Context) -> Fut,
     Fut: Future<Output = anyhow::Result<()>> + Send + 'static,
 {
-    let cmd = Cli::command().name(spec.kind.as_str()).about(spec.about);
+    let cmd = Cli::command()
+        .name(spec.kind.as_str())
+        .about(spec.about)
+        .version(env!("CARGO_PKG_VERSION"));
     let matches = cmd.get_matches();
     let cli = match Cli::from_arg_matches(&matches) {
         Ok(c) => c,
