@@ -15,7 +15,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use skymesh_autopilot_link::arbiter::geofence::LocalFrame;
-use skymesh_autopilot_link::arbiter::{Arbiter, Kinematics, Outcome, VehicleView};
+use skymesh_autopilot_link::arbiter::{Arbiter, Home, Kinematics, Outcome, VehicleView};
 use skymesh_autopilot_link::RawConfig;
 use skymesh_ipc_types::{
     Command, CommandSource, FenceKind, FlightMode, GeofenceSet, VehicleCommand,
@@ -59,6 +59,11 @@ fn decide(c: &mut Criterion) {
             alt_rel_m: 10.0,
             vel_ned_mps: [2.0, 0.0, 0.0],
             age_s: 0.1,
+        }),
+        home: Some(Home {
+            lat_deg: HOME.0,
+            lon_deg: HOME.1,
+            alt_msl_m: 584.0,
         }),
     };
     let east_150 = 150.0 / frame.to_local(HOME.0, HOME.1 + 1e-3).y * 1e-3;
