@@ -87,6 +87,36 @@ impl Tool {
         }
     }
 
+    /// [`Self::wait_state`] while the operator's take-off climbs: as any source
+    /// flying a position target must, it keeps its flight authority (a grab each
+    /// second), else the arbiter brakes the climb when the authority times out.
+    async fn climb_until(
+        &mut self,
+        what: &str,
+        pred: impl Fn(&VehicleState) -> bool,
+    ) -> VehicleState {
+        let deadline = Instant::now() + PATIENCE;
+        let mut grab = Instant::now();
+        loop {
+            if Instant::now() >= grab {
+                grab += Duration::from_secs(1);
+                let id = self.next_id;
+                self.next_id += 1;
+                let keep = Command::GrabFlightAuthority;
+                let sample = VehicleCommand::new(VEHICLE, CommandSource::Operator, id, &keep);
+                self.commands.publish(sample.unwrap()).unwrap();
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            let wait = left.min(Duration::from_millis(500));
+            match self.state.recv_timeout(wait).await.unwrap() {
+                Some(s) if pred(&s) => return s,
+                Some(_) => {}
+                None if left.is_zero() => panic!("no VehicleState with {what}"),
+                None => {}
+            }
+        }
+    }
+
     async fn wait_state(
         &mut self,
         what: &str,
@@ -187,7 +217,7 @@ async fn an_orbit_flies_the_simulated_vehicle_around_its_roi_and_fly_hands_it_ba
         let ack = tool.operator(cmd).await;
         assert!(ack.is_accepted(), "{cmd:?}: {ack:?}");
     }
-    let start = tool.wait_state("at 14 m", |s| s.alt_rel_m > 14.0).await;
+    let start = tool.climb_until("at 14 m", |s| s.alt_rel_m > 14.0).await;
     tool.operator(Command::ReleaseFlightAuthority).await;
 
     // The app connects, enters orbit and locks an ROI 20 m north.
