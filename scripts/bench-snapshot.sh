@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Every issue-10 measurement once, back to back, with one release build: the
-# snapshot behind the summary table of docs/benchmarks.md ("Issue 10 in one table").
+# snapshot behind the "Targets" table of docs/benchmarks.md.
 # Each program runs its baseline in the same run; this only runs them in a row and
 # keeps their output. ~20 minutes here, plus the build.
 #

@@ -1,11 +1,11 @@
 // The idle control mesh's configured periodic work done with bare syscalls — no
 // async runtime, no iceoryx2, no metrics — to measure what that work costs this
-// machine at the least (docs/benchmarks.md, "Then: whole-program LTO").
+// machine at the least (docs/benchmarks.md, the idle mesh's baseline).
 //
 //   gcc -O2 -o /tmp/idle-floor scripts/idle-floor.c && /tmp/idle-floor 30 [rest]
 //
-// `rest`: the swarm queue at rest and the pose broadcast asleep, as the idle mesh
-// runs since 2026-12-01 (nobody listening to the poses): `swarm` and `gc` at 1 Hz.
+// `rest`: the swarm queue at rest and the pose broadcast asleep, as in the idle
+// mesh (nobody listening to the poses): `swarm` and `gc` at 1 Hz.
 //
 // Processes (CPU from /proc/<pid>/schedstat over the window):
 //   sim        50 Hz on the CLOCK_MONOTONIC grid: one TCP send to `link` (28 bytes,

@@ -1,6 +1,6 @@
 // What one paced wake-up of a blocked receiver costs this machine at the least, by
-// mechanism, with nothing of ours in it (docs/benchmarks.md, "Small samples": the
-// floor under samples-bench's blocking receivers):
+// mechanism, with nothing of ours in it (the floor under samples-bench's blocking
+// receivers; docs/benchmarks.md, "Targets"):
 //
 //   udp   the sender writes 120 bytes to a loopback UDP socket, the receiver blocks
 //         in recv (samples-bench's udp-blk);

@@ -2,7 +2,7 @@
 # Where a one-way sample's latency goes, iceoryx2 vs UDP: runs samples-bench (release)
 # under a kernel trace with the benchmark's own clock and splits each message into
 # sender work / kernel send / scheduler / return / receiver work (scripts/wake_stages.py).
-# Needs perf with tracepoint access (root). docs/benchmarks.md, "Small samples".
+# Needs perf with tracepoint access (root).
 # usage: scripts/wake-stages.sh [RECEIVERS]   (default iox-blk,udp-blk)
 #        SAMPLES_BENCH=path/to/samples-bench scripts/wake-stages.sh   (another build)
 set -euo pipefail

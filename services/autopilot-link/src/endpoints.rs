@@ -17,9 +17,9 @@
 //! A `udpout` destination that nothing listens at (its host answers with ICMP port
 //! unreachable) is sent one frame a second instead of the stream until a frame
 //! draws no refusal or a datagram comes from it ([`skymesh_runtime::refusals`]);
-//! the frames left out are counted (`reason="not_listening"`). Each loopback
-//! datagram to a closed port cost this process ~50 µs of CPU, most of its idle
-//! cost at 50 Hz telemetry.
+//! the frames left out are counted (`reason="not_listening"`): a loopback
+//! datagram to a closed port costs the sender tens of µs of CPU, which at 50 Hz
+//! telemetry would be most of this process's idle cost.
 //!
 //! | scheme | socket | peers |
 //! |---|---|---|

@@ -30,8 +30,9 @@
 //! ([`skymesh_runtime::refusals`]); the others are counted as skipped
 //! (`reason="not_listening"`). While every destination refuses the task does not
 //! tick at all: it sleeps until the first probe is due (the ticks it skips are
-//! counted the same way). A datagram to a closed loopback port cost this process
-//! ~50 µs of CPU, at 30 Hz most of its idle cost. Broadcast addresses never refuse.
+//! counted the same way): a datagram to a closed loopback port costs the sender
+//! tens of µs of CPU, at 30 Hz most of its idle cost. Broadcast addresses never
+//! refuse.
 //!
 //! The task tells the swarm queue whether it reads the state (`SwarmWatch` on
 //! `skymesh/swarm/watch`): watching while some destination may listen, renewed

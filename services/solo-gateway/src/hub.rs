@@ -124,7 +124,7 @@ impl Hub {
         // On the machine-wide grid (skymesh_runtime::timer), not tokio's wheel: the
         // session goes out on the instants of the services' heartbeats, so neither
         // this process nor the shot engine, which listens to it, wakes for it alone
-        // (tokio's interval cost this process two wake-ups a second of their own).
+        // (a tokio interval would add two wake-ups a second of its own).
         let mut tick =
             Ticker::new(self.settings.session_publish).context("creating the session timer")?;
         let result = loop {

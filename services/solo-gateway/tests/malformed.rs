@@ -187,8 +187,8 @@ async fn a_geofence_whose_coord_and_subcoord_differ_in_length_is_answered_invali
         [37.872_895_782_9, -122.300_712_401_1],
         [37.872_942_621_2, -122.301_244_403_2],
     ];
-    // Two polygons, one sub-polygon: what the codec refuses (issue 43 item 5: it was
-    // dropped without an answer and the app waited forever).
+    // Two polygons, one sub-polygon: what the codec refuses, and must still answer
+    // (issue 43 item 5: without an answer the app waits forever).
     let json =
         format!(r#"{{"coord":[{square:?},{square:?}],"subCoord":[{square:?}],"type":[0,1]}}"#);
     app.send_raw(&frame(ids::GEOFENCE_SET_DATA, json.as_bytes()))

@@ -20,8 +20,8 @@
 //! command running, queued or waiting for its vehicle, no reply or output waits)
 //! and no reader watches its `SwarmState` (`skymesh/swarm/watch`: the pose
 //! broadcast says it watches while somebody may listen to the poses, and renews
-//! the word every second; a word lapses after `SWARM_WATCH_LEASE_NS`). The 30 Hz
-//! tick was then the whole of its work, and ~30 of the idle mesh's 180 wake-ups a
+//! the word every second; a word lapses after `SWARM_WATCH_LEASE_NS`). With
+//! nothing to fly, a 30 Hz tick would be the queue's whole work and 30 wake-ups a
 //! second. A swarm command ends the rest as it arrives (the vehicles' topics are
 //! drained first, so it sees their current state), and so does a word that starts
 //! watching: the queue ticks at once, so the reader has a fresh state within a

@@ -99,7 +99,7 @@ pub enum Ready<'a> {
     /// It has no readiness signal: it must still be running after this long.
     /// The text says what it runs without (for the assertion message). A fixed wait
     /// can end before a loaded machine has let the process install its signal
-    /// handlers (two flaky CLI tests did): prefer [`Ready::StderrContains`] with a
+    /// handlers, which makes a test flaky: prefer [`Ready::StderrContains`] with a
     /// line the process logs once it serves.
     StillRunningAfter(Duration, &'a str),
     /// Its stderr contains this text (read within the patience).

@@ -18,9 +18,9 @@
 //!   thread (iceoryx2's single-thread flavour, without the thread-safe port's mutex)
 //!   on the same event count;
 //! - `iox raw`: raw iceoryx2 ports, none of skymesh's code: thread-safe
-//!   publish-subscribe and iceoryx2's semaphore event (what `iox fx` used until
-//!   2026-11-28), `send_copy` + `notify`, the receiver blocked in the listener's
-//!   wait — what iceoryx2's own blocking wake-up costs;
+//!   publish-subscribe and iceoryx2's semaphore event, `send_copy` + `notify`,
+//!   the receiver blocked in the listener's wait — what iceoryx2's own blocking
+//!   wake-up costs;
 //! - `iox word`: the same publish-subscribe woken through the bus's event count
 //!   (`skymesh_runtime::TopicWord`) without the rest of the bus: `iox fx` minus
 //!   skymesh's publisher and subscriber;
@@ -109,9 +109,9 @@ enum Via {
     /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
     IoxAnticipating,
     /// Raw iceoryx2, none of skymesh's code: the thread-safe publish-subscribe
-    /// service and iceoryx2's semaphore event (the futex wake-up's mechanism until
-    /// 2026-11-28), `send_copy` + `notify`, the receiver blocked in the event
-    /// listener's wait: what iceoryx2's own blocking wake-up costs.
+    /// service and iceoryx2's semaphore event, `send_copy` + `notify`, the
+    /// receiver blocked in the event listener's wait: what iceoryx2's own
+    /// blocking wake-up costs.
     IoxRaw,
     /// The same publish-subscribe woken through the bus's event count
     /// (`TopicWord`: the sender bumps the word and wakes its waiters, the receiver
@@ -467,8 +467,8 @@ fn raw_domain(domain: &str) -> anyhow::Result<Domain> {
 }
 
 /// `ipc_threadsafe::Service` with iceoryx2's semaphore event in place of its socket
-/// event: what the bus's futex wake-up used until 2026-11-28 (an iceoryx2 event
-/// listener on a semaphore), kept for `iox-raw`. Only its event services are used.
+/// event (an iceoryx2 event listener on a semaphore), for `iox-raw`: iceoryx2's
+/// own blocking wake-up without skymesh. Only its event services are used.
 #[derive(Debug, Clone)]
 struct WakeSvc {}
 

@@ -1,7 +1,7 @@
 //! App messages and controller buttons: dispatch, entry, button mappings, and the
 //! honest answers to what this version does not implement.
 //!
-//! Not in this milestone (each answered with SHOTMANAGER_ERROR "`<what>` is not
+//! Not implemented (each answered with SHOTMANAGER_ERROR "`<what>` is not
 //! implemented in this skymesh version" and counted): SET_CURRENT_SHOT transect,
 //! RTL (plus GET_CURRENT_SHOT of the current shot, so the app leaves the shot screen
 //! when idle). HOME_LOCATION from the app sets the vehicle's home (`rewind.rs`).

@@ -36,7 +36,7 @@
 //! watches. Follow-stream positions do not ask for a step: they are a stream of
 //! their own (the app's 25 Hz), and stepping on each would double the setpoint rate.
 
-//! # Shots (this milestone: selfie, orbit, cable cam, follow)
+//! # Shots
 //!
 //! A shot is *entered* (SET_CURRENT_SHOT from the app, or A/B mapped to it) after the
 //! entry gate (`flight.rs`), spends a *setup* phase collecting what it needs (selfie:
