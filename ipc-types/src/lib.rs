@@ -24,6 +24,7 @@ pub mod shot_fence;
 pub mod swarm;
 pub mod topics;
 pub mod vehicle;
+pub mod view;
 pub mod vision;
 
 pub use arbiter::{
@@ -60,6 +61,7 @@ pub use swarm::{
 };
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};
+pub use view::{ReferenceFrame, TrackCommand, ViewControl, ViewControlKind, ViewReply};
 pub use vision::{
     CropMode, SttMode, SttState, TargetingMode, VirtualCamState, VisionControl, VisionControlKind,
     VisionDemand, VisionDetection, VisionOrigin, VisionReply, VisionResult, VisionState,
