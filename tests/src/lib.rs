@@ -23,6 +23,7 @@ use skymesh_runtime::{Bus, Domain, Stats};
 
 pub mod bench;
 pub mod fault_link;
+pub mod first_requests;
 pub mod ground;
 pub mod sitl;
 pub mod transport_bench;
@@ -885,6 +886,34 @@ grace_period_ms = 3000
                 .flatten()
                 .map(|p| p as u32)
         })
+    }
+
+    /// Waits until `/status` lists every service `running` (polled every 10 ms, as
+    /// closely as a client watching for "ready" would); returns their names.
+    pub fn wait_all_running(&mut self, timeout: Duration) -> Result<Vec<String>> {
+        let start = Instant::now();
+        loop {
+            if let Ok(status) = self.status() {
+                if !status.is_empty() && status.iter().all(|s| s["state"] == "running") {
+                    return Ok(status
+                        .iter()
+                        .filter_map(|s| s["name"].as_str().map(str::to_string))
+                        .collect());
+                }
+            }
+            if let Some(child) = self.supervisor.as_mut() {
+                if let Ok(Some(status)) = child.try_wait() {
+                    bail!("supervisor exited ({status}) before every service ran");
+                }
+            }
+            if start.elapsed() > timeout {
+                bail!(
+                    "not every service running after {timeout:?}: {:?}",
+                    self.status()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
     }
 
     /// Waits until every service in `names` runs; panics naming the first that does
