@@ -11,9 +11,13 @@
 //!
 //! `--default-mesh`: the real default mesh of deploy/skymesh.toml (every service, the
 //! shipped service configs, its default ports, which must be free), in its own
-//! iceoryx2 domain, vehicle on the ground, no clients. Per process over the window:
+//! iceoryx2 domain, vehicle on the ground. First the time from `skymesh up` to every
+//! service `running` and to the first request on every protocol answered
+//! (`skymesh_e2e::first_requests`, a ground station on the router's 14550); then, on
+//! a fresh start with no clients, per process over the window:
 //! CPU % of one core, RSS and wake-ups per second (voluntary + nonvoluntary context
-//! switches of all its threads); then SIGKILL → `running` again in the supervisor's
+//! switches of all its threads), again with a DigiView client attached (a GET
+//! once a second: camera and vision pipeline at work) and once it left; then SIGKILL → `running` again in the supervisor's
 //! /status for each `--restart` service; then the same idle window for the control
 //! mesh (camera, vision-pipeline and digiview-gateway disabled). The generated config
 //! differs from deploy/skymesh.toml only in absolute paths, `--metrics 127.0.0.1:0`
@@ -164,6 +168,7 @@ mod default_mesh {
     use anyhow::{anyhow, bail, Context as _, Result};
     use nix::sys::signal::Signal;
     use skymesh_e2e::bench::{arg, percentile};
+    use skymesh_e2e::first_requests::{report, send_all, GcsEndpoint, Targets};
     use skymesh_e2e::{bin_dir, processes_with_env, repo_root, signal};
     use skymesh_runtime::Domain;
 
@@ -202,12 +207,25 @@ mod default_mesh {
         // `--control-only`: skip the whole mesh (A/B runs of the idle cost).
         let control_only = std::env::args().any(|a| a == "--control-only");
         if !control_only {
+            first_requests(kills)?;
             println!(
-                "# whole default mesh (deploy/skymesh.toml), settle {settle:?}, window {window:?}"
+                "\n# whole default mesh (deploy/skymesh.toml), settle {settle:?}, window {window:?}"
             );
             let mut mesh = DefaultMesh::start(&[], kills)?;
             mesh.wait_all_running(Duration::from_secs(90))?;
             std::thread::sleep(settle);
+            println!("## nothing connected");
+            let idle = mesh.measure(window)?;
+            print_idle(&idle, window);
+            println!("\n## a DigiView client attached (GET SYSTEM_STATUS once a second)");
+            let client = DigiViewPoller::start(SocketAddr::from(([127, 0, 0, 1], 8555)))?;
+            std::thread::sleep(Duration::from_secs(1));
+            let busy = mesh.measure(window)?;
+            let polls = client.stop()?;
+            print_idle(&busy, window);
+            println!("DigiView client: {polls} GETs answered");
+            std::thread::sleep(settle);
+            println!("\n## the client gone again");
             let idle = mesh.measure(window)?;
             print_idle(&idle, window);
             for name in &restart {
@@ -225,6 +243,82 @@ mod default_mesh {
             mesh.stop()?;
         }
         Ok(())
+    }
+
+    /// `skymesh up` of the shipped mesh, then the first request on every protocol
+    /// the moment /status (polled every 10 ms) says every service runs: the time to
+    /// "running" and to every first request answered (each within 1 s or reported
+    /// failed), with a ground station listening on the router's default endpoint.
+    fn first_requests(kills: usize) -> Result<()> {
+        println!("# first requests on the shipped mesh (deploy/skymesh.toml, default ports)");
+        let gcs = GcsEndpoint::bind(14550)?;
+        let t_up = Instant::now();
+        let mut mesh = DefaultMesh::start(&[], kills)?;
+        mesh.wait_all_running_every(Duration::from_secs(90), Duration::from_millis(10))?;
+        let running = t_up.elapsed();
+        let local = |port| SocketAddr::from(([127, 0, 0, 1], port));
+        let targets = Targets {
+            solo: local(5507),
+            mqtt: local(1883),
+            dji_sn: "SKYMESH-DOCK-1".to_string(),
+            digiview: local(8555),
+            gc: local(8000),
+            imc: local(6002),
+        };
+        let t0 = Instant::now();
+        let answers = skymesh_e2e::ground::runtime().block_on(send_all(
+            &targets,
+            gcs,
+            t0,
+            Duration::from_secs(1),
+        ));
+        let served = answers.iter().map(|a| a.after).max().unwrap_or_default();
+        print!("{}", report(&answers));
+        let failed = answers.iter().filter(|a| a.outcome.is_err()).count();
+        println!(
+            "skymesh up → every service running {:.0} ms; → every first request answered {:.0} ms \
+             ({} requests, {failed} failed; the slowest {:.0} ms after running)",
+            running.as_secs_f64() * 1e3,
+            (running + served).as_secs_f64() * 1e3,
+            answers.len(),
+            served.as_secs_f64() * 1e3
+        );
+        mesh.stop()
+    }
+
+    /// A DigiView client as a UI holds one: connected, a GET SYSTEM_STATUS each second.
+    struct DigiViewPoller {
+        stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+        thread: std::thread::JoinHandle<Result<u64>>,
+    }
+
+    impl DigiViewPoller {
+        fn start(addr: SocketAddr) -> Result<DigiViewPoller> {
+            use digiview_proto::{Frame, MessageType, ParamType, FRAME_LEN};
+            let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2))?;
+            s.set_read_timeout(Some(Duration::from_secs(2)))?;
+            let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+            let flag = stop.clone();
+            let thread = std::thread::spawn(move || -> Result<u64> {
+                let mut n = 0;
+                while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                    s.write_all(&Frame::new(MessageType::Get, ParamType::SystemStatus).encode())?;
+                    let mut b = [0u8; FRAME_LEN];
+                    s.read_exact(&mut b)?;
+                    n += 1;
+                    std::thread::sleep(Duration::from_secs(1));
+                }
+                Ok(n)
+            });
+            Ok(DigiViewPoller { stop, thread })
+        }
+
+        fn stop(self) -> Result<u64> {
+            self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            self.thread
+                .join()
+                .map_err(|_| anyhow!("the DigiView client thread panicked"))?
+        }
     }
 
     /// One process's counters at one instant.
@@ -480,6 +574,11 @@ mod default_mesh {
 
         /// Waits until every enabled service is `running`.
         fn wait_all_running(&mut self, timeout: Duration) -> Result<()> {
+            self.wait_all_running_every(timeout, Duration::from_millis(100))
+        }
+
+        /// Waits until every enabled service is `running`, asking every `poll`.
+        fn wait_all_running_every(&mut self, timeout: Duration, poll: Duration) -> Result<()> {
             let start = Instant::now();
             loop {
                 self.check_alive()?;
@@ -499,7 +598,7 @@ mod default_mesh {
                         bail!("not running after {timeout:?}: {}", pending.join(", "));
                     }
                 }
-                std::thread::sleep(Duration::from_millis(100));
+                std::thread::sleep(poll);
             }
         }
 
