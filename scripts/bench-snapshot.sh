@@ -7,7 +7,7 @@
 # usage: scripts/bench-snapshot.sh [OUT_DIR]    (default target/bench-snapshot)
 #        SKIP_BUILD=1 scripts/bench-snapshot.sh  (the release binaries as they are)
 #
-# The real-time runs (frames with early wake on its own core, the Solo and DRC
+# The real-time runs (frames with the receiver on its own core, the Solo and DRC
 # paths as shipped) need SCHED_FIFO: root, CAP_SYS_NICE or `ulimit -r`. Without it
 # they run with normal scheduling and the log says so.
 set -euo pipefail
@@ -33,11 +33,11 @@ run() {
 # Tails need messages: at the programs' default counts a p99 is the 5th-worst of
 # 450 messages (100 Hz) or the 2nd-worst of 190 frames, and moved by a handful of
 # host events. Ten times the samples and twice the frames give p99s of 50 and 4.
-run samples "$b/samples-bench" 10 --interleave --only iox-bs,udp-blk,busy,spin,block,udp
-run samples-2 "$b/samples-bench" 10 --interleave --only iox-bs,udp-blk
+run samples "$b/samples-bench" 10 --interleave --only iox-tok,udp-tok,busy,block,udp
+run samples-2 "$b/samples-bench" 10 --interleave --only iox-tok,udp-tok
 run fanout "$b/fanout-bench"
 run frames "$b/frames-bench" 400
-run frames-1080p-ew env FRAMES_BENCH_ONLY=1920 "${frames_rt[@]}" "$b/frames-bench" 400
+run frames-1080p-rt env FRAMES_BENCH_ONLY=1920 "${frames_rt[@]}" "$b/frames-bench" 400
 run telemetry "$b/telemetry-bench" --samples 3000
 run solo "$b/solo-bench" --rounds 40 "${rt[@]}" --vision
 run dji "$b/dji-bench" --commands 300 "${rt[@]}" --vision

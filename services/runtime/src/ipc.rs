@@ -5,12 +5,11 @@
 //! A subscriber waits on its topic's event listener through `tokio::io::unix::AsyncFd`:
 //! one kernel wake-up per burst, no polling while idle.
 
-use std::ops::ControlFlow;
 use std::os::fd::{AsRawFd, BorrowedFd, RawFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
-use std::time::{Duration, Instant};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use iceoryx2::config::Config;
 use iceoryx2::node::NodeView;
@@ -18,17 +17,11 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::ipc_threadsafe;
-use nix::sys::epoll::{Epoll, EpollCreateFlags, EpollEvent, EpollFlags, EpollTimeout};
-use nix::sys::time::TimeSpec;
-use nix::sys::timerfd::{ClockId, Expiration, TimerFd, TimerFlags, TimerSetTimeFlags};
 use skymesh_ipc_types::{Sample, SampleHeader, ServiceId, Topic};
 use tokio::io::unix::AsyncFd;
-use tokio_util::sync::CancellationToken;
 
-use crate::anticipate::{self, Anticipating, Anticipation, AnticipationStats, Plan};
 use crate::clock::monotonic_ns;
 use crate::config::ConfigError;
-use crate::futex::{Deadline, TopicWord};
 use crate::stats::{Counter, Histogram, Stats, LATENCY_BOUNDS_S};
 
 /// The iceoryx2 service flavour every skymesh process uses.
@@ -231,13 +224,6 @@ impl Domain {
         format!("{}_", self.name)
     }
 
-    /// The prefix of this domain's futex wake-up files (the topics' event counts, see
-    /// [`crate::futex`]): not an extension of [`Domain::prefix`] (a domain name has no
-    /// `.`), so iceoryx2 never lists or opens them as its own.
-    pub fn wake_prefix(&self) -> String {
-        format!("{}.fx_", self.name)
-    }
-
     /// Removes the stale resources of every dead node of this domain. Returns the
     /// names of the nodes cleaned and how many could not be.
     ///
@@ -261,10 +247,9 @@ impl Domain {
         out
     }
 
-    /// Files this domain left in `/dev/shm` and under the iceoryx2 root path (both
-    /// prefixes).
+    /// Files this domain left in `/dev/shm` and under the iceoryx2 root path.
     pub fn leftover_files(&self) -> Vec<PathBuf> {
-        let prefixes = [self.prefix(), self.wake_prefix()];
+        let prefix = self.prefix();
         let root = PathBuf::from(self.config.global.root_path().to_string());
         let mut dirs = vec![PathBuf::from("/dev/shm")];
         for sub in ["", "services", "nodes"] {
@@ -279,7 +264,7 @@ impl Domain {
             for entry in rd.flatten() {
                 let name = entry.file_name();
                 let name = name.to_string_lossy();
-                if prefixes.iter().any(|p| name.starts_with(p.as_str())) {
+                if name.starts_with(prefix.as_str()) {
                     out.push(entry.path());
                 }
             }
@@ -325,25 +310,6 @@ impl std::ops::Deref for DomainGuard {
 impl Drop for DomainGuard {
     fn drop(&mut self) {
         self.remove_leftover_files();
-    }
-}
-
-/// A publisher's two ways to wake receivers: the topic's socket event (async and
-/// epoll waiters) and its event count (blocking receivers that asked for the futex
-/// wake-up; see [`crate::futex`]). With nobody waiting, each is a few atomic
-/// operations.
-pub(crate) struct Wakers {
-    socket: Notifier<Svc>,
-    futex: TopicWord,
-}
-
-impl Wakers {
-    /// Wakes every receiver of the topic, on either event.
-    pub(crate) fn notify(&self, topic: &str) -> Result<(), IpcError> {
-        self.socket
-            .notify()
-            .map_err(|e| ipc_err("notify", topic, e))?;
-        self.futex.wake()
     }
 }
 
@@ -399,8 +365,6 @@ fn open_event_of<S: iceoryx2::service::Service>(
 
 struct BusInner {
     node: Node<Svc>,
-    /// [`Domain::wake_prefix`]: where the topics' event counts live.
-    wake_prefix: String,
     name: String,
     service: ServiceId,
     instance: u16,
@@ -448,13 +412,11 @@ pub(crate) fn with_retry<S: iceoryx2::service::Service, T, E: core::fmt::Debug>(
     }
 }
 
-/// `topic`'s publish-subscribe service, opened (or created) through `node`: the
-/// thread-safe flavour of every port, or the single-thread one of a
-/// [`crate::BlockingSubscriber`]; both lay out the service's shared memory alike.
-pub(crate) fn open_pubsub_on<S: iceoryx2::service::Service, T: Sample>(
-    node: &Node<S>,
+/// `topic`'s publish-subscribe service, opened (or created) through `node`.
+fn open_pubsub_on<T: Sample>(
+    node: &Node<Svc>,
     topic: &Topic,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>, IpcError> {
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, IpcError> {
     let service_name =
         ServiceName::new(&topic.name).map_err(|e| ipc_err("service name", &topic.name, e))?;
     with_retry(node, &topic.name, "open publish-subscribe", || {
@@ -506,7 +468,6 @@ impl Bus {
         Ok(Bus {
             inner: Arc::new(BusInner {
                 node,
-                wake_prefix: domain.wake_prefix(),
                 name: name.to_string(),
                 service,
                 instance,
@@ -546,28 +507,13 @@ impl Bus {
         open_event_of(&self.inner.node, topic, "open event")
     }
 
-    /// A publisher's notifier of `topic`'s socket event and handle on its event count.
-    pub(crate) fn wakers(&self, topic: &Topic) -> Result<Wakers, IpcError> {
-        let socket = self
-            .open_event(topic)?
+    /// A publisher's notifier of `topic`'s event (with nobody waiting, a notify is
+    /// a few atomic operations).
+    pub(crate) fn notifier(&self, topic: &Topic) -> Result<Notifier<Svc>, IpcError> {
+        self.open_event(topic)?
             .notifier_builder()
             .create()
-            .map_err(|e| ipc_err("create notifier", &topic.name, e))?;
-        let futex = TopicWord::open(&self.inner.wake_prefix, &topic.name)?;
-        Ok(Wakers { socket, futex })
-    }
-
-    /// A subscriber's `set_futex_wake`: opens the topic's event count into `slot`,
-    /// unless it is there.
-    pub(crate) fn futex_wait_into(
-        &self,
-        slot: &mut Option<TopicWord>,
-        name: &str,
-    ) -> Result<(), IpcError> {
-        if slot.is_none() {
-            *slot = Some(TopicWord::open(&self.inner.wake_prefix, name)?);
-        }
-        Ok(())
+            .map_err(|e| ipc_err("create notifier", &topic.name, e))
     }
 
     fn open_pubsub<T: Sample>(
@@ -576,16 +522,6 @@ impl Bus {
     ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, IpcError>
     {
         open_pubsub_on(&self.inner.node, topic)
-    }
-
-    /// The domain's iceoryx2 configuration (for [`crate::BlockingSubscriber`]'s own node).
-    pub(crate) fn config(&self) -> &Config {
-        self.inner.node.config()
-    }
-
-    /// The topic's event count (see [`crate::futex`]).
-    pub(crate) fn topic_word(&self, topic: &str) -> Result<TopicWord, IpcError> {
-        TopicWord::open(&self.inner.wake_prefix, topic)
     }
 
     /// A publisher on `topic` that stamps headers, sends and wakes subscribers.
@@ -607,14 +543,14 @@ impl Bus {
             .publisher_builder()
             .create()
             .map_err(|e| ipc_err("create publisher", &topic.name, e))?;
-        let wakers = self.wakers(topic)?;
+        let notifier = self.notifier(topic)?;
         let published = self.inner.stats.counter(
             "skymesh_topic_samples_published_total",
             &[("topic", family)],
         );
         Ok(Publisher {
             port,
-            wakers,
+            notifier,
             seq: 0,
             service: self.inner.service.to_wire(),
             instance: self.inner.instance,
@@ -625,7 +561,7 @@ impl Bus {
     }
 
     /// A subscriber on `topic`: awaited with `recv` (inside a tokio runtime) or
-    /// blocked on with [`wait_loop`].
+    /// polled with `try_recv`.
     pub fn subscriber<T: Sample>(&self, topic: &Topic) -> Result<Subscriber<T>, IpcError> {
         self.subscriber_counted_as(topic, &topic.name)
     }
@@ -648,9 +584,6 @@ impl Bus {
             socket,
             port,
             counts: ReceiveCounts::new(&self.inner.stats, family),
-            spin: Duration::ZERO,
-            anticipation: Anticipating::default(),
-            futex: None,
             topic: topic.name.clone(),
             _bus: self.clone(),
         })
@@ -691,24 +624,16 @@ pub(crate) fn register_listener(listener: &Listener<Svc>) -> std::io::Result<Asy
     Ok(unsafe { AsyncFd::register_with_interest(fd, tokio::io::Interest::READABLE) }?)
 }
 
-/// A subscriber's wait on its topic's socket event: the listener, its epoll set
-/// (blocking receives) and its tokio registration (async receives).
-///
-/// The listener is created with the subscriber. `set_futex_wake` releases it
-/// ([`SocketWait::release`]): a receiver that sleeps on the event count would
-/// otherwise keep a listener nobody drains — a port, a socket holding one unread
-/// datagram (iceoryx2 writes no more until a drain), and a connection every
-/// publish looks at. A later wait on the socket event (an async receive, an
-/// anticipating one, [`wait_loop`]) creates it again, with fresh bookkeeping.
+/// A subscriber's wait on its topic's event: the listener and its tokio
+/// registration.
 #[derive(Debug)]
 pub(crate) struct SocketWait {
     // Declared first: must drop before `listener` (see `ListenerFd`). Registered
-    // with tokio on the first async wait, so blocking users need no runtime.
+    // with tokio on the first wait.
     afd: Option<AsyncFd<ListenerFd>>,
-    // The listener's fd in an epoll set, for blocking waits; also dropped first.
-    pub(crate) blocking: BlockingWait,
-    listener: OnceLock<Listener<Svc>>,
-    event: iceoryx2::service::port_factory::event::PortFactory<Svc>,
+    /// What the receives know about the listener's notifications.
+    pub(crate) notes: Notifications,
+    listener: Listener<Svc>,
 }
 
 impl SocketWait {
@@ -716,70 +641,26 @@ impl SocketWait {
         event: iceoryx2::service::port_factory::event::PortFactory<Svc>,
         topic: &str,
     ) -> Result<SocketWait, IpcError> {
-        let wait = SocketWait {
-            afd: None,
-            blocking: BlockingWait::default(),
-            listener: OnceLock::new(),
-            event,
-        };
-        wait.listener(topic)?;
-        Ok(wait)
-    }
-
-    /// The listener, created again if it was released.
-    pub(crate) fn listener(&self, topic: &str) -> Result<&Listener<Svc>, IpcError> {
-        if let Some(l) = self.listener.get() {
-            return Ok(l);
-        }
-        let l = self
-            .event
+        let listener = event
             .listener_builder()
             .create()
             .map_err(|e| ipc_err("create listener", topic, e))?;
-        // A racing creation on another thread wins; this one is dropped unused.
-        let _ = self.listener.set(l);
-        Ok(self.listener.get().expect("set above"))
-    }
-
-    /// Drops the listener (publishers stop notifying it) and everything tied to its
-    /// file descriptor and its notifications.
-    pub(crate) fn release(&mut self) {
-        self.afd = None;
-        self.blocking = BlockingWait::default();
-        self.listener = OnceLock::new();
-    }
-
-    /// [`Notifications::settle`] on this listener.
-    pub(crate) fn settle(&self, topic: &str) -> Result<(), IpcError> {
-        self.blocking.notes.settle(self.listener(topic)?, topic)
+        Ok(SocketWait {
+            afd: None,
+            notes: Notifications::default(),
+            listener,
+        })
     }
 
     /// [`Notifications::settle_async`] on this listener.
     pub(crate) fn settle_async(&self, topic: &str) -> Result<(), IpcError> {
-        self.blocking
-            .notes
-            .settle_async(self.afd.as_ref(), self.listener(topic)?, topic)
-    }
-
-    /// [`BlockingWait::wait`] on this listener.
-    pub(crate) fn wait_blocking(
-        &self,
-        timeout: Option<Duration>,
-        topic: &str,
-    ) -> Result<(), IpcError> {
-        self.blocking.wait(self.listener(topic)?, timeout, topic)
-    }
-
-    /// [`Notifications::drain`] of this listener.
-    pub(crate) fn drain(&self, topic: &str) -> Result<(), IpcError> {
-        self.blocking.notes.drain(self.listener(topic)?, topic)
+        self.notes
+            .settle_async(self.afd.as_ref(), &self.listener, topic)
     }
 
     /// Waits until samples may be pending (see [`wait_listener`]).
     pub(crate) async fn wait_async(&mut self, topic: &str) -> Result<(), IpcError> {
-        self.listener(topic)?;
-        let listener = self.listener.get().expect("created above");
-        wait_listener(&mut self.afd, &self.blocking.notes, listener, topic).await
+        wait_listener(&mut self.afd, &self.notes, &self.listener, topic).await
     }
 }
 
@@ -789,7 +670,7 @@ impl SocketWait {
 /// shared notification state is idle: after one notification, later ones are skipped
 /// until the listener drains (`try_wait`: state back to idle, one datagram read). The
 /// drain therefore need not follow the wake-up at once: a woken receive takes its
-/// sample and returns; the next receive drains first ([`Notifications::settle`]),
+/// sample and returns; the next receive drains first ([`Notifications::settle_async`]),
 /// then looks for samples, then waits (this keeps the drain's `recvfrom` and event
 /// bookkeeping, ~3–5 µs after an idle period, off every sample's latency, at the
 /// same two looks and one drain per sample; `scripts/wake-stages.sh`,
@@ -834,14 +715,8 @@ impl Notifications {
     /// At the start of a receive: drains if the listener woke since the last drain
     /// (its sample was taken, its notification left unread). Looking for samples
     /// after this and before a wait is then enough: anything published later
-    /// notifies anew.
-    pub(crate) fn settle(&self, listener: &Listener<Svc>, topic: &str) -> Result<(), IpcError> {
-        self.drain_first(listener, topic).map(drop)
-    }
-
-    /// [`Notifications::settle`] for a listener registered with tokio: also clears
-    /// the reactor's readiness the drain used up (or the next wait would return at
-    /// once for nothing). Never waits.
+    /// notifies anew. Also clears the reactor's readiness the drain used up (or the
+    /// next wait would return at once for nothing). Never waits.
     pub(crate) fn settle_async(
         &self,
         afd: Option<&AsyncFd<ListenerFd>>,
@@ -926,223 +801,6 @@ impl Notifications {
         Ok(got)
     }
 }
-
-/// Blocking waits on a listener's socket without an async runtime: the fd sits in a
-/// private epoll set (created on the first wait), so a wait is one `epoll_wait`, and
-/// the listener's non-blocking read happens before the next one (see
-/// [`Notifications`]). Measured against the alternatives (strace, samples-bench): the
-/// listener's own `blocking_wait`/`timed_wait` also switch the socket between
-/// blocking and non-blocking and set a receive timeout (four `fcntl` and a
-/// `setsockopt` per wake-up), and a `poll` sets up and tears down its wait queue
-/// entry on every call, where epoll keeps it registered.
-#[derive(Debug, Default)]
-pub(crate) struct BlockingWait {
-    epoll: OnceLock<Epoll>,
-    /// A `CLOCK_MONOTONIC` timer in the same epoll set, for anticipating waits
-    /// ([`BlockingWait::wait_until`]); created on first use.
-    timer: OnceLock<TimerFd>,
-    /// Shared with the subscriber's async receive path.
-    pub(crate) notes: Notifications,
-}
-
-/// epoll data of the listener's fd and of the timer.
-const EPOLL_LISTENER: u64 = 0;
-const EPOLL_TIMER: u64 = 1;
-
-impl BlockingWait {
-    /// Returns when samples may be pending: after draining the notifications of the
-    /// last wake-up (at once), or when `listener`'s socket becomes readable, or after
-    /// `timeout` (`None` waits indefinitely), or on a signal. Callers look for samples
-    /// whichever it was.
-    pub(crate) fn wait(
-        &self,
-        listener: &Listener<Svc>,
-        timeout: Option<Duration>,
-        topic: &str,
-    ) -> Result<(), IpcError> {
-        if self.notes.drain_first(listener, topic)? {
-            return Ok(());
-        }
-        let epoll = self.epoll(listener).map_err(wait_err(topic))?;
-        self.wait_events(epoll, timeout, topic).map(drop)
-    }
-
-    /// Like [`BlockingWait::wait`], but also returns at `wake_at_ns`
-    /// (`CLOCK_MONOTONIC`, ns; a timer with the kernel's high resolution, where
-    /// epoll's own timeout has whole milliseconds). True if the timer ended the
-    /// wait, false otherwise (the topic's event, a drain, the timeout, a signal).
-    pub(crate) fn wait_until(
-        &self,
-        listener: &Listener<Svc>,
-        wake_at_ns: u64,
-        timeout: Option<Duration>,
-        topic: &str,
-    ) -> Result<bool, IpcError> {
-        if self.notes.drain_first(listener, topic)? {
-            return Ok(false);
-        }
-        let err = wait_err(topic);
-        let epoll = self.epoll(listener).map_err(err)?;
-        let timer = match self.timer.get() {
-            Some(timer) => timer,
-            None => {
-                let timer = TimerFd::new(
-                    ClockId::CLOCK_MONOTONIC,
-                    TimerFlags::TFD_NONBLOCK | TimerFlags::TFD_CLOEXEC,
-                )
-                .map_err(err)?;
-                epoll
-                    .add(&timer, EpollEvent::new(EpollFlags::EPOLLIN, EPOLL_TIMER))
-                    .map_err(err)?;
-                let _ = self.timer.set(timer);
-                self.timer.get().expect("set above")
-            }
-        };
-        // Re-arming also clears an expiry not yet read.
-        timer
-            .set(
-                Expiration::OneShot(TimeSpec::from_duration(Duration::from_nanos(
-                    wake_at_ns.max(1),
-                ))),
-                TimerSetTimeFlags::TFD_TIMER_ABSTIME,
-            )
-            .map_err(err)?;
-        self.wait_events(epoll, timeout, topic)
-    }
-
-    /// One `epoll_wait`; notes a listener wake-up (its notification is read by the
-    /// next wait) and consumes the timer's expiry (also one left armed by an
-    /// anticipating wait that an event ended). True if the timer fired.
-    fn wait_events(
-        &self,
-        epoll: &Epoll,
-        timeout: Option<Duration>,
-        topic: &str,
-    ) -> Result<bool, IpcError> {
-        let mut events = [EpollEvent::empty(); 2];
-        let n = match epoll.wait(&mut events, epoll_timeout(timeout)) {
-            Ok(n) => n,
-            Err(nix::errno::Errno::EINTR) => 0,
-            Err(e) => return Err(wait_err(topic)(e)),
-        };
-        let mut timer_fired = false;
-        for e in &events[..n] {
-            if e.data() == EPOLL_TIMER {
-                timer_fired = true;
-            } else {
-                self.notes.woke();
-            }
-        }
-        if timer_fired {
-            self.consume_timer();
-        }
-        Ok(timer_fired)
-    }
-
-    /// The epoll set with the listener's fd, created on first use.
-    fn epoll(&self, listener: &Listener<Svc>) -> nix::Result<&Epoll> {
-        if let Some(epoll) = self.epoll.get() {
-            return Ok(epoll);
-        }
-        let epoll = Epoll::new(EpollCreateFlags::EPOLL_CLOEXEC)?;
-        epoll.add(
-            listener_fd(listener),
-            EpollEvent::new(EpollFlags::EPOLLIN, EPOLL_LISTENER),
-        )?;
-        // Two threads racing here each built one; the loser's is dropped.
-        let _ = self.epoll.set(epoll);
-        Ok(self.epoll.get().expect("set above"))
-    }
-
-    /// Reads the timer's expiry count so it stops being readable.
-    fn consume_timer(&self) {
-        if let Some(timer) = self.timer.get() {
-            // Non-blocking: EAGAIN when another read (or a re-arm) got there first.
-            let _ = timer.wait();
-        }
-    }
-}
-
-/// A failed wait on `topic`'s event.
-fn wait_err(topic: &str) -> impl Fn(nix::errno::Errno) -> IpcError + Copy + '_ {
-    move |e| IpcError::Wait {
-        topic: topic.to_string(),
-        source: e.into(),
-    }
-}
-
-/// `timeout` for epoll: rounded up to whole milliseconds (its resolution); never 0,
-/// which would not wait at all.
-fn epoll_timeout(timeout: Option<Duration>) -> EpollTimeout {
-    match timeout {
-        None => EpollTimeout::NONE,
-        Some(t) => {
-            EpollTimeout::try_from(t.as_micros().div_ceil(1000).max(1)).unwrap_or(EpollTimeout::MAX)
-        }
-    }
-}
-
-/// What is left until `deadline` for a blocking wait: `Some(None)` without a
-/// deadline (wait indefinitely), `None` once it has passed.
-pub(crate) fn time_left(deadline: Option<Instant>) -> Option<Option<Duration>> {
-    match deadline {
-        None => Some(None),
-        Some(d) => match d.saturating_duration_since(Instant::now()) {
-            left if left.is_zero() => None,
-            left => Some(Some(left)),
-        },
-    }
-}
-
-/// Runs one blocking receive of a subscriber with [`Anticipation`] on: `take` tries to
-/// take a sample (and, through the subscriber's accounting, feeds its stamp to
-/// `anticipation`); between tries the thread sleeps, spins or blocks as the
-/// anticipation plans. `None` once `deadline` has passed without a sample.
-pub(crate) fn recv_anticipating<R, E: From<IpcError>>(
-    socket: &SocketWait,
-    anticipation: &Mutex<Anticipation>,
-    deadline: Option<Instant>,
-    topic: &str,
-    mut take: impl FnMut() -> Result<Option<R>, E>,
-) -> Result<Option<R>, E> {
-    let lock = || anticipate::lock(anticipation);
-    let (blocking, listener) = (&socket.blocking, socket.listener(topic)?);
-    let mut spun = false;
-    loop {
-        if let Some(r) = take()? {
-            return Ok(Some(r));
-        }
-        let Some(left) = time_left(deadline) else {
-            return Ok(None);
-        };
-        let plan = if spun {
-            Plan::Block
-        } else {
-            lock().plan(monotonic_ns())
-        };
-        match plan {
-            Plan::Block => blocking.wait(listener, left, topic)?,
-            Plan::SleepUntil(at) => {
-                if blocking.wait_until(listener, at, left, topic)? {
-                    lock().woke(at, monotonic_ns());
-                }
-            }
-            Plan::SpinUntil(until) => {
-                spun = true;
-                lock().windows += 1;
-                let expired = |_| deadline.is_some_and(|d| Instant::now() >= d);
-                if let Some(r) = anticipate::poll_until(until, expired, &mut take)? {
-                    // Its notification is consumed by the next wait, off the
-                    // latency path.
-                    blocking.notes.woke();
-                    lock().hits += 1;
-                    return Ok(Some(r));
-                }
-            }
-        }
-    }
-}
-
 /// Waits until samples may be pending on `listener` (see [`Notifications`]): drains
 /// the last wake-up's notification and returns at once, or waits for the event to
 /// fire. Registers the listener with tokio (in `afd`) on first use. The owner must
@@ -1211,15 +869,14 @@ impl SeqTable {
     }
 }
 
-/// A subscriber's per-topic series and gap counting, for [`Subscriber`],
-/// [`crate::BlockingSubscriber`] and [`crate::FrameSubscriber`].
+/// A subscriber's per-topic series and gap counting, for [`Subscriber`] and
+/// [`crate::FrameSubscriber`].
 pub(crate) struct ReceiveCounts {
     received: Counter,
     lost: Counter,
     age: Histogram,
     /// Last sequence seen per publisher, for gap counting. Behind a mutex so reads
-    /// work through `&self` (the blocking wait loop holds shared references while the
-    /// callback receives); never contended in practice.
+    /// work through `&self` (`try_recv` takes `&self`); never contended in practice.
     last_seq: Mutex<SeqTable>,
     /// Overwritten samples are expected, not lost (see `set_newest_only`).
     newest_only: bool,
@@ -1261,9 +918,9 @@ impl ReceiveCounts {
     }
 }
 
-/// Takes one pending sample from `port` (either iceoryx2 flavour) as a copy.
-pub(crate) fn take<S: iceoryx2::service::Service, T: Sample>(
-    port: &iceoryx2::port::subscriber::Subscriber<S, T, ()>,
+/// Takes one pending sample from `port` as a copy.
+fn take<T: Sample>(
+    port: &iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
     topic: &str,
 ) -> Result<Option<T>, IpcError> {
     let Some(sample) = port.receive().map_err(|e| ipc_err("receive", topic, e))? else {
@@ -1274,30 +931,10 @@ pub(crate) fn take<S: iceoryx2::service::Service, T: Sample>(
     Ok(Some(value))
 }
 
-/// Polls `take` for up to `spin` (zero: not at all); `Some` if a sample came.
-pub(crate) fn spin_for<R>(
-    spin: Duration,
-    mut take: impl FnMut() -> Result<Option<R>, IpcError>,
-) -> Result<Option<R>, IpcError> {
-    if spin.is_zero() {
-        return Ok(None);
-    }
-    let start = Instant::now();
-    loop {
-        if let Some(v) = take()? {
-            return Ok(Some(v));
-        }
-        if start.elapsed() >= spin {
-            return Ok(None);
-        }
-        std::hint::spin_loop();
-    }
-}
-
 /// Sends samples of one type on one topic.
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
-    wakers: Wakers,
+    notifier: Notifier<Svc>,
     seq: u64,
     service: u16,
     instance: u16,
@@ -1345,7 +982,9 @@ impl<T: Sample> Publisher<T> {
 
     fn sent(&mut self, wake: bool) -> Result<u64, IpcError> {
         if wake {
-            self.wakers.notify(&self.topic)?;
+            self.notifier
+                .notify()
+                .map_err(|e| ipc_err("notify", &self.topic, e))?;
         }
         self.published.inc();
         Ok(self.seq)
@@ -1388,18 +1027,10 @@ impl<T: Sample> Publisher<T> {
 
 /// Receives samples of one type from one topic.
 pub struct Subscriber<T: Sample> {
-    /// The topic's socket event: async receives, and blocking ones without the
-    /// futex wake-up.
+    /// The topic's event, which the receives wait on.
     socket: SocketWait,
     port: iceoryx2::port::subscriber::Subscriber<Svc, T, ()>,
     counts: ReceiveCounts,
-    /// How long a receive polls shared memory before it blocks (see
-    /// [`Subscriber::set_spin`]); zero = block at once.
-    spin: Duration,
-    /// Set by [`Subscriber::set_anticipate`].
-    anticipation: Anticipating,
-    /// Set by [`Subscriber::set_futex_wake`].
-    futex: Option<TopicWord>,
     topic: String,
     _bus: Bus,
 }
@@ -1438,7 +1069,6 @@ impl<T: Sample> Subscriber<T> {
 
     fn account(&self, value: &T) {
         let h = value.header();
-        self.anticipation.observe(h.stamp_ns);
         self.counts.count(h);
     }
 
@@ -1450,146 +1080,15 @@ impl<T: Sample> Subscriber<T> {
         self.counts.newest_only = true;
     }
 
-    /// Low-latency receive for the consumers that need it: before blocking, every
-    /// receive polls shared memory for up to `spin` (no syscall; the thread stays
-    /// on the CPU), so a sample published within that window is taken without a
-    /// kernel wake-up. Costs up to `spin` of CPU per receive that finds nothing:
-    /// worth it where a reply or the next sample is expected within microseconds
-    /// (request/response, a control loop's input), not for a 50 Hz telemetry
-    /// stream. Zero (the default) blocks at once.
-    pub fn set_spin(&mut self, spin: Duration) {
-        self.spin = spin;
-    }
-
-    /// Low-latency receive of a periodic stream with [`Subscriber::recv_blocking`]:
-    /// learns the publisher's period from the samples' send stamps, sleeps on a
-    /// high-resolution timer until shortly before the next sample is due and polls
-    /// shared memory around that time (at most `max_spin` per receive), so the sample
-    /// is taken without a kernel wake-up after its publication. A sample outside the
-    /// window (early, late, lost) is received as without this option. For one
-    /// periodic publisher per topic; costs about the window's width of CPU per
-    /// sample (measured in `samples-bench`). Zero turns it off. Async receives ignore it.
-    pub fn set_anticipate(&mut self, max_spin: Duration) {
-        self.anticipation.set(max_spin);
-    }
-
-    /// What [`Subscriber::set_anticipate`] has done; `None` when it is off.
-    pub fn anticipation(&self) -> Option<AnticipationStats> {
-        self.anticipation.stats()
-    }
-
-    /// Blocking receives ([`Subscriber::recv_blocking`]) sleep on the topic's event
-    /// count (a futex word in shared memory, see the `futex` module) instead of its
-    /// socket event: one system call per wake-up instead of two, for a thread that
-    /// blocks on one topic (a control loop at hundreds of Hz to kHz). Measured
-    /// against a blocking UDP `recv` in `samples-bench` (docs/benchmarks.md).
-    /// Async receives still wait on the socket event (they need its file
-    /// descriptor): this call releases the subscriber's socket listener, which the
-    /// first socket wait creates again. [`Subscriber::set_anticipate`], which waits
-    /// on a timer beside the socket event, takes precedence. Publishers of every
-    /// topic wake both.
-    pub fn set_futex_wake(&mut self) -> Result<(), IpcError> {
-        self._bus.futex_wait_into(&mut self.futex, &self.topic)?;
-        self.socket.release();
-        Ok(())
-    }
-
-    /// Polls for up to the configured spin time; `Some` if a sample came.
-    fn spin_recv(&self) -> Result<Option<T>, IpcError> {
-        spin_for(self.spin, || self.try_recv())
-    }
-
-    /// Waits for the next sample on the calling thread, without an async runtime:
-    /// blocks in the kernel on the topic's event (as a blocking socket `recv`
-    /// does), after the optional spin (see [`Subscriber::set_spin`]). `None` after
-    /// `timeout` without a sample; `timeout = None` waits indefinitely.
-    pub fn recv_blocking(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
-        if let (Some(futex), None) = (&self.futex, self.anticipation.get()) {
-            return self.recv_futex(futex, timeout);
-        }
-        self.recv_socket(timeout)
-    }
-
-    /// [`Subscriber::recv_blocking`] on the topic's event count: its own small
-    /// function, apart from the socket and anticipation paths, so that a receive
-    /// waking after a long sleep runs through few cold code lines and a small stack
-    /// frame. Announce the wait and read the count, look, sleep while the count is
-    /// unchanged; a sample published after the announcement ends the sleep at once.
-    fn recv_futex(
-        &self,
-        word: &TopicWord,
-        timeout: Option<Duration>,
-    ) -> Result<Option<T>, IpcError> {
-        let deadline = timeout.map(Deadline::after);
-        if let Some(v) = self.spin_recv()? {
-            return Ok(Some(v));
-        }
-        word.recv(deadline, || self.try_recv())
-    }
-
-    #[inline(never)]
-    fn recv_socket(&self, timeout: Option<Duration>) -> Result<Option<T>, IpcError> {
-        let deadline = timeout.map(|t| Instant::now() + t);
-        self.socket.settle(&self.topic)?;
-        if let Some(a) = self.anticipation.get() {
-            return recv_anticipating(&self.socket, a, deadline, &self.topic, || self.try_recv());
-        }
-        self.blocking_loop(
-            deadline,
-            || self.socket.drain(&self.topic),
-            |left| self.socket.wait_blocking(left, &self.topic),
-        )
-    }
-
-    /// A blocking receive on either event: look; spin once if set; then `wait` for
-    /// at most what is left until `deadline` and look again. Samples taken while
-    /// spinning left their notifications behind: `drain` consumes them (and the
-    /// loop looks once more), or the wait would return at once and the caller would
-    /// spin a second time.
-    fn blocking_loop(
-        &self,
-        deadline: Option<Instant>,
-        drain: impl Fn() -> Result<(), IpcError>,
-        wait: impl Fn(Option<Duration>) -> Result<(), IpcError>,
-    ) -> Result<Option<T>, IpcError> {
-        let mut spun = self.spin.is_zero();
-        loop {
-            if let Some(v) = self.try_recv()? {
-                return Ok(Some(v));
-            }
-            if !spun {
-                spun = true;
-                if let Some(v) = self.spin_recv()? {
-                    return Ok(Some(v));
-                }
-                drain()?;
-                continue;
-            }
-            let Some(left) = time_left(deadline) else {
-                return Ok(None);
-            };
-            wait(left)?;
-        }
-    }
-
     /// Waits for the next sample. Cancel-safe: dropping the future loses nothing.
     /// A sample published quietly ([`Publisher::publish_quiet`]) is received with
     /// the next notified one (or by [`Subscriber::try_recv`]); a receive that found
     /// the queue empty waits for a notification without looking again.
     pub async fn recv(&mut self) -> Result<T, IpcError> {
         self.settle()?;
-        // Spin at most once per call: a wake-up by a notification whose sample the
-        // spin already took finds nothing and must block, not spin again.
-        let mut spun = self.spin.is_zero();
         loop {
-            if let Some(v) = self.socket.blocking.notes.look(|| self.try_recv())? {
+            if let Some(v) = self.socket.notes.look(|| self.try_recv())? {
                 return Ok(v);
-            }
-            if !spun {
-                spun = true;
-                if let Some(v) = self.spin_recv()? {
-                    return Ok(v);
-                }
             }
             self.wait_readable().await?;
         }
@@ -1600,12 +1099,7 @@ impl<T: Sample> Subscriber<T> {
     pub async fn recv_with<R>(&mut self, mut read: impl FnMut(&T) -> R) -> Result<R, IpcError> {
         self.settle()?;
         loop {
-            if let Some(r) = self
-                .socket
-                .blocking
-                .notes
-                .look(|| self.try_recv_with(&mut read))?
-            {
+            if let Some(r) = self.socket.notes.look(|| self.try_recv_with(&mut read))? {
                 return Ok(r);
             }
             self.wait_readable().await?;
@@ -1644,167 +1138,9 @@ impl<T: Sample> Subscriber<T> {
     }
 }
 
-/// What woke a [`wait_loop`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Wake {
-    /// Samples may be pending on `sources[i]`: drain it with `try_recv` until `None`.
-    Topic(usize),
-    /// The loop's interval elapsed.
-    Tick,
-}
-
-/// Something a [`wait_loop`] can block on. Implemented by every [`Subscriber`].
-pub trait WaitSource {
-    /// The topic's socket event listener (created again if `set_futex_wake`
-    /// released it).
-    #[doc(hidden)]
-    fn listener(&self) -> Result<&Listener<Svc>, IpcError>;
-}
-
-impl<T: Sample> WaitSource for Subscriber<T> {
-    fn listener(&self) -> Result<&Listener<Svc>, IpcError> {
-        self.socket.listener(&self.topic)
-    }
-}
-
-/// How often a [`wait_loop`] without an interval looks at its stop token.
-const STOP_CHECK: Duration = Duration::from_millis(100);
-
-/// Blocks the calling thread on an iceoryx2 WaitSet over `sources` (plus an optional
-/// `interval`) and calls `on_wake` for each wake-up, until `stop` is cancelled or the
-/// callback breaks. For consumers that own a thread and want no async runtime in
-/// their hot path (a frame loop, a control loop): one kernel wake-up per burst, no
-/// spinning while idle.
-pub fn wait_loop(
-    sources: &[&dyn WaitSource],
-    interval: Option<Duration>,
-    stop: &CancellationToken,
-    mut on_wake: impl FnMut(Wake) -> ControlFlow<()>,
-) -> Result<(), IpcError> {
-    let waitset = WaitSetBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<Svc>()
-        .map_err(|e| ipc_err("create waitset", "wait_loop", e))?;
-    let listeners = sources
-        .iter()
-        .map(|s| s.listener())
-        .collect::<Result<Vec<_>, _>>()?;
-    let guards = listeners
-        .iter()
-        .map(|l| waitset.attach_notification(*l))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| ipc_err("attach", "wait_loop", e))?;
-    let tick = interval
-        .map(|i| waitset.attach_interval(i))
-        .transpose()
-        .map_err(|e| ipc_err("attach interval", "wait_loop", e))?;
-    let timeout = interval.map_or(STOP_CHECK, |i| i.min(STOP_CHECK));
-    while !stop.is_cancelled() {
-        let mut flow = ControlFlow::Continue(());
-        waitset
-            .wait_and_process_once_with_timeout(
-                |id| {
-                    for (i, guard) in guards.iter().enumerate() {
-                        if id.has_event_from(guard) {
-                            // Consume the wake-up before the callback drains samples, so
-                            // a sample published meanwhile wakes us again.
-                            let _ = listeners[i].try_wait(|_| {});
-                            flow = on_wake(Wake::Topic(i));
-                        }
-                    }
-                    if let Some(t) = &tick {
-                        if flow.is_continue() && id.has_event_from(t) {
-                            flow = on_wake(Wake::Tick);
-                        }
-                    }
-                    if flow.is_break() {
-                        CallbackProgression::Stop
-                    } else {
-                        CallbackProgression::Continue
-                    }
-                },
-                timeout,
-            )
-            .map_err(|e| ipc_err("wait", "wait_loop", e))?;
-        if flow.is_break() {
-            break;
-        }
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// `set_futex_wake` releases the subscriber's socket listener (nobody would
-    /// drain it; publishers stop looking at it). An async receive
-    /// afterwards creates it again, takes what was published while there was none
-    /// (though an async receive before had found the queue empty), and is woken by
-    /// what comes later; blocking futex receives go on working, and so does a
-    /// blocking wait on the new socket listener (an anticipating receive), though a
-    /// blocking socket receive before had registered the old one with epoll.
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_futex_subscriber_leaves_the_socket_event_until_it_waits_on_it() {
-        use skymesh_ipc_types::{topics, VehicleState};
-        let d = Domain::load(&format!("ut{}fxsock", std::process::id()), None).unwrap();
-        {
-            let bus = Bus::open(&d, "fx-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-            let topic = topics::vehicle_state(9);
-            let event = bus.open_event(&topic).unwrap();
-            let listeners = || event.dynamic_config().number_of_listeners();
-            let mut publ = bus.publisher::<VehicleState>(&topic).unwrap();
-            let mut sub = bus.subscriber::<VehicleState>(&topic).unwrap();
-            let second = Duration::from_secs(1);
-            assert_eq!(listeners(), 1, "a new subscriber waits on the socket event");
-            let short = Duration::from_millis(20);
-            assert!(sub.recv_timeout(short).await.unwrap().is_none());
-            assert!(sub.recv_blocking(Some(short)).unwrap().is_none());
-            sub.set_futex_wake().unwrap();
-            assert_eq!(listeners(), 0, "set_futex_wake keeps a socket listener");
-
-            let blocking_seq = |sub: &Subscriber<VehicleState>| {
-                let got = sub.recv_blocking(Some(second)).unwrap();
-                got.expect("a blocking receive timed out").header.seq
-            };
-            publ.publish(VehicleState::default()).unwrap();
-            assert_eq!(blocking_seq(&sub), 1);
-            assert_eq!(listeners(), 0, "a futex receive created a socket listener");
-
-            publ.publish(VehicleState::default()).unwrap();
-            let got = tokio::time::timeout(second, sub.recv())
-                .await
-                .expect("async receive");
-            assert_eq!(
-                got.unwrap().header.seq,
-                2,
-                "the sample sent with no listener"
-            );
-            assert_eq!(listeners(), 1, "an async receive needs the socket listener");
-            let late = tokio::spawn(async move {
-                tokio::time::sleep(Duration::from_millis(50)).await;
-                publ.publish(VehicleState::default()).unwrap();
-                publ
-            });
-            let got = tokio::time::timeout(second, sub.recv())
-                .await
-                .expect("woken");
-            assert_eq!(got.unwrap().header.seq, 3);
-            let mut publ = late.await.unwrap();
-
-            publ.publish(VehicleState::default()).unwrap();
-            assert_eq!(blocking_seq(&sub), 4, "futex again");
-
-            sub.set_anticipate(Duration::from_micros(100));
-            let late = std::thread::spawn(move || {
-                std::thread::sleep(Duration::from_millis(50));
-                publ.publish(VehicleState::default()).unwrap();
-            });
-            assert_eq!(blocking_seq(&sub), 5, "woken on the new socket listener");
-            late.join().unwrap();
-        }
-        d.remove_leftover_files();
-    }
 
     #[test]
     fn the_sequence_table_keeps_each_publisher_apart_beyond_its_inline_slots() {

@@ -9,22 +9,19 @@
 //! - structured logs (`tracing`, text or JSON),
 //! - the iceoryx2 node, created from one explicitly loaded config file with the
 //!   domain from `SKYMESH_DOMAIN` (all iceoryx2 calls live in [`ipc`]),
-//! - typed publishers and subscribers that wake through events (no spinning):
-//!   awaited in tokio, or blocked on a WaitSet with [`wait_loop`],
+//! - typed publishers and subscribers that wake through events (no spinning),
+//!   awaited in tokio,
 //! - heartbeat and stats publishing for the supervisor, systemd notify/watchdog,
 //! - SIGTERM/SIGINT → one [`CancellationToken`] → graceful shutdown.
 #![deny(unsafe_code)]
 
 pub mod addresses;
 pub mod angle;
-mod anticipate;
 pub mod backoff;
-mod blocking;
 pub mod clock;
 pub mod config;
 pub mod exit;
 pub mod frames;
-mod futex;
 pub mod health;
 pub mod ipc;
 pub mod net;
@@ -39,15 +36,10 @@ pub mod systemd;
 pub mod timer;
 pub mod warn_limit;
 
-pub use anticipate::AnticipationStats;
 pub use backoff::Backoff;
-pub use blocking::BlockingSubscriber;
 pub use config::{ConfigError, ServiceConfig};
-pub use frames::{EarlyWakeStats, FrameError, FramePublisher, FrameSubscriber};
-pub use futex::{Armed, Deadline, TopicWord};
-/// The iceoryx2 service flavour of the futex wake-up's event (for benchmarks that
-/// measure raw iceoryx2 beside the bus).
-pub use ipc::{wait_loop, Bus, Domain, IpcError, Publisher, Subscriber, WaitSource, Wake};
+pub use frames::{FrameError, FramePublisher, FrameSubscriber};
+pub use ipc::{Bus, Domain, IpcError, Publisher, Subscriber};
 pub use rate::TokenBucket;
 pub use service::{service_main, CommonArgs, Context, ServiceSpec};
 pub use stats::{Counter, CounterFamily, Gauge, Histogram, Stats};

@@ -103,152 +103,20 @@ async fn domains_are_isolated_and_leave_no_files_behind() {
         assert!(!d1.leftover_files().is_empty());
         assert_eq!(d1.live_nodes().len(), 1);
     }
-    // After every node is gone, only iceoryx2's global management file and the
-    // topic's event count (owned by nobody, so a service restarted alone finds the
-    // one the others use) may remain; the supervisor removes them with the domain.
+    // After every node is gone, only iceoryx2's global management file may remain;
+    // the supervisor removes it with the domain.
     let left = d1.leftover_files();
-    let count_file = |p: &std::path::PathBuf| {
-        let name = p
-            .file_name()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .into_owned();
-        name.starts_with(&d1.wake_prefix()) && name.ends_with(".dyn")
-    };
     assert!(
-        left.len() <= 2
+        left.len() <= 1
             && left
                 .iter()
-                .all(|p| p.to_string_lossy().ends_with(".global_mgmt") || count_file(p)),
+                .all(|p| p.to_string_lossy().ends_with(".global_mgmt")),
         "{left:?}"
     );
-    assert!(left.iter().any(count_file), "no event count: {left:?}");
     d1.remove_leftover_files();
     assert!(d1.leftover_files().is_empty(), "{:?}", d1.leftover_files());
     d2.remove_leftover_files();
     assert!(d1.leftover_files().is_empty());
-}
-
-#[test]
-fn the_blocking_wait_loop_wakes_on_samples_and_ticks_and_stops() {
-    use skymesh_ipc_types::VehicleStatus;
-    use skymesh_runtime::{wait_loop, CancellationToken, Wake};
-    use std::ops::ControlFlow;
-
-    // No tokio runtime here: the blocking loop needs none.
-    let d = domain("w");
-    let bus = Bus::open(&d, "waiter", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let state_sub = bus
-        .subscriber::<VehicleState>(&topics::vehicle_state(2))
-        .unwrap();
-    let status_sub = bus
-        .subscriber::<VehicleStatus>(&topics::vehicle_status(2))
-        .unwrap();
-    let mut state_pub = bus
-        .publisher::<VehicleState>(&topics::vehicle_state(2))
-        .unwrap();
-    let mut status_pub = bus
-        .publisher::<VehicleStatus>(&topics::vehicle_status(2))
-        .unwrap();
-
-    let stop = CancellationToken::new();
-    let stopper = stop.clone();
-    let publisher = std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_millis(50));
-        state_pub
-            .publish(VehicleState {
-                lat_deg: 9.0,
-                ..Default::default()
-            })
-            .unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        status_pub
-            .publish(VehicleStatus {
-                armed: 1,
-                ..Default::default()
-            })
-            .unwrap();
-        std::thread::sleep(Duration::from_millis(300));
-        stopper.cancel();
-    });
-    let (mut states, mut statuses, mut ticks) = (Vec::new(), Vec::new(), 0);
-    wait_loop(
-        &[&state_sub, &status_sub],
-        Some(Duration::from_millis(20)),
-        &stop,
-        |wake| {
-            match wake {
-                Wake::Topic(0) => {
-                    states.extend(std::iter::from_fn(|| state_sub.try_recv().unwrap()))
-                }
-                Wake::Topic(_) => {
-                    statuses.extend(std::iter::from_fn(|| status_sub.try_recv().unwrap()))
-                }
-                Wake::Tick => ticks += 1,
-            }
-            ControlFlow::Continue(())
-        },
-    )
-    .unwrap();
-    publisher.join().unwrap();
-    assert_eq!(states.len(), 1);
-    assert_eq!(states[0].lat_deg, 9.0);
-    assert_eq!(statuses.len(), 1);
-    assert!(statuses[0].is_armed());
-    assert!(ticks >= 5, "interval ticks: {ticks}");
-}
-
-/// `recv_blocking` (with and without a spin before blocking): times out with
-/// nothing pending, is woken by a publisher on another thread, returns samples in
-/// order, and a spin that took a sample leaves no stale notification behind (the
-/// next receive must wait for the next sample, not return early with nothing).
-#[test]
-fn recv_blocking_waits_wakes_and_times_out_with_and_without_spin() {
-    for (tag, spin) in [("rb0", Duration::ZERO), ("rb1", Duration::from_micros(300))] {
-        let d = domain(tag);
-        let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-        let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-        let topic = topics::vehicle_state(3);
-        let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
-        sub.set_spin(spin);
-        let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-
-        let t0 = std::time::Instant::now();
-        assert!(sub
-            .recv_blocking(Some(Duration::from_millis(30)))
-            .unwrap()
-            .is_none());
-        assert!(t0.elapsed() >= Duration::from_millis(30), "{spin:?}");
-
-        std::thread::scope(|s| {
-            let publisher = s.spawn(move || {
-                for i in 1..=3 {
-                    std::thread::sleep(Duration::from_millis(10));
-                    publ.publish(VehicleState {
-                        lat_deg: f64::from(i),
-                        ..Default::default()
-                    })
-                    .unwrap();
-                }
-                publ
-            });
-            for i in 1..=3 {
-                let v = sub
-                    .recv_blocking(Some(Duration::from_secs(5)))
-                    .unwrap()
-                    .expect("woken by the publisher");
-                assert_eq!(v.lat_deg, f64::from(i), "{spin:?}");
-            }
-            let _publ = publisher.join().unwrap();
-            // Everything was taken: the next receive waits for its whole timeout.
-            let t0 = std::time::Instant::now();
-            assert!(sub
-                .recv_blocking(Some(Duration::from_millis(20)))
-                .unwrap()
-                .is_none());
-            assert!(t0.elapsed() >= Duration::from_millis(20), "{spin:?}");
-        });
-    }
 }
 
 /// CPU time of the calling thread.
@@ -269,14 +137,14 @@ fn assert_blocks(idle: Duration, what: &str, wait: impl FnOnce()) {
     );
 }
 
-/// The receive paths take a sample before they consume its notification and drain
-/// before they wait again: a stream of samples each published while the receiver is
-/// blocked is received whole (a notification consumed but not looked after would
+/// The receive takes a sample before it consumes its notification and drains
+/// before it waits again: a stream of samples each published while the receiver is
+/// waiting is received whole (a notification consumed but not looked after would
 /// lose a wake-up and time out), and after the last one the receiver blocks — it
 /// does not poll on an unread notification (measured as the thread's CPU time over
 /// the wait, which a poll would spend whole).
 #[test]
-fn receivers_take_the_sample_first_and_block_again_after_draining() {
+fn the_receive_takes_the_sample_first_and_blocks_again_after_draining() {
     let d = domain("dr");
     let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
     let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
@@ -295,22 +163,6 @@ fn receivers_take_the_sample_first_and_block_again_after_draining() {
         }
     };
 
-    // Blocking receive.
-    std::thread::scope(|s| {
-        let p = s.spawn(|| publish_stream(&mut publ));
-        for i in 1..=50 {
-            let v = sub
-                .recv_blocking(Some(Duration::from_secs(5)))
-                .unwrap()
-                .expect("every sample wakes the receiver");
-            assert_eq!(v.lat_deg, f64::from(i));
-        }
-        p.join().unwrap();
-    });
-    assert_blocks(idle, "blocking wait", || {
-        assert!(sub.recv_blocking(Some(idle)).unwrap().is_none())
-    });
-
     // Async receive, on a current-thread runtime (the receiving thread is this one).
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -319,13 +171,13 @@ fn receivers_take_the_sample_first_and_block_again_after_draining() {
     std::thread::scope(|s| {
         let p = s.spawn(|| publish_stream(&mut publ));
         rt.block_on(async {
-            for i in 51..=100 {
+            for i in 1..=50 {
                 let v = sub
                     .recv_timeout(Duration::from_secs(5))
                     .await
                     .unwrap()
                     .expect("every sample wakes the receiver");
-                assert_eq!(v.lat_deg, f64::from(i - 50));
+                assert_eq!(v.lat_deg, f64::from(i));
             }
         });
         p.join().unwrap();
@@ -373,77 +225,6 @@ fn overwritten_samples_count_as_lost_unless_the_subscriber_wants_only_the_newest
             assert!(lost > 0, "overwritten samples not counted");
         }
     }
-}
-
-/// `set_anticipate`: a periodic stream is received whole and in order, some samples
-/// are taken by polling in the window around their expected time (no wake-up), the
-/// period is learnt from the send stamps, a receive still times out when the stream
-/// stops, and a sample taken while polling leaves no stale notification behind.
-#[test]
-fn anticipating_receive_takes_a_periodic_stream_in_order_and_times_out() {
-    let d = domain("ant");
-    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::vehicle_state(4);
-    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
-    sub.set_anticipate(Duration::from_millis(2));
-    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-    const N: u32 = 150;
-    const PERIOD: Duration = Duration::from_millis(5);
-
-    let sent = std::thread::scope(|s| {
-        let publisher = s.spawn(move || {
-            let t0 = std::time::Instant::now();
-            let mut sent = Vec::with_capacity(N as usize);
-            for i in 1..=N {
-                // Absolute pacing, as a camera or a fixed-rate telemetry loop does.
-                let due = t0 + PERIOD * i;
-                std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
-                sent.push(std::time::Instant::now());
-                publ.publish(VehicleState {
-                    lat_deg: f64::from(i),
-                    ..Default::default()
-                })
-                .unwrap();
-            }
-            (publ, sent)
-        });
-        for i in 1..=N {
-            let v = sub
-                .recv_blocking(Some(Duration::from_secs(5)))
-                .unwrap()
-                .expect("every sample arrives");
-            assert_eq!(v.lat_deg, f64::from(i));
-        }
-        let (_publ, sent) = publisher.join().unwrap();
-        let t0 = std::time::Instant::now();
-        assert!(sub
-            .recv_blocking(Some(Duration::from_millis(30)))
-            .unwrap()
-            .is_none());
-        assert!(t0.elapsed() >= Duration::from_millis(30));
-        sent
-    });
-    let stats = sub.anticipation().expect("on");
-    let period = stats.period.expect("period learnt");
-    // Learnt from the send stamps: within the span of the intervals the publisher
-    // really had (a stall on a loaded machine stretches some and bunches others; the
-    // filter itself is checked with exact stamps in anticipate.rs). Off by the
-    // factors a wrong unit or a receive-side clock would give, it fails.
-    let intervals: Vec<Duration> = sent.windows(2).map(|w| w[1] - w[0]).collect();
-    let (shortest, longest) = (
-        *intervals.iter().min().unwrap(),
-        *intervals.iter().max().unwrap(),
-    );
-    assert!(
-        period >= shortest / 2 && period <= longest * 2,
-        "{stats:?}, send intervals {shortest:?}..{longest:?}"
-    );
-    assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
-    assert!(stats.hits <= stats.windows, "{stats:?}");
-
-    sub.set_anticipate(Duration::ZERO);
-    assert!(sub.anticipation().is_none());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -601,298 +382,4 @@ async fn a_receive_that_found_nothing_waits_for_a_notification_without_looking_a
     let want: Vec<f64> = (1..=300u32).map(f64::from).collect();
     assert_eq!(got, want);
     let _publ = producer.join().unwrap();
-}
-
-/// Publishes one sample on `topic` after `after` unless `cancel` is set first: a
-/// receive that should time out but instead hangs (a timeout that never fires)
-/// gets this sample and fails its assertion instead of hanging the test.
-fn rescue(
-    bus: &Bus,
-    topic: &skymesh_ipc_types::Topic,
-    after: Duration,
-) -> (
-    Arc<std::sync::atomic::AtomicBool>,
-    std::thread::JoinHandle<()>,
-) {
-    let cancel = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let mut publ = bus.publisher::<VehicleState>(topic).unwrap();
-    let c = Arc::clone(&cancel);
-    let t = std::thread::spawn(move || {
-        let t0 = std::time::Instant::now();
-        while t0.elapsed() < after {
-            if c.load(Ordering::SeqCst) {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        publ.publish(VehicleState {
-            lat_deg: -1.0,
-            ..Default::default()
-        })
-        .unwrap();
-    });
-    (cancel, t)
-}
-
-/// A receiver that blocks on the topic's event count: a [`skymesh_runtime::Subscriber`]
-/// after `set_futex_wake`, or a [`skymesh_runtime::BlockingSubscriber`].
-trait FutexReceiver {
-    fn recv_for(&self, timeout: Duration) -> Option<VehicleState>;
-    fn set_spin(&mut self, spin: Duration);
-}
-
-impl FutexReceiver for skymesh_runtime::Subscriber<VehicleState> {
-    fn recv_for(&self, timeout: Duration) -> Option<VehicleState> {
-        self.recv_blocking(Some(timeout)).unwrap()
-    }
-    fn set_spin(&mut self, spin: Duration) {
-        skymesh_runtime::Subscriber::set_spin(self, spin);
-    }
-}
-
-impl FutexReceiver for skymesh_runtime::BlockingSubscriber<VehicleState> {
-    fn recv_for(&self, timeout: Duration) -> Option<VehicleState> {
-        self.recv_blocking(Some(timeout)).unwrap()
-    }
-    fn set_spin(&mut self, spin: Duration) {
-        skymesh_runtime::BlockingSubscriber::set_spin(self, spin);
-    }
-}
-
-/// `set_futex_wake`: blocking receives sleep on the topic's event count. With and
-/// without a spin: a receive with nothing pending times out (the futex wait's own
-/// timeout), a stream published while the receiver blocks arrives whole and in
-/// order (a publisher that did not wake the count would leave every receive to time
-/// out), after it the receiver blocks rather than polls (thread CPU over the wait),
-/// and no receive leaves its announcement behind (publishers would make the wake-up
-/// call on every publish).
-#[test]
-fn futex_wake_receives_a_stream_whole_and_times_out() {
-    for (tag, spin) in [("fx0", Duration::ZERO), ("fx1", Duration::from_micros(300))] {
-        futex_receiver_takes_a_stream(tag, spin, |bus, topic| {
-            let mut sub = bus.subscriber::<VehicleState>(topic).unwrap();
-            sub.set_futex_wake().unwrap();
-            sub
-        });
-    }
-}
-
-/// The same for a [`skymesh_runtime::BlockingSubscriber`] (iceoryx2's single-thread
-/// flavour on a node of its own, beside thread-safe publishers), which also counts
-/// what it received in the bus's series.
-#[test]
-fn a_blocking_subscriber_receives_a_stream_whole_and_times_out() {
-    for (tag, spin) in [("bs0", Duration::ZERO), ("bs1", Duration::from_micros(300))] {
-        futex_receiver_takes_a_stream(tag, spin, |bus, topic| {
-            bus.blocking_subscriber::<VehicleState>(topic).unwrap()
-        });
-    }
-}
-
-fn futex_receiver_takes_a_stream<R: FutexReceiver>(
-    tag: &str,
-    spin: Duration,
-    make: impl FnOnce(&Bus, &skymesh_ipc_types::Topic) -> R,
-) {
-    let d = domain(tag);
-    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-    // Room for the whole stream: a receiver stalled by a loaded machine must not
-    // lose samples to overwriting (that is not what this test is about).
-    let topic = skymesh_ipc_types::Topic {
-        qos: skymesh_ipc_types::TopicQos {
-            buffer: 64,
-            ..skymesh_ipc_types::TopicQos::STATE
-        },
-        ..topics::vehicle_state(5)
-    };
-    let mut sub = make(&b, &topic);
-    sub.set_spin(spin);
-    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-
-    let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(10));
-    let t0 = std::time::Instant::now();
-    let got = sub.recv_for(Duration::from_millis(30));
-    let waited = t0.elapsed();
-    cancel.store(true, Ordering::SeqCst);
-    rescuer.join().unwrap();
-    assert!(got.is_none(), "{tag}: the timeout never ended the wait");
-    assert!(waited >= Duration::from_millis(30), "{tag}: {waited:?}");
-
-    let t0 = std::time::Instant::now();
-    std::thread::scope(|s| {
-        let p = s.spawn(|| {
-            for i in 1..=50 {
-                std::thread::sleep(Duration::from_micros(if i % 2 == 0 { 200 } else { 1500 }));
-                publ.publish(VehicleState {
-                    lat_deg: f64::from(i),
-                    ..Default::default()
-                })
-                .unwrap();
-            }
-        });
-        for i in 1..=50 {
-            let v = sub
-                .recv_for(Duration::from_secs(5))
-                .expect("every sample wakes the receiver");
-            assert_eq!(v.lat_deg, f64::from(i), "{tag}");
-        }
-        p.join().unwrap();
-    });
-    // Woken by each sample, not by the 5 s timeout: the stream takes ~45 ms.
-    let took = t0.elapsed();
-    assert!(took < Duration::from_secs(4), "{tag}: stream took {took:?}");
-    let idle = Duration::from_millis(300);
-    assert_blocks(idle, &format!("{tag}: blocking wait"), || {
-        assert!(sub.recv_for(idle).is_none())
-    });
-    let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
-    assert_eq!(count.waiters(), 0, "{tag}: an announcement left behind");
-    let series = [("topic", topic.name.as_str())];
-    let stats = b.stats();
-    assert_eq!(
-        stats
-            .counter("skymesh_topic_samples_received_total", &series)
-            .get(),
-        50,
-        "{tag}"
-    );
-    assert_eq!(
-        stats
-            .counter("skymesh_topic_samples_lost_total", &series)
-            .get(),
-        0,
-        "{tag}"
-    );
-}
-
-/// One publish wakes every futex receiver asleep on its topic — two subscribers
-/// with `set_futex_wake` and two `BlockingSubscriber`s here, each on its own
-/// thread. Until 2026-11-29 the wake-up call woke exactly one of them (a count of
-/// `u32::MAX` is -1 to the kernel); the others slept through the sample until the
-/// next publish or, on a quiet topic, their timeout (20 s here; a receive ended
-/// by its timeout still takes the sample, so the test tells the two apart by when
-/// each returned: within half the timeout of the publish, against milliseconds
-/// when woken — not a measurement).
-#[test]
-fn one_publish_wakes_every_futex_receiver_of_the_topic() {
-    let d = domain("fxall");
-    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::vehicle_state(8);
-    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-    let count = skymesh_runtime::TopicWord::open(&d.wake_prefix(), &topic.name).unwrap();
-    let guard = Duration::from_secs(20);
-    std::thread::scope(|s| {
-        let receivers: Vec<_> = (0..4)
-            .map(|i| {
-                let (b, topic) = (&b, &topic);
-                s.spawn(move || {
-                    // A `BlockingSubscriber` is made on the thread that uses it.
-                    let got = if i % 2 == 0 {
-                        let mut sub = b.subscriber::<VehicleState>(topic).unwrap();
-                        sub.set_futex_wake().unwrap();
-                        sub.recv_for(guard)
-                    } else {
-                        b.blocking_subscriber::<VehicleState>(topic)
-                            .unwrap()
-                            .recv_for(guard)
-                    };
-                    (got.map(|v| v.lat_deg), std::time::Instant::now())
-                })
-            })
-            .collect();
-        // All four asleep (or about to be: a wait announced before the publish
-        // returns at once once the count has moved) before the one publish.
-        let t0 = std::time::Instant::now();
-        while count.waiters() < 4 {
-            assert!(
-                t0.elapsed() < Duration::from_secs(10),
-                "receivers did not wait"
-            );
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-        let published = std::time::Instant::now();
-        publ.publish(VehicleState {
-            lat_deg: 1.0,
-            ..Default::default()
-        })
-        .unwrap();
-        for (i, r) in receivers.into_iter().enumerate() {
-            let (got, at) = r.join().unwrap();
-            assert_eq!(got, Some(1.0), "receiver {i}'s sample");
-            let after = at.duration_since(published);
-            assert!(
-                after < guard / 2,
-                "receiver {i} slept through the publish: it returned {after:?} later, at its timeout"
-            );
-        }
-    });
-    assert_eq!(count.waiters(), 0);
-}
-
-/// Timeouts of two futex receivers on one topic are their own: after a long timeout
-/// ended by a sample, a shorter one ends on time (not at the old deadline), and one
-/// receiver's timeout neither ends nor shortens the other's wait. (Until 2026-11-28
-/// a watchdog thread per subscriber ended timed waits by waking the whole topic;
-/// this test kept its early wake-up honest and stays for the same properties.)
-#[test]
-fn futex_wake_a_shorter_timeout_than_the_last_still_ends_on_time() {
-    let d = domain("fxt");
-    let a = Bus::open(&d, "pub-node", ServiceId::AutopilotLink, 1, Stats::new()).unwrap();
-    let b = Bus::open(&d, "sub-node", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::vehicle_state(6);
-    let mut sub = b.subscriber::<VehicleState>(&topic).unwrap();
-    sub.set_futex_wake().unwrap();
-    let mut other = b.subscriber::<VehicleState>(&topic).unwrap();
-    other.set_futex_wake().unwrap();
-    let mut publ = a.publisher::<VehicleState>(&topic).unwrap();
-
-    // A long timeout, ended by a sample.
-    std::thread::scope(|s| {
-        s.spawn(|| {
-            std::thread::sleep(Duration::from_millis(20));
-            publ.publish(VehicleState::default()).unwrap();
-        });
-        assert!(sub
-            .recv_blocking(Some(Duration::from_secs(8)))
-            .unwrap()
-            .is_some());
-    });
-    assert!(other.try_recv().unwrap().is_some());
-
-    // The rescue sample at 4 s comes before the old deadline: without the early
-    // wake-up the short receive below gets it instead of timing out.
-    let (cancel, rescuer) = rescue(&a, &topic, Duration::from_secs(4));
-    let t0 = std::time::Instant::now();
-    let got = sub.recv_blocking(Some(Duration::from_millis(40))).unwrap();
-    let waited = t0.elapsed();
-    assert!(
-        got.is_none(),
-        "the short timeout waited for the old deadline"
-    );
-    assert!(waited >= Duration::from_millis(40), "{waited:?}");
-
-    // The other receiver waits on through this one's timeout.
-    let other_wait = Duration::from_millis(600);
-    std::thread::scope(|s| {
-        let o = s.spawn(|| {
-            let t0 = std::time::Instant::now();
-            let got = other.recv_blocking(Some(other_wait)).unwrap();
-            (got, t0.elapsed())
-        });
-        assert!(sub
-            .recv_blocking(Some(Duration::from_millis(40)))
-            .unwrap()
-            .is_none());
-        let (got, waited) = o.join().unwrap();
-        assert!(got.is_none());
-        assert!(
-            waited >= other_wait,
-            "ended by the other receiver's timeout, returned after {waited:?}"
-        );
-    });
-    cancel.store(true, Ordering::SeqCst);
-    rescuer.join().unwrap();
 }

@@ -150,18 +150,21 @@ async fn a_frame_crosses_processes_intact() {
                 mapping_of(pixels.as_ptr() as usize),
             )
         };
-        // Even frames through the async receive, odd ones through the blocking one.
+        // Even frames through `recv_with`, odd ones through `latest_with` (the
+        // publisher waits for each frame to be read, so none is skipped).
         let (hd, len, sum, mapping) = if k % 2 == 0 {
             tokio::time::timeout(Duration::from_secs(20), sub.recv_with(read))
                 .await
                 .expect("frame not received in time")
                 .unwrap()
         } else {
-            tokio::task::block_in_place(|| {
-                sub.recv_blocking_with(Some(Duration::from_secs(20)), read)
-            })
-            .unwrap()
-            .expect("frame not received in time")
+            let (got, skipped) =
+                tokio::time::timeout(Duration::from_secs(20), sub.latest_with(read))
+                    .await
+                    .expect("frame not received in time")
+                    .unwrap();
+            assert_eq!(skipped, 0, "frame {k}");
+            got
         };
         assert_eq!(len, frame_len(k), "frame {k}");
         assert_eq!(hd.payload_len as usize, len);
@@ -313,160 +316,67 @@ fn a_frame_whose_header_does_not_describe_its_pixels_is_not_sent() {
     assert_eq!(seq, 1);
 }
 
-/// Publishes `n` small frames on `topic`, one every `period` (on a fixed
-/// schedule), each taking `write_time` to write (a camera's capture into the loaned
-/// frame), while each of `subs` receives them with `recv_blocking_with` on a thread
-/// of its own: each must arrive at every receiver, in order; then a receive with
-/// nothing published times out. Gives the receivers back.
-fn blocking_receive_takes_a_periodic_stream(
+/// Publishes `n` small frames on `topic` from another thread, one every `period`
+/// (on a fixed schedule), each taking `write_time` to write (a camera's capture into
+/// the loaned frame), while `sub` receives them with the async `recv_with`: each
+/// must arrive, in order; then a receive with nothing published times out.
+fn async_receive_takes_a_periodic_stream(
     bus: &Bus,
     topic: &skymesh_ipc_types::Topic,
-    subs: Vec<FrameSubscriber>,
+    mut sub: FrameSubscriber,
     n: u64,
     period: Duration,
     write_time: Duration,
-) -> Vec<FrameSubscriber> {
+) {
     let (f, w, h, s) = FRAMES[4];
     let len = f.frame_len(w, h, s).unwrap() as usize;
     let mut publ = bus.frame_publisher(topic, len).unwrap();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
     std::thread::scope(|scope| {
-        let receivers: Vec<_> = subs
-            .into_iter()
-            .map(|sub| {
-                scope.spawn(move || {
-                    for i in 1..=n {
-                        let (seq, first) = sub
-                            .recv_blocking_with(Some(Duration::from_secs(5)), |hd, pixels| {
-                                (hd.frame_seq, pixels[0])
-                            })
-                            .unwrap()
-                            .expect("every frame arrives");
-                        assert_eq!((seq, first), (i, i as u8));
-                    }
-                    sub
-                })
-            })
-            .collect();
-        let t0 = std::time::Instant::now();
-        for i in 1..=n {
-            let due = t0 + period * i as u32;
-            std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
-            publ.publish_with(len, |hd, pixels| {
-                hd.frame_seq = i;
-                hd.set_geometry(f, w, h, s);
-                std::thread::sleep(write_time);
-                pixels.fill(i as u8);
-            })
-            .unwrap();
-        }
-        let subs: Vec<_> = receivers.into_iter().map(|r| r.join().unwrap()).collect();
-        for sub in &subs {
+        scope.spawn(move || {
             let t0 = std::time::Instant::now();
-            assert!(sub
-                .recv_blocking_with(Some(Duration::from_millis(30)), |_, _| ())
-                .unwrap()
-                .is_none());
-            assert!(t0.elapsed() >= Duration::from_millis(30));
-        }
-        subs
-    })
-}
-
-/// `set_anticipate` on a frame stream: every frame of a 100 fps stream arrives in
-/// order through the blocking receive, some are taken by polling in the window
-/// around their expected time, and the receive times out when the stream stops.
-#[test]
-fn an_anticipating_frame_receive_takes_a_periodic_stream_in_order() {
-    let d = domain("ant");
-    let bus = Bus::open(&d, "frame-ant", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::camera_frames("anticipate");
-    let mut sub = bus.frame_subscriber(&topic).unwrap();
-    sub.set_anticipate(Duration::from_millis(2));
-    let period = Duration::from_millis(10);
-    let sub = blocking_receive_takes_a_periodic_stream(
-        &bus,
-        &topic,
-        vec![sub],
-        120,
-        period,
-        Duration::ZERO,
-    )
-    .remove(0);
-    let stats = sub.anticipation().expect("on");
-    assert!(stats.windows > 0 && stats.hits > 0, "{stats:?}");
-}
-
-/// `set_futex_wake` on a frame stream: every frame published while the receiver
-/// blocks wakes it, in order (a frame publisher that did not notify the futex event
-/// would leave each receive to time out), and the receive times out when the
-/// stream stops.
-#[test]
-fn a_futex_woken_frame_receive_takes_a_stream_in_order_and_times_out() {
-    let d = domain("fx");
-    let bus = Bus::open(&d, "frame-fx", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::camera_frames("futex");
-    let mut sub = bus.frame_subscriber(&topic).unwrap();
-    sub.set_futex_wake().unwrap();
-    let period = Duration::from_millis(10);
-    blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, Duration::ZERO);
-}
-
-/// `set_early_wake` on a frame stream whose pixels take 5 ms to write: the
-/// receiver sleeps until the publisher starts each frame and polls until it is
-/// sent, so frames are taken while polling (a publisher that did not wake the
-/// receiver at a frame's start would leave every receive to wake at the send, with
-/// nothing polled); every frame arrives in order, and the receive times out when
-/// the stream stops.
-#[test]
-fn an_early_waking_frame_receive_polls_for_each_frame_from_its_start() {
-    let d = domain("ew");
-    let bus = Bus::open(&d, "frame-ew", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::camera_frames("early");
-    let mut sub = bus.frame_subscriber(&topic).unwrap();
-    assert_eq!(sub.early_wake(), None);
-    sub.set_early_wake(Duration::from_millis(20)).unwrap();
-    let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    let sub = blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, write)
-        .remove(0);
-    let stats = sub.early_wake().expect("on");
-    assert!(stats.polls > 0 && stats.hits > 0, "{stats:?}");
-    assert!(stats.hits <= stats.polls);
-}
-
-/// Two consumers of one stream with `set_early_wake` (the vision pipeline and a
-/// recorder, say): the publisher's announcement of each frame wakes both, so each
-/// polls for most frames from their start. Until 2026-11-29 the announcement woke
-/// one waiter only: per frame one receiver polled and the other slept until the
-/// send, so the two together polled for about as many frames as were sent; now
-/// about twice as many (the bound leaves a quarter of the frames to a slow host).
-#[test]
-fn every_early_receiver_of_a_stream_is_woken_at_a_frames_start() {
-    const FRAMES_SENT: u64 = 24;
-    let d = domain("ew2");
-    let bus = Bus::open(&d, "frame-ew2", ServiceId::Tool, 0, Stats::new()).unwrap();
-    let topic = topics::camera_frames("early2");
-    let subs = (0..2)
-        .map(|_| {
-            let mut sub = bus.frame_subscriber(&topic).unwrap();
-            sub.set_early_wake(Duration::from_millis(40)).unwrap();
-            sub
-        })
-        .collect();
-    let (period, write) = (Duration::from_millis(25), Duration::from_millis(10));
-    let subs =
-        blocking_receive_takes_a_periodic_stream(&bus, &topic, subs, FRAMES_SENT, period, write);
-    let stats: Vec<_> = subs.iter().map(|s| s.early_wake().expect("on")).collect();
-    let polled: u64 = stats.iter().map(|s| s.polls).sum();
-    assert!(
-        polled >= FRAMES_SENT * 3 / 2,
-        "frames polled for: {stats:?}"
-    );
+            for i in 1..=n {
+                let due = t0 + period * i as u32;
+                std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+                publ.publish_with(len, |hd, pixels| {
+                    hd.frame_seq = i;
+                    hd.set_geometry(f, w, h, s);
+                    std::thread::sleep(write_time);
+                    pixels.fill(i as u8);
+                })
+                .unwrap();
+            }
+        });
+        rt.block_on(async {
+            for i in 1..=n {
+                let (seq, first) = tokio::time::timeout(
+                    Duration::from_secs(5),
+                    sub.recv_with(|hd, pixels| (hd.frame_seq, pixels[0])),
+                )
+                .await
+                .expect("every frame arrives")
+                .unwrap();
+                assert_eq!((seq, first), (i, i as u8));
+            }
+        });
+    });
+    rt.block_on(async {
+        let t0 = std::time::Instant::now();
+        let quiet = Duration::from_millis(30);
+        assert!(tokio::time::timeout(quiet, sub.recv_with(|_, _| ()))
+            .await
+            .is_err());
+        assert!(t0.elapsed() >= quiet);
+    });
 }
 
 /// Set in the child that dies in the middle of a frame: the domain to publish in.
 const DIE_MID_FRAME_ENV: &str = "SKYMESH_FRAMES_TEST_DIE_MID_FRAME";
 
-/// The publisher half of [`a_publisher_killed_mid_frame_does_not_stall_early_receivers`]:
+/// The publisher half of [`a_publisher_killed_mid_frame_does_not_stall_the_stream`]:
 /// starts a frame, says so on stdout and never finishes it.
 #[test]
 fn child_dies_mid_frame() {
@@ -487,18 +397,14 @@ fn child_dies_mid_frame() {
     });
 }
 
-/// A camera killed between a frame's start and its send leaves the stream's making
-/// word announcing a frame that never comes: an early receiver polls for it, gives
-/// up after its `max_spin` and waits for the send, so the next publisher's frames
-/// all arrive, in order, and the stream's state recovers (frames taken while
-/// polling again).
+/// A camera killed between a frame's loan and its send leaves a frame that never
+/// comes: the subscriber still receives every frame of the next publisher, in order.
 #[test]
-fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
+fn a_publisher_killed_mid_frame_does_not_stall_the_stream() {
     let d = domain("die");
     let bus = Bus::open(&d, "frame-die", ServiceId::Tool, 0, Stats::new()).unwrap();
     let topic = topics::camera_frames("dier");
-    let mut sub = bus.frame_subscriber(&topic).unwrap();
-    sub.set_early_wake(Duration::from_millis(20)).unwrap();
+    let sub = bus.frame_subscriber(&topic).unwrap();
     let mut child = Command::new(std::env::current_exe().unwrap())
         .args([
             "child_dies_mid_frame",
@@ -520,8 +426,5 @@ fn a_publisher_killed_mid_frame_does_not_stall_early_receivers() {
     child.wait().unwrap();
     d.cleanup_dead_nodes();
     let (period, write) = (Duration::from_millis(20), Duration::from_millis(5));
-    let sub = blocking_receive_takes_a_periodic_stream(&bus, &topic, vec![sub], 40, period, write)
-        .remove(0);
-    let stats = sub.early_wake().expect("on");
-    assert!(stats.hits > 0, "{stats:?}");
+    async_receive_takes_a_periodic_stream(&bus, &topic, sub, 40, period, write);
 }

@@ -5,17 +5,13 @@
 //! `Subscriber` and through raw iceoryx2 ports in the same process, interleaved.
 //!
 //! ```text
-//! cargo run --release -p skymesh-e2e --bin cold-bench [-- ROUNDS] [--futex]
+//! cargo run --release -p skymesh-e2e --bin cold-bench [-- ROUNDS]
 //! ```
 //!
 //! Raw iceoryx2: `send_copy` + `notify` on the thread-safe service flavour skymesh
-//! uses (`ipc_threadsafe`), and on the single-threaded one (`ipc`, no port mutex);
-//! receive + copy + release. skymesh: `publish` (header stamp, send, both events'
-//! notify, counter) and `try_recv` (receive, copy, release, then the subscriber's
-//! accounting: received counter, age histogram, gap table). `--futex`: the
-//! subscriber calls `set_futex_wake` first (publishers then wake its event count,
-//! and no socket listener). `skymesh blocking try_recv`: a `BlockingSubscriber` of
-//! the same topic (single-thread flavour), against the raw single-thread receive.
+//! uses (`ipc_threadsafe`); receive + copy + release. skymesh: `publish` (header
+//! stamp, send, notify, counter) and `try_recv` (receive, copy, release, then the
+//! subscriber's accounting: received counter, age histogram, gap table).
 //! Prints p50 / p99 per operation and the p50 of the per-round difference
 //! skymesh − raw, in ns. One thread, no wake-ups:
 //! the cost of touching memory, not of the kernel.
@@ -48,8 +44,8 @@ fn cold<T>(buf: &mut [u8], k: usize, op: impl FnOnce() -> T) -> (u64, T) {
 }
 
 /// A cold raw iceoryx2 receive + copy + release: its time (ns) and the sample's sequence.
-fn raw_receive<S: iceoryx2::service::Service>(
-    sub: &iceoryx2::port::subscriber::Subscriber<S, VehicleState, ()>,
+fn raw_receive(
+    sub: &iceoryx2::port::subscriber::Subscriber<ipc_threadsafe::Service, VehicleState, ()>,
     buf: &mut [u8],
     k: usize,
 ) -> Result<(u64, u64)> {
@@ -65,25 +61,19 @@ fn raw_receive<S: iceoryx2::service::Service>(
 
 fn main() -> Result<()> {
     let mut rounds = 1000usize;
-    let mut futex = false;
     for a in std::env::args().skip(1) {
-        match a.as_str() {
-            "--futex" => futex = true,
-            n => {
-                rounds = n
-                    .parse()
-                    .map_err(|_| anyhow!("usage: cold-bench [ROUNDS] [--futex]"))?
-            }
-        }
+        rounds = a
+            .parse()
+            .map_err(|_| anyhow!("usage: cold-bench [ROUNDS]"))?;
     }
     let name = format!("cb{}", std::process::id());
     let domain = Domain::load(&name, None)?;
-    let result = run(&domain, &name, rounds, futex);
+    let result = run(&domain, &name, rounds);
     domain.remove_leftover_files();
     result
 }
 
-fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
+fn run(domain: &Domain, name: &str, rounds: usize) -> Result<()> {
     let tx = Bus::open(domain, "cold-pub", ServiceId::Tool, 0, Stats::new())?;
     let rx = Bus::open(domain, "cold-sub", ServiceId::Tool, 1, Stats::new())?;
     let topic = Topic {
@@ -91,11 +81,7 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         qos: TopicQos::STATE,
     };
     let mut publ = tx.publisher::<VehicleState>(&topic)?;
-    let mut sub = rx.subscriber::<VehicleState>(&topic)?;
-    if futex {
-        sub.set_futex_wake()?;
-    }
-    let bsub = rx.blocking_subscriber::<VehicleState>(&topic)?;
+    let sub = rx.subscriber::<VehicleState>(&topic)?;
 
     // Raw iceoryx2 under its own file prefix in the same domain name space.
     let mut cfg = iceoryx2::config::Config::default();
@@ -121,23 +107,10 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
     let ts_sub = ts.subscriber_builder().create().map_err(|e| err(&e))?;
     let ts_notifier = ts_event.notifier_builder().create().map_err(|e| err(&e))?;
     let _ts_listener = ts_event.listener_builder().create().map_err(|e| err(&e))?;
-    let st_node = NodeBuilder::new()
-        .config(&cfg)
-        .create::<ipc::Service>()
-        .map_err(|e| err(&e))?;
-    let st = st_node
-        .service_builder(&"raw/st".try_into().map_err(|e| err(&e))?)
-        .publish_subscribe::<VehicleState>()
-        .open_or_create()
-        .map_err(|e| err(&e))?;
-    let st_pub = st.publisher_builder().create().map_err(|e| err(&e))?;
-    let st_sub = st.subscriber_builder().create().map_err(|e| err(&e))?;
-
     let mut buf = vec![0u8; FLUSH_BYTES];
-    // skymesh publish, receive; raw ts send, receive; raw st send, receive;
-    // skymesh BlockingSubscriber receive.
-    let mut t: [Vec<u64>; 7] = Default::default();
-    let mut diff: [Vec<i64>; 3] = Default::default();
+    // skymesh publish, receive; raw ts send, receive.
+    let mut t: [Vec<u64>; 4] = Default::default();
+    let mut diff: [Vec<i64>; 2] = Default::default();
     let mut seqs = 0u64;
     let s = VehicleState::default();
     for k in 0..rounds {
@@ -162,35 +135,17 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         t[3].push(g2);
         diff[0].push(p as i64 - p2 as i64);
         diff[1].push(g as i64 - g2 as i64);
-
-        let (p3, r) = cold(&mut buf, k, || st_pub.send_copy(s));
-        r.map_err(|e| err(&e))?;
-        t[4].push(p3);
-        let (g3, seq) = raw_receive(&st_sub, &mut buf, k)?;
-        seqs += seq;
-        t[5].push(g3);
-        let (g4, r) = cold(&mut buf, k, || bsub.try_recv());
-        seqs += r?
-            .ok_or_else(|| anyhow!("skymesh blocking: no sample"))?
-            .header
-            .seq;
-        t[6].push(g4);
-        diff[2].push(g4 as i64 - g3 as i64);
     }
     black_box(seqs);
     println!(
-        "cold-bench: {rounds} rounds, each operation after a {} MiB flush{}; ns",
+        "cold-bench: {rounds} rounds, each operation after a {} MiB flush; ns",
         FLUSH_BYTES >> 20,
-        if futex { ", futex subscriber" } else { "" }
     );
     for (i, what) in [
         "skymesh publish",
         "skymesh try_recv",
         "raw ts send + notify",
         "raw ts receive + copy",
-        "raw st send",
-        "raw st receive + copy",
-        "skymesh blocking try_recv",
     ]
     .iter()
     .enumerate()
@@ -198,13 +153,9 @@ fn run(domain: &Domain, name: &str, rounds: usize, futex: bool) -> Result<()> {
         let p = percentiles(&t[i]);
         println!("{what:>22}: p50 {:>7.0}  p99 {:>7.0}", p[0], p[1]);
     }
-    for (what, mut d) in [
-        "publish, skymesh − raw ts",
-        "receive, skymesh − raw ts",
-        "receive, skymesh blocking − raw st",
-    ]
-    .into_iter()
-    .zip(diff)
+    for (what, mut d) in ["publish, skymesh − raw ts", "receive, skymesh − raw ts"]
+        .into_iter()
+        .zip(diff)
     {
         d.sort_unstable();
         println!(

@@ -8,8 +8,7 @@
 //! ```
 //!
 //! At 100 Hz (300 messages × SCALE) and 1 kHz (2,000 × SCALE); for each rate and each
-//! N, two iceoryx2 phases (the receivers below) then the UDP phase, fresh child
-//! processes for each phase.
+//! N, an iceoryx2 phase then a UDP phase, fresh child processes for each phase.
 //! Latency = a child's `CLOCK_MONOTONIC` when it holds the message − the send stamp in
 //! the message: iceoryx2's `Publisher::publish` stamps `header.stamp_ns` once, then
 //! delivers to every subscriber and notifies; the UDP sender stamps once, then does
@@ -17,17 +16,13 @@
 //! i sends before its own — that is what unicast fan-out costs). Reported per N over
 //! all children's messages: p50/p99/p999; "last" = per message, the latency of the
 //! slowest child (p50/p99 over messages every child received); sender CPU per message;
-//! mean receiver CPU per message (over the children); and UDP ÷ iceoryx2 for each
-//! receiver. The first [`WARMUP`] messages of a phase are counted neither in latency
+//! mean receiver CPU per message (over the children); and UDP ÷ iceoryx2. The first [`WARMUP`] messages of a phase are counted neither in latency
 //! nor in CPU.
 //!
-//! Children block in the kernel, no spin, no async runtime:
-//! - `bs`: `BlockingSubscriber::recv_blocking`, the bus's subscriber for one thread,
-//!   asleep on the topic's event count (a futex word): the publisher's one
-//!   `FUTEX_WAKE` wakes every child;
-//! - `iox`: `Subscriber::recv_blocking` on the topic's socket event, how a
-//!   subscriber without the option waits (what the async receivers use): the
-//!   publisher's notify is one datagram per child;
+//! Children wait in the kernel, no spin:
+//! - `iox`: `Subscriber::recv` awaited in a tokio current-thread runtime, as the
+//!   services receive (woken through the topic's event: the publisher's notify is
+//!   one datagram per child);
 //! - `udp`: a blocking `std::net::UdpSocket::recv`.
 
 use std::collections::HashMap;
@@ -42,7 +37,7 @@ use skymesh_e2e::transport_bench::{
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{Bus, Domain, IpcError, Stats};
+use skymesh_runtime::{Bus, Domain, Stats};
 
 /// Messages at the start of each phase not counted (first wake-ups, page faults).
 const WARMUP: usize = 50;
@@ -55,35 +50,12 @@ const LEN: usize = DATAGRAM_LEN;
 /// Subscriber counts.
 const FANOUT: [usize; 4] = [1, 2, 4, 8];
 
-/// How an iceoryx2 child waits for a sample.
-#[derive(Debug, Clone, Copy)]
-enum Wait {
-    /// `BlockingSubscriber` on the topic's event count (futex word).
-    Word,
-    /// `Subscriber::recv_blocking` on the topic's socket event.
-    Event,
-}
-
-impl Wait {
-    fn arg(self) -> &'static str {
-        match self {
-            Wait::Word => "word",
-            Wait::Event => "event",
-        }
-    }
-}
-
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
         Some("--iox-sub") => {
             die_with_parent()?;
-            let wait = match args.get(4).map(String::as_str) {
-                Some("word") => Wait::Word,
-                Some("event") => Wait::Event,
-                other => bail!("--iox-sub: unknown wait {other:?}"),
-            };
-            iox_receiver(&args[2], args[3].parse()?, wait)
+            iox_receiver(&args[2], args[3].parse()?)
         }
         Some("--udp-sub") => {
             die_with_parent()?;
@@ -168,8 +140,7 @@ fn driver(scale: usize) -> Result<()> {
     ];
     println!(
         "fanout-bench: VehicleState ({LEN} bytes) from this process to N child processes; \
-         iceoryx2 (one publish; bs: BlockingSubscriber on the event count, iox: recv_blocking \
-         on the socket event) vs loopback UDP (one send_to per child, blocking recv); domain \
+         iceoryx2 (one publish; async receive in a tokio current-thread runtime) vs loopback UDP (one send_to per child, blocking recv); domain \
          {name}; first {WARMUP} of each phase not counted; latency µs, CPU µs per message \
          (rx = mean over children)"
     );
@@ -190,10 +161,9 @@ fn driver(scale: usize) -> Result<()> {
     );
     for (rate, n) in plan {
         for subs in FANOUT {
-            let bs = iox_run(&domain.0, rate, n, subs, Wait::Word)?.summary();
-            let iox = iox_run(&domain.0, rate, n, subs, Wait::Event)?.summary();
+            let iox = iox_run(&domain.0, rate, n, subs)?.summary();
             let udp = udp_run(rate, n, subs)?.summary();
-            for (via, s) in [("bs", &bs), ("iox", &iox), ("udp", &udp)] {
+            for (via, s) in [("iox", &iox), ("udp", &udp)] {
                 println!(
                     "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.1} {:>8.1} {:>8.1} | {:>8.1} {:>8.1} | {:>7.2} {:>7.2}",
                     rate.label(),
@@ -210,7 +180,7 @@ fn driver(scale: usize) -> Result<()> {
                     s.rx_cpu / 1e3,
                 );
             }
-            for (label, s) in [("u÷bs", &bs), ("u÷i", &iox)] {
+            for (label, s) in [("u÷i", &iox)] {
                 println!(
                     "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.2} {:>8.2} {:>8.2} | {:>8.2} {:>8.2} | {:>7.2} {:>7.2}",
                     rate.label(),
@@ -235,18 +205,14 @@ fn driver(scale: usize) -> Result<()> {
     Ok(())
 }
 
-fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize, wait: Wait) -> Result<Phase> {
+fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize) -> Result<Phase> {
     // A fresh bus and publisher per phase, so nothing of a previous phase lingers.
     let bus = Bus::open(domain, "bench-fanout-pub", ServiceId::Tool, 0, Stats::new())?;
     let mut publ = bus.publisher::<VehicleState>(&bench_topic())?;
     let mut children = Vec::with_capacity(subs);
     for _ in 0..subs {
-        let (child, mut out) = spawn_child(&[
-            "--iox-sub".into(),
-            domain.name.clone(),
-            n.to_string(),
-            wait.arg().into(),
-        ])?;
+        let (child, mut out) =
+            spawn_child(&["--iox-sub".into(), domain.name.clone(), n.to_string()])?;
         expect_line(&mut out, "ready")?;
         children.push((child, out));
     }
@@ -271,7 +237,7 @@ fn iox_run(domain: &Domain, rate: Rate, n: usize, subs: usize, wait: Wait) -> Re
     })
 }
 
-fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
+fn iox_receiver(domain: &str, n: usize) -> Result<()> {
     let domain = Domain::load(domain, None)?;
     let bus = Bus::open(
         &domain,
@@ -281,8 +247,8 @@ fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
         Stats::new(),
     )?;
     let mut tally = Tally::new(n, WARMUP);
-    // Blocks in the kernel (no spin), as the UDP child blocks in `recv`.
-    let take = |s: VehicleState| -> Result<bool> {
+    // Waits in the kernel (no spin), as the UDP child blocks in `recv`.
+    let mut take = |s: VehicleState| -> Result<bool> {
         let t1 = monotonic_ns();
         ensure!(
             s.vehicle_id == VEHICLE,
@@ -293,32 +259,20 @@ fn iox_receiver(domain: &str, n: usize, wait: Wait) -> Result<()> {
         tally.add(k, s.header.stamp_ns, t1);
         Ok(k + 1 >= n)
     };
-    match wait {
-        Wait::Word => {
-            let sub = bus.blocking_subscriber::<VehicleState>(&bench_topic())?;
-            receive_all(|| sub.recv_blocking(Some(IDLE_END)), take)?;
-        }
-        Wait::Event => {
-            let sub = bus.subscriber::<VehicleState>(&bench_topic())?;
-            receive_all(|| sub.recv_blocking(Some(IDLE_END)), take)?;
-        }
-    }
-    tally.report()
-}
-
-/// Says `ready`, then hands every sample `recv` returns to `take` until it has the
-/// last or `recv` times out.
-fn receive_all(
-    mut recv: impl FnMut() -> Result<Option<VehicleState>, IpcError>,
-    mut take: impl FnMut(VehicleState) -> Result<bool>,
-) -> Result<()> {
+    let mut sub = bus.subscriber::<VehicleState>(&bench_topic())?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
     println!("ready");
-    while let Some(s) = recv()? {
-        if take(s)? {
-            break;
+    rt.block_on(async {
+        while let Some(s) = sub.recv_timeout(IDLE_END).await? {
+            if take(s)? {
+                break;
+            }
         }
-    }
-    Ok(())
+        anyhow::Ok(())
+    })?;
+    tally.report()
 }
 
 fn udp_run(rate: Rate, n: usize, subs: usize) -> Result<Phase> {

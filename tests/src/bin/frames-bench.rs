@@ -6,7 +6,7 @@
 //! cargo run --release -p skymesh-e2e --bin frames-bench [-- FRAMES_PER_PHASE]
 //! ```
 //!
-//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, ten phases per size in this
+//! For 640×480, 1280×720 and 1920×1080 RGB24 at 30 fps, four phases per size in this
 //! order (fresh child process each), FRAMES_PER_PHASE frames each (default 200), the
 //! first [`WARMUP`] not counted (page faults of fresh mappings, first wake-ups):
 //!
@@ -19,30 +19,18 @@
 //! - `xfer` (transfer only): the frame is already written when the clock starts and
 //!   the receiver does not read the pixels. iceoryx2: the publisher loans and writes
 //!   the frame (not timed); the bus stamps `header.stamp_ns` just before `send`; the
-//!   receiver's time is taken in `recv_blocking_with`'s closure, when it holds the sample
+//!   receiver's time is taken in `recv_with`'s closure, when it holds the sample
 //!   (header read, pixels untouched but the first and last byte checked after the
 //!   clock stopped). Socket: header and pixels already in one buffer, stamped just
 //!   before one `write_all`; receipt after `read_exact` of the whole frame (a socket
 //!   has to move every byte: that is its transfer).
 //!
-//! - `ant`: `xfer` with the iceoryx2 receiver anticipating the next frame
-//!   (`FrameSubscriber::set_anticipate`, [`ANT_MAX_SPIN`]); compared with a fresh
-//!   socket `xfer` phase. The receiver prints its learnt period, windows and hits.
+//! The iceoryx2 receiver awaits `FrameSubscriber::recv_with` in a tokio
+//! current-thread runtime, as the services receive frames.
 //!
-//! - `fx`: `xfer` with the iceoryx2 receiver blocking on the stream's event count
-//!   (`FrameSubscriber::set_futex_wake`) instead of its socket event; compared with a
-//!   fresh socket `xfer` phase.
-//!
-//! - `ew`: `xfer` with the iceoryx2 receiver woken when the publisher *starts* the
-//!   frame (before its loan and pixel write) and polling until it is sent
-//!   (`FrameSubscriber::set_early_wake`, [`ANT_MAX_SPIN`]); compared with a fresh
-//!   socket `xfer` phase. The receiver prints how many frames it polled for and took.
-//!
-//! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_TRACE=1` makes the `ant`
-//! receiver print every frame's latency and anticipation state (stderr);
-//! `FRAMES_BENCH_RX_CPU=1 taskset -c 0 frames-bench` gives the receivers CPU 1 and
+//! `FRAMES_BENCH_ONLY=1920` runs one size; `FRAMES_BENCH_RX_CPU=1 taskset -c 0 frames-bench` gives the receivers CPU 1 and
 //! the sender CPU 0; `FRAMES_BENCH_RX_RT=10` runs the receivers under `SCHED_FIFO`.
-//! `FRAMES_BENCH_MODES=fx,ew` runs those phases only (and their socket phases).
+//! `FRAMES_BENCH_MODES=xfer` runs those phases only.
 //! `FRAMES_BENCH_TX_YIELD=1` makes the iceoryx2 sender yield its CPU
 //! (`sched_yield`) right after each `publish_with`, so a receiver the kernel woke on
 //! the sender's CPU runs before the sender goes to sleep (an experiment, counted in
@@ -52,7 +40,7 @@
 //! frame is `CLOCK_PROCESS_CPUTIME_ID` over the counted frames on each side. In the
 //! iceoryx2 `xfer` phase the sender also measures the loan itself (the call to
 //! `publish_with` until its closure runs: `loan_slice`, which zero-fills the slice)
-//! and the pixel write, per frame, and (also in `ant`) the rest of `publish_with`:
+//! and the pixel write, per frame, and the rest of `publish_with`:
 //! header check, stamp, `send`, notify.
 
 use std::io::{Read, Write};
@@ -64,7 +52,7 @@ use skymesh_e2e::transport_bench::{
     die_with_parent, expect_line, finish_child, percentiles, spawn_child, DomainGuard, Pacer, Rate,
     RxReport, SendCpu, Tally,
 };
-use skymesh_ipc_types::{topics, PixelFormat, ServiceId};
+use skymesh_ipc_types::{topics, FrameHeader, PixelFormat, ServiceId};
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Bus, Domain, Stats};
 
@@ -83,37 +71,13 @@ enum Mode {
     Full,
     /// Transfer only.
     Xfer,
-    /// Transfer only, the iceoryx2 receiver anticipating the next frame
-    /// (`FrameSubscriber::set_anticipate`); its socket phase is `xfer`'s.
-    Ant,
-    /// Transfer only, the iceoryx2 receiver woken through the event count
-    /// (`FrameSubscriber::set_futex_wake`); its socket phase is `xfer`'s.
-    Fx,
-    /// Transfer only, the iceoryx2 receiver woken when the publisher starts the
-    /// frame and polling until it is sent (`FrameSubscriber::set_early_wake`); its
-    /// socket phase is `xfer`'s.
-    Ew,
 }
-
-/// The anticipating receiver's longest poll per frame.
-const ANT_MAX_SPIN: Duration = Duration::from_millis(2);
 
 impl Mode {
     fn arg(self) -> &'static str {
         match self {
             Mode::Full => "full",
             Mode::Xfer => "xfer",
-            Mode::Ant => "ant",
-            Mode::Fx => "fx",
-            Mode::Ew => "ew",
-        }
-    }
-
-    /// The socket phase compared with this one.
-    fn socket(self) -> Mode {
-        match self {
-            Mode::Ant | Mode::Fx | Mode::Ew => Mode::Xfer,
-            m => m,
         }
     }
 
@@ -121,9 +85,6 @@ impl Mode {
         match s {
             "full" => Ok(Mode::Full),
             "xfer" => Ok(Mode::Xfer),
-            "ant" => Ok(Mode::Ant),
-            "fx" => Ok(Mode::Fx),
-            "ew" => Ok(Mode::Ew),
             _ => anyhow::bail!("unknown mode `{s}`"),
         }
     }
@@ -266,7 +227,7 @@ fn driver(frames: usize) -> Result<()> {
             "FRAMES_BENCH_ONLY: no frame size {o} pixels wide (640, 1280 or 1920)"
         );
     }
-    // FRAMES_BENCH_MODES=fx,ew runs those phases only.
+    // FRAMES_BENCH_MODES=xfer runs those phases only.
     let modes: Option<Vec<Mode>> = match std::env::var("FRAMES_BENCH_MODES") {
         Ok(v) => Some(
             v.split(',')
@@ -281,12 +242,12 @@ fn driver(frames: usize) -> Result<()> {
             continue;
         }
         let len = (w * h * 3) as usize;
-        for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx, Mode::Ew] {
+        for mode in [Mode::Full, Mode::Xfer] {
             if modes.as_ref().is_some_and(|m| !m.contains(&mode)) {
                 continue;
             }
             let iox = iox_run(w, h, frames, mode)?;
-            let uds = uds_run(len, frames, mode.socket())?;
+            let uds = uds_run(len, frames, mode)?;
             let (pi, pu) = (iox.p(), uds.p());
             for (via, ph, p) in [("iox", &iox, pi), ("uds", &uds, pu)] {
                 println!(
@@ -329,7 +290,7 @@ fn driver(frames: usize) -> Result<()> {
             iox_p.push((w, mode, pi));
         }
     }
-    println!("iceoryx2 publisher, per frame (xfer, ant, fx and ew phases): µs");
+    println!("iceoryx2 publisher, per frame (xfer phases): µs");
     println!(
         "{:>9} {:>4} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
         "size",
@@ -361,7 +322,7 @@ fn driver(frames: usize) -> Result<()> {
             se[2] / 1e3,
         );
     }
-    for mode in [Mode::Full, Mode::Xfer, Mode::Ant, Mode::Fx, Mode::Ew] {
+    for mode in [Mode::Full, Mode::Xfer] {
         let find = |w: u32| iox_p.iter().find(|e| e.0 == w && e.1 == mode).map(|e| e.2);
         if let (Some(small), Some(big)) = (find(640), find(1920)) {
             println!(
@@ -432,7 +393,7 @@ fn iox_run(w: u32, h: u32, frames: usize, mode: Mode) -> Result<Phase> {
     drop(publ);
     drop(bus);
     let (loan, write, send) = match mode {
-        Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => (loan, write, send),
+        Mode::Xfer => (loan, write, send),
         Mode::Full => (Vec::new(), Vec::new(), Vec::new()),
     };
     Ok(Phase {
@@ -448,22 +409,14 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
     let domain = Domain::load(domain, None)?;
     let bus = Bus::open(&domain, "bench-reader", ServiceId::Tool, 0, Stats::new())?;
     let mut sub = bus.frame_subscriber(&topics::camera_frames("bench"))?;
-    if mode == Mode::Ant {
-        sub.set_anticipate(ANT_MAX_SPIN);
-    }
-    if mode == Mode::Fx {
-        sub.set_futex_wake()?;
-    }
-    if mode == Mode::Ew {
-        sub.set_early_wake(ANT_MAX_SPIN)?;
-    }
-    // Read once: not an environment lookup per frame in the counted receive CPU.
-    let trace = env_flag("FRAMES_BENCH_TRACE")?;
     let mut tally = Tally::new(frames, WARMUP);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
     println!("ready");
-    // Blocks in the kernel on the stream's event (`recv_blocking_with`), as the socket
-    // receiver blocks in `read_exact`: the same wake pattern on both sides.
-    while let Some(got) = sub.recv_blocking_with(Some(IDLE_END), |hd, pixels| {
+    // Waits in the kernel on the stream's event (an async `recv_with`, as the
+    // services receive), as the socket receiver blocks in `read_exact`.
+    let read = |hd: &FrameHeader, pixels: &[u8]| {
         let k = hd.frame_seq as usize;
         match mode {
             Mode::Full => {
@@ -471,7 +424,7 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
                 let t1 = monotonic_ns();
                 (k, hd.capture_mono_ns, t1, pixels.len(), sum, (0, 0))
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
+            Mode::Xfer => {
                 let t1 = monotonic_ns();
                 let ends = (
                     pixels.first().copied().unwrap_or(0),
@@ -480,36 +433,20 @@ fn iox_receiver(domain: &str, len: usize, frames: usize, mode: Mode) -> Result<(
                 (k, hd.header.stamp_ns, t1, pixels.len(), 0, ends)
             }
         }
-    })? {
-        let (k, t0, t1, n, sum, ends) = got;
+    };
+    while let Ok(got) =
+        rt.block_on(async { tokio::time::timeout(IDLE_END, sub.recv_with(read)).await })
+    {
+        let (k, t0, t1, n, sum, ends) = got?;
         ensure!(n == len, "frame {k}: {n} bytes, expected {len}");
         match mode {
             Mode::Full => check_sum(k, n, sum)?,
-            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => check_ends(k, ends)?,
+            Mode::Xfer => check_ends(k, ends)?,
         }
         tally.add(k, t0, t1);
-        if trace {
-            if let Some(a) = sub.anticipation() {
-                eprintln!("k {k} stamp {t0} lat {} {a:?}", t1 - t0);
-            }
-        }
         if k + 1 >= frames {
             break;
         }
-    }
-    if let Some(a) = sub.anticipation() {
-        eprintln!(
-            "    (ant receiver: period {:.3} ms, {} windows, {} frames taken while polling)",
-            a.period.map_or(f64::NAN, |p| p.as_secs_f64() * 1e3),
-            a.windows,
-            a.hits
-        );
-    }
-    if let Some(e) = sub.early_wake() {
-        eprintln!(
-            "    (ew receiver: {} frames polled for from their start, {} taken while polling)",
-            e.polls, e.hits
-        );
     }
     tally.report()
 }
@@ -542,7 +479,7 @@ fn uds_run(len: usize, frames: usize, mode: Mode) -> Result<Phase> {
                 buf[HEAD..].fill(fill_value(k));
                 t0
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
+            Mode::Xfer => {
                 buf[HEAD..].fill(fill_value(k));
                 monotonic_ns()
             }
@@ -588,7 +525,7 @@ fn uds_receiver(path: &str, len: usize, frames: usize, mode: Mode) -> Result<()>
                 check_sum(k, n, sum)?;
                 tally.add(k, t0, t1);
             }
-            Mode::Xfer | Mode::Ant | Mode::Fx | Mode::Ew => {
+            Mode::Xfer => {
                 let t1 = monotonic_ns();
                 check_ends(k, (buf[0], buf[len - 1]))?;
                 tally.add(k, t0, t1);

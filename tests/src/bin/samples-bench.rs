@@ -8,33 +8,17 @@
 //! ```
 //!
 //! **One way**, at 100 Hz (500 messages), 1 kHz (2,000) and back to back (2,000),
-//! `SCALE` multiplying the counts, nine receivers per rate, in this order:
-//! - `iox blk`: `Subscriber::recv_blocking` — the thread blocks in the kernel on the
-//!   topic's event, like a blocking socket `recv` (same wake pattern as `udp blk`);
-//! - `iox fx`: `recv_blocking` after `Subscriber::set_futex_wake`: the thread blocks
-//!   on the topic's event count, a futex word (one system call per wake-up, against
-//!   the socket event's two);
-//! - `iox bs`: `BlockingSubscriber::recv_blocking`: the bus's subscriber for one
-//!   thread (iceoryx2's single-thread flavour, without the thread-safe port's mutex)
-//!   on the same event count;
+//! `SCALE` multiplying the counts, five receivers per rate, in this order:
 //! - `iox raw`: raw iceoryx2 ports, none of skymesh's code: thread-safe
-//!   publish-subscribe and iceoryx2's semaphore event, `send_copy` + `notify`,
-//!   the receiver blocked in the listener's wait — what iceoryx2's own blocking
-//!   wake-up costs;
-//! - `iox word`: the same publish-subscribe woken through the bus's event count
-//!   (`skymesh_runtime::TopicWord`) without the rest of the bus: `iox fx` minus
-//!   skymesh's publisher and subscriber;
+//!   publish-subscribe and its socket event, `send_copy` + `notify`, the receiver
+//!   blocked in the listener's wait — what iceoryx2's own blocking wake-up costs;
 //! - `udp blk`: `std::net::UdpSocket::recv`, blocking;
 //! - `udp blk2`: a second `udp blk` receiver, the comparison's noise floor: with
 //!   `--interleave`, the row `u÷i udp2` is UDP against itself, and how far its
 //!   ratios stray from 1 is how far the host alone moves a ratio in that run;
 //! - `iox tok`: `Subscriber::recv` awaited in a tokio current-thread runtime (event
 //!   wake-up through epoll: how the services receive);
-//! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime;
-//! - `iox ant`: `recv_blocking` with `Subscriber::set_anticipate` ([`ANT_MAX_SPIN`]):
-//!   wakes on a timer just before the next sample is due and polls for it (compared
-//!   with `udp blk`; `SAMPLES_BENCH_TRACE=1` prints every sample's latency and the
-//!   anticipation's windows and hits).
+//! - `udp tok`: `tokio::net::UdpSocket::recv` in the same kind of runtime.
 //!
 //! `--interleave` runs a rate's receivers at once, the sender taking turns message by
 //! message, so whatever the host does falls on all of them alike (back to back stays
@@ -54,11 +38,12 @@
 //! topic holds a whole phase (nothing overwritten), so back to back both transports
 //! queue; that row measures queueing and the per-message cost, not wake-ups.
 //!
-//! **Ping-pong** (the low-latency option): the parent sends a sample, the child sends
-//! it straight back, 2,000 × `SCALE` round trips back to back; one-way latency =
-//! round trip / 2. `busy`: both sides poll shared memory and never block (the floor
-//! of this machine); `spin`: `Subscriber::set_spin(SPIN)` then block; `block`: block
-//! at once; `udp`: blocking sockets. CPU is per round trip on each side.
+//! **Ping-pong**: the parent sends a sample, the child sends it straight back, 2,000 ×
+//! `SCALE` round trips back to back; one-way latency = round trip / 2. `busy`: both
+//! sides poll shared memory with `try_recv` and never block (the floor of this
+//! machine); `block`: both sides await `Subscriber::recv` in a tokio current-thread
+//! runtime (the services' receive); `udp`: blocking sockets. CPU is per round trip
+//! on each side.
 
 use std::io::{BufReader, Write};
 use std::net::UdpSocket;
@@ -66,13 +51,6 @@ use std::process::{Child, ChildStdout};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
-use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
-use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
-use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
-use iceoryx2_cal::{
-    arc_sync_policy, bag, dynamic_storage, event, hash, monitoring, reactor,
-    resizable_shared_memory, serialize, shared_memory, static_storage, zero_copy_connection,
-};
 use skymesh_e2e::transport_bench::{
     bench_state, datagram_fields, die_with_parent, finish_child, percentiles, process_cpu_ns,
     read_line, recv_until_idle, retry_interrupted, send_loop, spawn_child, stamp_datagram,
@@ -80,7 +58,7 @@ use skymesh_e2e::transport_bench::{
 };
 use skymesh_ipc_types::{ServiceId, Topic, TopicQos, VehicleState};
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::{Bus, Domain, Stats, TopicWord};
+use skymesh_runtime::{Bus, Domain, Stats};
 
 /// Messages at the start of each phase not counted (first wake-ups, page faults).
 const WARMUP: usize = 50;
@@ -90,15 +68,10 @@ const VEHICLE: u8 = 201;
 const IDLE_END: Duration = Duration::from_secs(2);
 /// Bytes per UDP datagram: exactly a `VehicleState`.
 const LEN: usize = DATAGRAM_LEN;
-/// Spin budget of the low-latency ping-pong.
-const SPIN: Duration = Duration::from_micros(200);
 
 /// How a one-way receiver waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Via {
-    IoxBlocking,
-    /// `recv_blocking` with `Subscriber::set_futex_wake`.
-    IoxFutex,
     UdpBlocking,
     /// A second `udp-blk` receiver, for the comparison's noise floor: `udp-blk` ÷
     /// `udp-blk2` is the same mechanism against itself, so how far its ratios stray
@@ -106,52 +79,28 @@ enum Via {
     UdpBlockingAgain,
     IoxTokio,
     UdpTokio,
-    /// `recv_blocking` with `Subscriber::set_anticipate(ANT_MAX_SPIN)`.
-    IoxAnticipating,
     /// Raw iceoryx2, none of skymesh's code: the thread-safe publish-subscribe
-    /// service and iceoryx2's semaphore event, `send_copy` + `notify`, the
-    /// receiver blocked in the event listener's wait: what iceoryx2's own
-    /// blocking wake-up costs.
+    /// service and its socket event, `send_copy` + `notify`, the receiver blocked in
+    /// the event listener's wait: what iceoryx2's own blocking wake-up costs.
     IoxRaw,
-    /// The same publish-subscribe woken through the bus's event count
-    /// (`TopicWord`: the sender bumps the word and wakes its waiters, the receiver
-    /// sleeps while the word is unchanged and nothing is pending), without the rest
-    /// of the bus: `iox-fx` minus skymesh's publisher and subscriber.
-    IoxWord,
-    /// `recv_blocking` of a `BlockingSubscriber`: the bus's subscriber for one
-    /// thread (iceoryx2's single-thread flavour, no port mutex), on the event count.
-    IoxBlockingSub,
 }
 
-/// The anticipating receiver's longest poll per sample.
-const ANT_MAX_SPIN: Duration = Duration::from_micros(200);
-
 impl Via {
-    const ALL: [Via; 10] = [
-        Via::IoxBlocking,
-        Via::IoxFutex,
-        Via::IoxBlockingSub,
+    const ALL: [Via; 5] = [
         Via::IoxRaw,
-        Via::IoxWord,
         Via::UdpBlocking,
         Via::UdpBlockingAgain,
         Via::IoxTokio,
         Via::UdpTokio,
-        Via::IoxAnticipating,
     ];
 
     fn arg(self) -> &'static str {
         match self {
-            Via::IoxBlocking => "iox-blk",
-            Via::IoxFutex => "iox-fx",
             Via::UdpBlocking => "udp-blk",
             Via::UdpBlockingAgain => "udp-blk2",
             Via::IoxTokio => "iox-tok",
             Via::UdpTokio => "udp-tok",
-            Via::IoxAnticipating => "iox-ant",
             Via::IoxRaw => "iox-raw",
-            Via::IoxWord => "iox-word",
-            Via::IoxBlockingSub => "iox-bs",
         }
     }
 
@@ -163,14 +112,7 @@ impl Via {
     }
 
     fn is_iox(self) -> bool {
-        matches!(
-            self,
-            Via::IoxBlocking
-                | Via::IoxFutex
-                | Via::IoxTokio
-                | Via::IoxAnticipating
-                | Via::IoxBlockingSub
-        )
+        self == Via::IoxTokio
     }
 }
 
@@ -178,18 +120,16 @@ impl Via {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Pong {
     Busy,
-    Spin,
     Block,
     Udp,
 }
 
 impl Pong {
-    const ALL: [Pong; 4] = [Pong::Busy, Pong::Spin, Pong::Block, Pong::Udp];
+    const ALL: [Pong; 3] = [Pong::Busy, Pong::Block, Pong::Udp];
 
     fn arg(self) -> &'static str {
         match self {
             Pong::Busy => "busy",
-            Pong::Spin => "spin",
             Pong::Block => "block",
             Pong::Udp => "udp",
         }
@@ -226,7 +166,7 @@ fn main() -> anyhow::Result<()> {
                         "usage: samples-bench [SCALE] [--only NAME,...] [--interleave]\n\
                          iceoryx2 (skymesh bus) vs loopback UDP, one way at 100 Hz, 1 kHz and\n\
                          back to back, then ping-pong; SCALE multiplies the message counts;\n\
-                         --only runs the named receivers / ping-pong modes (e.g. iox-blk,udp-blk);\n\
+                         --only runs the named receivers / ping-pong modes (e.g. iox-tok,udp-tok);\n\
                          --interleave runs a rate's receivers at once, their messages taking\n\
                          turns (the host's noise falls on all alike; back to back stays apart)"
                     );
@@ -325,13 +265,8 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
             phases.push((via, p, ph));
         }
         for (label, udp, iox) in [
-            ("blk", Via::UdpBlocking, Via::IoxBlocking),
-            ("fx", Via::UdpBlocking, Via::IoxFutex),
-            ("bs", Via::UdpBlocking, Via::IoxBlockingSub),
             ("raw", Via::UdpBlocking, Via::IoxRaw),
-            ("word", Via::UdpBlocking, Via::IoxWord),
             ("tok", Via::UdpTokio, Via::IoxTokio),
-            ("ant", Via::UdpBlocking, Via::IoxAnticipating),
             ("udp2", Via::UdpBlocking, Via::UdpBlockingAgain),
         ] {
             let find = |v: Via| phases.iter().find(|(w, _, _)| *w == v);
@@ -355,8 +290,7 @@ fn driver(scale: usize, wanted: &dyn Fn(&str) -> bool, interleave: bool) -> anyh
     let n = 2000 * scale;
     println!(
         "ping-pong: {n} round trips back to back, one way = round trip / 2 (µs); \
-         spin = {} µs then block; CPU µs per round trip",
-        SPIN.as_micros()
+         CPU µs per round trip"
     );
     println!(
         "{:>7} | {:>8} {:>8} {:>8} {:>9} {:>8} {:>8}",
@@ -466,59 +400,20 @@ fn raw_domain(domain: &str) -> anyhow::Result<Domain> {
     Ok(Domain::load(&format!("{domain}raw"), None)?)
 }
 
-/// `ipc_threadsafe::Service` with iceoryx2's semaphore event in place of its socket
-/// event (an iceoryx2 event listener on a semaphore), for `iox-raw`: iceoryx2's
-/// own blocking wake-up without skymesh. Only its event services are used.
-#[derive(Debug, Clone)]
-struct WakeSvc {}
-
-impl iceoryx2::service::Service for WakeSvc {
-    type StaticStorage = static_storage::recommended::Ipc;
-    type ConfigSerializer = serialize::recommended::Recommended;
-    type PersistentDynamicStorage<T: std::fmt::Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::PersistentIpc<T>;
-    type Bag = bag::recommended::Recommended;
-    type DynamicStorage<T: std::fmt::Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<T>;
-    type ServiceNameHasher = hash::recommended::Recommended;
-    type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
-    type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
-    type Connection = zero_copy_connection::recommended::Ipc;
-    type Event = event::SemaphoreShmCountingBitSet;
-    type Monitoring = monitoring::recommended::Ipc;
-    type Reactor = reactor::recommended::Ipc;
-    type ArcThreadSafetyPolicy<T: Send + std::fmt::Debug + Abandonable> =
-        arc_sync_policy::mutex_protected::MutexProtected<T>;
-    type BlackboardMgmt<KeyType: Send + Sync + std::fmt::Debug + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<KeyType>;
-    type BlackboardPayload = shared_memory::recommended::Ipc<BumpAllocator>;
-    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
-}
-
-impl iceoryx2::service::internal::ServiceInternal<WakeSvc> for WakeSvc {}
-
-/// The raw domain's config under its wake-up prefix, for `iox-raw`'s event.
-fn raw_wake_config(domain: &Domain) -> anyhow::Result<Config> {
-    let mut config = domain.config.clone();
-    config.global.prefix = FileName::new(domain.wake_prefix().as_bytes()).map_err(raw_err)?;
-    Ok(config)
-}
-
-/// `iox-raw`'s services: publish-subscribe on the thread-safe flavour and the
-/// semaphore event ([`WakeSvc`]), laid out as the bus lays out a topic's (the event
-/// under the domain's wake-up prefix).
+/// `iox-raw`'s services: publish-subscribe and event on the thread-safe flavour,
+/// laid out as the bus lays out a topic's.
 struct RawPorts {
     pubsub: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
         ipc_threadsafe::Service,
         VehicleState,
         (),
     >,
-    event: iceoryx2::service::port_factory::event::PortFactory<WakeSvc>,
-    _nodes: (Node<ipc_threadsafe::Service>, Node<WakeSvc>),
+    event: iceoryx2::service::port_factory::event::PortFactory<ipc_threadsafe::Service>,
+    _node: Node<ipc_threadsafe::Service>,
 }
 
 impl RawPorts {
-    /// `via`'s services (`iox-raw`, `iox-word`: one each).
+    /// `via`'s services.
     fn open(domain: &str, via: Via, n: usize) -> anyhow::Result<RawPorts> {
         let domain = raw_domain(domain)?;
         let name: ServiceName = format!("bench/{}", via.arg())
@@ -538,11 +433,7 @@ impl RawPorts {
             .subscriber_max_buffer_size(n.max(1))
             .open_or_create()
             .map_err(raw_err)?;
-        let wake_node = NodeBuilder::new()
-            .config(&raw_wake_config(&domain)?)
-            .create::<WakeSvc>()
-            .map_err(raw_err)?;
-        let event = wake_node
+        let event = node
             .service_builder(&name)
             .event()
             .event_id_max_value(0)
@@ -551,18 +442,9 @@ impl RawPorts {
         Ok(RawPorts {
             pubsub,
             event,
-            _nodes: (node, wake_node),
+            _node: node,
         })
     }
-}
-
-/// `iox-word`'s event count: the bus's own mechanism (`TopicWord`), in the raw
-/// domain, without the bus around it.
-fn open_word(domain: &str) -> anyhow::Result<TopicWord> {
-    Ok(TopicWord::open(
-        &raw_domain(domain)?.wake_prefix(),
-        "bench/iox-word",
-    )?)
 }
 
 /// Starts a shared-memory receiver child and waits until it is subscribed.
@@ -602,10 +484,8 @@ enum Sender {
 
 /// `iox-raw`'s sending end.
 struct RawSender {
-    /// `iox-word`'s; `iox-raw` notifies the event instead.
-    word: Option<TopicWord>,
     publ: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, VehicleState, ()>,
-    notifier: iceoryx2::port::notifier::Notifier<WakeSvc>,
+    notifier: iceoryx2::port::notifier::Notifier<ipc_threadsafe::Service>,
     state: VehicleState,
     _ports: RawPorts,
 }
@@ -620,17 +500,12 @@ struct Link {
 impl Link {
     /// Starts `via`'s receiver child for `n` messages and opens its sender.
     fn start(domain: &Domain, via: Via, n: usize) -> anyhow::Result<Link> {
-        if matches!(via, Via::IoxRaw | Via::IoxWord) {
-            let word = match via {
-                Via::IoxWord => Some(open_word(&domain.name)?),
-                _ => None,
-            };
+        if via == Via::IoxRaw {
             let ports = RawPorts::open(&domain.name, via, n)?;
             let publ = ports.pubsub.publisher_builder().create().map_err(raw_err)?;
             let notifier = ports.event.notifier_builder().create().map_err(raw_err)?;
             let (child, out) = start_shm_receiver(domain, via, n)?;
             let sender = Sender::Raw(Box::new(RawSender {
-                word,
                 publ,
                 notifier,
                 state: bench_state(VEHICLE),
@@ -690,12 +565,7 @@ impl Link {
             raw.state.header.seq = seq;
             raw.state.header.stamp_ns = monotonic_ns();
             raw.publ.send_copy(raw.state).map_err(raw_err)?;
-            match &raw.word {
-                Some(word) => word.wake()?,
-                None => {
-                    raw.notifier.notify().map_err(raw_err)?;
-                }
-            }
+            raw.notifier.notify().map_err(raw_err)?;
         }
         Ok(())
     }
@@ -772,69 +642,26 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
             .build()
     };
     match via {
-        Via::IoxBlocking | Via::IoxFutex | Via::IoxTokio | Via::IoxAnticipating => {
+        Via::IoxTokio => {
             let domain = Domain::load(domain, None)?;
             let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
             let mut sub = bus.subscriber::<VehicleState>(&one_way_topic(via, n))?;
-            if via == Via::IoxAnticipating {
-                sub.set_anticipate(ANT_MAX_SPIN);
-            }
-            if via == Via::IoxFutex {
-                sub.set_futex_wake()?;
-            }
             println!("ready");
-            if via != Via::IoxTokio {
-                let trace = std::env::var_os("SAMPLES_BENCH_TRACE").is_some();
-                while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
-                    if trace {
-                        if let Some(a) = sub.anticipation() {
-                            let lat = monotonic_ns().saturating_sub(s.header.stamp_ns);
-                            eprintln!(
-                                "seq {} lat {} windows {} hits {}",
-                                s.header.seq, lat, a.windows, a.hits
-                            );
-                        }
-                    }
+            rt()?.block_on(async {
+                while let Some(s) = sub.recv_timeout(IDLE_END).await? {
                     if iox_sample(&mut tally, s)? {
                         break;
                     }
                 }
-                if let Some(a) = sub.anticipation() {
-                    eprintln!(
-                        "    (iox-ant receiver: period {:.3} ms, {} windows, {} samples taken while polling)",
-                        a.period.map_or(f64::NAN, |p| p.as_secs_f64() * 1e3),
-                        a.windows,
-                        a.hits
-                    );
-                }
-            } else {
-                rt()?.block_on(async {
-                    while let Some(s) = sub.recv_timeout(IDLE_END).await? {
-                        if iox_sample(&mut tally, s)? {
-                            break;
-                        }
-                    }
-                    anyhow::Ok(())
-                })?;
-            }
-        }
-        Via::IoxBlockingSub => {
-            let domain = Domain::load(domain, None)?;
-            let bus = Bus::open(&domain, "bench-state-sub", ServiceId::Tool, 0, Stats::new())?;
-            let sub = bus.blocking_subscriber::<VehicleState>(&one_way_topic(via, n))?;
-            println!("ready");
-            while let Some(s) = sub.recv_blocking(Some(IDLE_END))? {
-                if iox_sample(&mut tally, s)? {
-                    break;
-                }
-            }
+                anyhow::Ok(())
+            })?;
         }
         Via::IoxRaw => {
             let raw = RawPorts::open(domain, via, n)?;
             let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
             let listener = raw.event.listener_builder().create().map_err(raw_err)?;
             println!("ready");
-            // As `recv_blocking`: look, and block only when nothing is pending.
+            // Look, and block only when nothing is pending.
             'phase: loop {
                 while let Some(smp) = sub.receive().map_err(raw_err)? {
                     let s: VehicleState = *smp.payload();
@@ -844,25 +671,6 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
                     }
                 }
                 listener.blocking_wait(|_| {}).map_err(raw_err)?;
-            }
-        }
-        Via::IoxWord => {
-            let raw = RawPorts::open(domain, via, n)?;
-            let sub = raw.pubsub.subscriber_builder().create().map_err(raw_err)?;
-            let word = open_word(domain)?;
-            println!("ready");
-            // As the bus's futex receive: announce the wait and read the count, look,
-            // and sleep only while the count is unchanged.
-            'phase: loop {
-                let armed = word.arm();
-                while let Some(smp) = sub.receive().map_err(raw_err)? {
-                    let s: VehicleState = *smp.payload();
-                    drop(smp);
-                    if s.header.seq == 0 || iox_sample(&mut tally, s)? {
-                        break 'phase;
-                    }
-                }
-                armed.wait(None)?;
             }
         }
         Via::UdpBlocking | Via::UdpBlockingAgain => {
@@ -894,9 +702,11 @@ fn receiver(via: Via, domain: &str, n: usize) -> anyhow::Result<()> {
     tally.report()
 }
 
-/// Receives the next sample the way `mode` waits (`busy` never blocks).
+/// Receives the next sample the way `mode` waits: `busy` polls with `try_recv`
+/// and never blocks, `block` awaits `recv` on `rt`.
 fn iox_wait(
-    sub: &skymesh_runtime::Subscriber<VehicleState>,
+    sub: &mut skymesh_runtime::Subscriber<VehicleState>,
+    rt: &tokio::runtime::Runtime,
     mode: Pong,
 ) -> anyhow::Result<Option<VehicleState>> {
     if mode == Pong::Busy {
@@ -909,7 +719,14 @@ fn iox_wait(
         }
         return Ok(None);
     }
-    Ok(sub.recv_blocking(Some(IDLE_END))?)
+    Ok(rt.block_on(sub.recv_timeout(IDLE_END))?)
+}
+
+/// A tokio current-thread runtime for the receives of `block`.
+fn pong_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?)
 }
 
 /// Round trips, one-way ns (round trip / 2); CPU per round trip of ping and pong.
@@ -953,9 +770,7 @@ fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>,
         let bus = Bus::open(domain, "bench-ping", ServiceId::Tool, 0, Stats::new())?;
         let mut ping = bus.publisher::<VehicleState>(&bench_topic("ping", total))?;
         let mut pong = bus.subscriber::<VehicleState>(&bench_topic("pong", total))?;
-        if mode == Pong::Spin {
-            pong.set_spin(SPIN);
-        }
+        let rt = pong_runtime()?;
         let (child, mut out) = spawn_child(&[
             "--pong".into(),
             mode.arg().into(),
@@ -974,7 +789,7 @@ fn ping_pong(domain: &Domain, mode: Pong, n: usize) -> anyhow::Result<(Vec<u64>,
             state.time_boot_ms = k as u32;
             let t0 = monotonic_ns();
             ping.publish(state)?;
-            let Some(s) = iox_wait(&pong, mode)? else {
+            let Some(s) = iox_wait(&mut pong, &rt, mode)? else {
                 anyhow::bail!("no pong for ping {k}");
             };
             let t1 = monotonic_ns();
@@ -1020,12 +835,10 @@ fn pong_child(mode: Pong, domain: &str, total: usize) -> anyhow::Result<()> {
         let bus = Bus::open(&domain, "bench-pong", ServiceId::Tool, 0, Stats::new())?;
         let mut ping = bus.subscriber::<VehicleState>(&bench_topic("ping", total))?;
         let mut pong = bus.publisher::<VehicleState>(&bench_topic("pong", total))?;
-        if mode == Pong::Spin {
-            ping.set_spin(SPIN);
-        }
+        let rt = pong_runtime()?;
         println!("ready");
         for k in 0..total {
-            let Some(s) = iox_wait(&ping, mode)? else {
+            let Some(s) = iox_wait(&mut ping, &rt, mode)? else {
                 anyhow::bail!("no ping {k}");
             };
             if k == WARMUP {
