@@ -19,7 +19,13 @@
 //! silently like other malformed frames: the app waits for a GEOFENCE_SET_ACK, so
 //! the gateway answers GEOFENCE_SET_ACK {0, false} and a SHOTMANAGER_ERROR saying
 //! why, and counts it under its malformed kind. Nothing reaches the engine, whose
-//! fence is unchanged.
+//! fence is unchanged. GEOFENCE_CLEAR of the wrong length, and any geofence request
+//! beyond the client's rate ([`rate_limited`]), get the same answer.
+//!
+//! A SPLINE_POINT whose magnitudes are refused ([`magnitudes`]) is answered with the
+//! app's own point and status −4 ([`SPLINE_POINT_FAILED`]): the app waits for one
+//! SPLINE_POINT per SPLINE_POINT, and the engine answers a refused keypoint the same
+//! way.
 
 use bytes::{Bytes, BytesMut};
 use skymesh_ipc_types::{AppGeofence, APP_VALUE_CAPACITY};
@@ -72,6 +78,20 @@ pub fn check(frame: &RawFrame) -> Verdict {
         };
     }
     if let Err(reason) = magnitudes(&message) {
+        if let SoloMessage::SplinePoint(p) = &message {
+            // The app waits for one SPLINE_POINT per SPLINE_POINT: its own point
+            // back with a failure status, as the engine answers a refused keypoint.
+            let failed = SoloMessage::SplinePoint(solo_proto::SplinePoint {
+                status: SPLINE_POINT_FAILED,
+                ..*p
+            });
+            return Verdict::Answer {
+                msg_type: frame.msg_type,
+                kind: Malformed::InvalidValue,
+                reason,
+                replies: vec![failed],
+            };
+        }
         return Verdict::Drop {
             kind: Malformed::InvalidValue,
             reason,
@@ -84,6 +104,36 @@ pub fn check(frame: &RawFrame) -> Verdict {
         return too_large(message, frame.value.len());
     }
     Verdict::Forward(message)
+}
+
+/// SOLO_SPLINE_POINT status "anything else" (the spec's -4), the answer to a
+/// keypoint the gateway refuses.
+pub const SPLINE_POINT_FAILED: i16 = -4;
+
+/// The decision about a frame beyond the client's rate: dropped and counted, but a
+/// geofence request is still answered GEOFENCE_SET_ACK {0, false} (the app waits
+/// for it; the fence is unchanged).
+pub fn rate_limited(frame: &RawFrame, reason: String) -> Verdict {
+    if !is_geofence_request(frame.msg_type) {
+        return Verdict::Drop {
+            kind: Malformed::RateLimited,
+            reason,
+        };
+    }
+    Verdict::Answer {
+        msg_type: frame.msg_type,
+        kind: Malformed::RateLimited,
+        replies: vec![
+            SoloMessage::GeofenceSetAck {
+                count: 0,
+                valid: false,
+            },
+            SoloMessage::ShotManagerError(format!(
+                "skymesh: geofence not set: {reason}. The vehicle's geofence is unchanged."
+            )),
+        ],
+        reason,
+    }
 }
 
 /// Largest altitude or distance the gateway forwards, metres (either sign).
@@ -169,11 +219,14 @@ pub fn magnitudes(m: &SoloMessage) -> Result<(), String> {
     }
 }
 
-/// The app's geofence requests, each answered with a GEOFENCE_SET_ACK.
+/// The app's geofence requests, each answered with a GEOFENCE_SET_ACK (the spec:
+/// after GEOFENCE_SET_DATA, GEOFENCE_UPDATE_POLY or GEOFENCE_CLEAR).
 fn is_geofence_request(msg_type: u32) -> bool {
     matches!(
         msg_type,
-        solo_proto::ids::GEOFENCE_SET_DATA | solo_proto::ids::GEOFENCE_UPDATE_POLY
+        solo_proto::ids::GEOFENCE_SET_DATA
+            | solo_proto::ids::GEOFENCE_UPDATE_POLY
+            | solo_proto::ids::GEOFENCE_CLEAR
     )
 }
 
@@ -443,6 +496,91 @@ mod tests {
             kind(check(&raw(ids::SET_CURRENT_SHOT, &[1, 0, 0]))),
             Malformed::WrongLength
         );
+    }
+
+    #[test]
+    fn a_geofence_clear_of_the_wrong_length_is_answered() {
+        match check(&raw(ids::GEOFENCE_CLEAR, &[1])) {
+            Verdict::Answer { kind, replies, .. } => {
+                assert_eq!(kind, Malformed::WrongLength);
+                assert_eq!(
+                    replies[0],
+                    SoloMessage::GeofenceSetAck {
+                        count: 0,
+                        valid: false
+                    }
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+        let clear = SoloMessage::GeofenceClear;
+        assert_eq!(
+            check(&raw(clear.msg_type(), &value_of(&clear))),
+            Verdict::Forward(clear)
+        );
+    }
+
+    #[test]
+    fn a_rate_limited_geofence_request_is_still_answered() {
+        for t in [
+            ids::GEOFENCE_SET_DATA,
+            ids::GEOFENCE_UPDATE_POLY,
+            ids::GEOFENCE_CLEAR,
+        ] {
+            match rate_limited(&raw(t, &[]), "over the rate".into()) {
+                Verdict::Answer {
+                    msg_type,
+                    kind,
+                    replies,
+                    ..
+                } => {
+                    assert_eq!((msg_type, kind), (t, Malformed::RateLimited));
+                    assert_eq!(
+                        replies[0],
+                        SoloMessage::GeofenceSetAck {
+                            count: 0,
+                            valid: false
+                        }
+                    );
+                }
+                other => panic!("{t}: {other:?}"),
+            }
+        }
+        let pause = SoloMessage::Pause;
+        assert_eq!(
+            kind(rate_limited(&raw(pause.msg_type(), &[]), "x".into())),
+            Malformed::RateLimited
+        );
+    }
+
+    #[test]
+    fn a_refused_spline_point_is_answered_with_a_failure_status() {
+        let p = solo_proto::SplinePoint {
+            version: 0,
+            abs_alt_ref_m: 10.0,
+            index: 3,
+            lat_deg: 37.0,
+            lon_deg: -122.0,
+            alt_m: 1.0e6,
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+            u_position: 0.0,
+            status: 0,
+        };
+        let m = SoloMessage::SplinePoint(p);
+        match check(&raw(m.msg_type(), &value_of(&m))) {
+            Verdict::Answer { kind, replies, .. } => {
+                assert_eq!(kind, Malformed::InvalidValue);
+                assert_eq!(
+                    replies,
+                    vec![SoloMessage::SplinePoint(solo_proto::SplinePoint {
+                        status: SPLINE_POINT_FAILED,
+                        ..p
+                    })]
+                );
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -114,18 +114,18 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
             Err(ReadError::TruncatedFrame { buffered }) => return End::Truncated(buffered),
             Err(ReadError::Frame(FrameError::Io(e))) => return End::Io(e),
         };
-        if !rate.take(Instant::now().into_std()) {
-            ctx.drops.record(
-                Malformed::RateLimited,
-                ctx.peer,
-                &format_args!(
+        let verdict = if rate.take(Instant::now().into_std()) {
+            inbound::check(&frame)
+        } else {
+            inbound::rate_limited(
+                &frame,
+                format!(
                     "type {}: more than {per_s} frames per second (burst {burst}); dropped",
                     frame.msg_type
                 ),
-            );
-            continue;
-        }
-        match inbound::check(&frame) {
+            )
+        };
+        match verdict {
             Verdict::Forward(_) => {
                 metrics.message(Direction::In, frame.msg_type);
                 if let Err(e) =
