@@ -7,12 +7,15 @@
 //! | `skymesh/vehicle/{id}/state` | subscribe | `VehicleState` (body attitude, height above home) |
 //! | `skymesh/vision/control` | subscribe | `VisionControl` |
 //! | `skymesh/vision/reply` | publish | `VisionReply` (one per control) |
+//! | `skymesh/vision/view_control` | subscribe | `ViewControl` (settings of views, detector, tracker) |
+//! | `skymesh/vision/view_reply` | publish | `ViewReply` (one per view control) |
 //! | `skymesh/vision/state` | publish | `VisionState` (written in place) |
 //! | `skymesh/vision/{stream}/output` | publish | output frames, rendered in place |
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, VehicleState, VisionControl, VisionDemand, VisionReply, VisionState, MAX_FRAME_LEN,
+    topics, view, VehicleState, ViewControl, ViewReply, VisionControl, VisionDemand, VisionReply,
+    VisionState, MAX_FRAME_LEN,
 };
 use skymesh_runtime::{Bus, FramePublisher, FrameSubscriber, IpcError, Publisher, Subscriber};
 
@@ -34,6 +37,7 @@ pub struct Ports {
     pub streams: Vec<StreamPorts>,
     pub vehicle: Subscriber<VehicleState>,
     pub control: Subscriber<VisionControl>,
+    pub view: Subscriber<ViewControl>,
     pub demand: Subscriber<VisionDemand>,
     pub sinks: Sinks,
 }
@@ -43,6 +47,7 @@ pub struct Ports {
 #[derive(Debug)]
 pub struct Sinks {
     reply: Publisher<VisionReply>,
+    view_reply: Publisher<ViewReply>,
     state: Publisher<VisionState>,
 }
 
@@ -69,6 +74,9 @@ impl Ports {
             control: bus
                 .subscriber(&topics::vision_control())
                 .context("opening the vision control topic")?,
+            view: bus
+                .subscriber(&view::view_control())
+                .context("opening the view control topic")?,
             demand: bus
                 .subscriber(&topics::vision_demand())
                 .context("opening the vision demand topic")?,
@@ -76,6 +84,9 @@ impl Ports {
                 reply: bus
                     .publisher(&topics::vision_reply())
                     .context("opening the vision reply topic")?,
+                view_reply: bus
+                    .publisher(&view::view_reply())
+                    .context("opening the view reply topic")?,
                 state: bus
                     .publisher(&topics::vision_state())
                     .context("opening the vision state topic")?,
@@ -119,6 +130,10 @@ impl Ports {
 impl Sinks {
     pub fn reply(&mut self, reply: VisionReply) -> Result<(), IpcError> {
         self.reply.publish(reply).map(|_| ())
+    }
+
+    pub fn view_reply(&mut self, reply: ViewReply) -> Result<(), IpcError> {
+        self.view_reply.publish(reply).map(|_| ())
     }
 
     /// Publishes the state, written in place (it is several KiB).

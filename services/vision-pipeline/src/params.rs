@@ -1,29 +1,35 @@
-//! The DigiView parameter state and every [`VisionControl`] → what to do, per the
-//! document's SET behaviour (`digiview-vision.md`, FACTS.md). Pure: no bus, no
-//! frames. Parameters that live in other modules' objects (virtual cameras, the
-//! single-target tracker, captures) come back as an [`Effect`] the service applies;
-//! what is kept here (AI, VIDEO_OUTPUT, DETECTION) is changed here.
+//! The pipeline's settings and every [`ViewControl`] / [`VisionControl`] → what to
+//! do. Pure: no bus, no frames. Settings that live in other modules' objects
+//! (virtual cameras, the single-target tracker, captures) come back as an [`Effect`]
+//! the service applies; what is kept here (detector, output, tracker thresholds) is
+//! changed here.
 //!
-//! | parameter | SET here |
+//! | view control | here |
 //! |---|---|
-//! | AI | enabled; model names must be in [`MODELS`] (else Ignored); an empty name keeps the current model |
-//! | VIDEO_OUTPUT | width/height clamped to 1920/1080, below 640/480 → Ignored; layout > 6, overlay > 5 unchanged; views, boxes and fps are computed, not set |
-//! | CAPTURE | → [`Effect::Capture`] |
-//! | DETECTION | sorting > 2 keeps; thresholds outside 0..0.99 keep; score bytes 255 keep |
-//! | CAM_TARGETING, CAM_OPTICS_AND_CONTROL | range-checked, → [`Effect::Targeting`] / [`Effect::Optics`] |
-//! | SINGLE_TARGET_TRACKING | range-checked, → [`Effect::Stt`] |
-//! | SENSOR, CAM_DEPTH_ESTIMATION | Unsupported (disabled, as in DigiView) |
-//! | SYSTEM_STATUS, MODEL, DETECTED_ROI, CAM_OFFSET | Invalid (not settable) |
+//! | `Ai` | enabled; model names must be in [`MODELS`] (else Ignored); an empty name keeps the current model |
+//! | `Output` | width/height clamped to 1920/1080, below 640/480 → Ignored; layout > 6, overlay > 5 unchanged; views and boxes are computed, not set |
+//! | `Capture` | → [`Effect::Capture`] |
+//! | `Detection` | sorting > 2 keeps; thresholds outside 0..0.99 keep; scores of [`SCORE_KEEP`] keep |
+//! | `Targeting`, `Optics` | range-checked (Invalid), → [`Effect::Targeting`] / [`Effect::Optics`] |
+//! | `SingleTarget` | range-checked, → [`Effect::Stt`] |
+//! | `DirectionAt` | offsets within −1..1, → [`Effect::DirectionAt`] |
 //!
-//! An unknown stream name or a camera outside 0..4 is Ignored (the document:
-//! "the operation is ignored"); an undecodable payload is Invalid with the error.
+//! An unknown stream name or a camera outside 0..4 is Ignored ("the operation is
+//! ignored"); a value out of range or not finite is Invalid with the field's name.
 
-use digiview_proto::{CamOpticsAndControl, CamTargeting, Param, ParamType, DATA_LEN, SCORE_KEEP};
-use skymesh_ipc_types::{VisionControl, VisionControlKind, VisionResult, VISION_MAX_CAMS};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use skymesh_ipc_types::view::SCORE_KEEP;
+use skymesh_ipc_types::{
+    CropMode, FixedStr, ReferenceFrame, TargetingMode, TrackCommand, ViewControl, ViewControlKind,
+    VisionControl, VisionControlKind, VisionResult, LOCK_PITCH, LOCK_ROLL, LOCK_YAW,
+    VISION_MAX_CAMS,
+};
 
 use crate::detect::MODELS;
 use crate::geometry::GeoPosition;
 use crate::track::TrackerParams;
+use crate::views::{Optics, Targeting, ZOOM_MAX, ZOOM_MIN};
 
 /// MAVLink GIMBAL_MANAGER_FLAGS_YAW_LOCK.
 pub const GIMBAL_YAW_LOCK: u32 = 16;
@@ -113,12 +119,19 @@ pub enum Effect {
     Targeting {
         stream: usize,
         cam: u8,
-        targeting: CamTargeting,
+        targeting: Targeting,
     },
     Optics {
         stream: usize,
         cam: u8,
-        optics: CamOpticsAndControl,
+        optics: Optics,
+    },
+    /// Answer with the direction at offset (x, y) of the camera's view.
+    DirectionAt {
+        stream: usize,
+        cam: u8,
+        x: f64,
+        y: f64,
     },
     Stt {
         stream: usize,
@@ -239,7 +252,9 @@ impl Params {
         let kind = VisionControlKind::try_from(c.kind)
             .map_err(|_| Refusal::invalid(format!("unknown control kind {}", c.kind)))?;
         match kind {
-            VisionControlKind::DigiViewSet => self.digiview_set(c.param, &c.data),
+            VisionControlKind::DigiViewSet => Err(Refusal::invalid(
+                "settings come as a ViewControl, not as protocol payloads",
+            )),
             VisionControlKind::GimbalAttitude => {
                 let stream = self.stream_at(c.stream)?;
                 let cam = Self::cam(c.cam)?;
@@ -321,31 +336,14 @@ impl Params {
         }
     }
 
-    /// A DigiView SET of parameter type `param` with payload `data`.
-    pub fn digiview_set(&mut self, param: u8, data: &[u8; DATA_LEN]) -> Result<Effect, Refusal> {
-        let ptype = ParamType::from_u8(param)
-            .ok_or_else(|| Refusal::invalid(format!("unknown parameter type {param}")))?;
-        match ptype {
-            ParamType::SystemStatus
-            | ParamType::Model
-            | ParamType::DetectedRoi
-            | ParamType::CamOffset => {
-                return Err(Refusal::invalid(format!(
-                    "{} is not settable",
-                    ptype.name()
-                )))
-            }
-            ParamType::Sensor | ParamType::CamDepthEstimation => {
-                return Err(Refusal::unsupported(format!(
-                    "{} is disabled, as in DigiView",
-                    ptype.name()
-                )))
-            }
-            _ => {}
-        }
-        let p = Param::decode(ptype, data).map_err(|e| Refusal::invalid(e.to_string()))?;
-        match p {
-            Param::Ai(a) => {
+    /// Applies one [`ViewControl`]: `Ok` = Applied (with what is left to do),
+    /// `Err` = the reply.
+    pub fn apply_view(&mut self, c: &ViewControl) -> Result<Effect, Refusal> {
+        let kind = c
+            .kind()
+            .map_err(|_| Refusal::invalid(format!("unknown view control kind {}", c.kind)))?;
+        match kind {
+            ViewControlKind::Ai => {
                 let pick = |name: &str, current: &str| -> Result<String, Refusal> {
                     if name.is_empty() {
                         Ok(current.to_string())
@@ -358,137 +356,214 @@ impl Params {
                         )))
                     }
                 };
-                let scan = pick(a.scan_model.as_str(), &self.scan_model)?;
-                let track = pick(a.track_model.as_str(), &self.track_model)?;
-                self.ai_enabled = a.enabled;
+                let scan = pick(text(&c.scan_model, "scan model")?, &self.scan_model)?;
+                let track = pick(text(&c.track_model, "track model")?, &self.track_model)?;
+                self.ai_enabled = c.ai_enabled != 0;
                 self.scan_model = scan;
                 self.track_model = track;
                 Ok(Effect::AiChanged)
             }
-            Param::VideoOutput(v) => {
-                let i = self.stream_named(v.stream.as_str())?;
-                if v.width < 640 || v.height < 480 {
+            ViewControlKind::Output => {
+                let i = self.stream_named(text(&c.stream, "stream")?)?;
+                if c.width < 640 || c.height < 480 {
                     return Err(Refusal::ignored(format!(
                         "{}x{} is below 640x480",
-                        v.width, v.height
+                        c.width, c.height
                     )));
                 }
                 let s = &mut self.streams[i];
-                s.out_width = v.width.min(1920);
-                s.out_height = v.height.min(1080);
-                if v.layout_mode <= 6 {
-                    s.layout_mode = v.layout_mode;
+                s.out_width = c.width.min(1920);
+                s.out_height = c.height.min(1080);
+                if c.layout_mode <= 6 {
+                    s.layout_mode = c.layout_mode;
                 }
-                if v.overlay_mode <= 5 {
-                    s.overlay_mode = v.overlay_mode;
+                if c.overlay_mode <= 5 {
+                    s.overlay_mode = c.overlay_mode;
                 }
                 Ok(Effect::Changed)
             }
-            Param::Capture(c) => Ok(Effect::Capture {
-                stream: self.stream_named(c.stream.as_str())?,
-                single_image: c.single_image,
-                record: Some(c.record_video),
+            ViewControlKind::Capture => Ok(Effect::Capture {
+                stream: self.stream_named(text(&c.stream, "stream")?)?,
+                single_image: c.capture_image != 0,
+                record: Some(c.record != 0),
             }),
-            Param::Detection(d) => {
+            ViewControlKind::Detection => {
                 let t = &mut self.tracker;
-                self.detection_mode = d.mode;
-                if d.sorting_mode <= 2 {
-                    t.sorting_mode = d.sorting_mode;
+                self.detection_mode = c.detection_mode;
+                if c.sorting_mode <= 2 {
+                    t.sorting_mode = c.sorting_mode;
                 }
                 let ratio = |v: f64, old: &mut f32| {
                     if (0.0..0.99).contains(&v) {
                         *old = v as f32;
                     }
                 };
-                ratio(d.track_confidence, &mut t.track_confidence);
-                ratio(d.scan_confidence, &mut t.scan_confidence);
-                ratio(d.track_overlap, &mut t.track_overlap);
-                ratio(d.scan_overlap, &mut t.scan_overlap);
+                ratio(c.track_confidence, &mut t.track_confidence);
+                ratio(c.scan_confidence, &mut t.scan_confidence);
+                ratio(c.track_overlap, &mut t.track_overlap);
+                ratio(c.scan_overlap, &mut t.scan_overlap);
                 let score = |v: u8, old: &mut u8| {
                     if v != SCORE_KEEP {
                         *old = v;
                     }
                 };
-                score(d.creation_score, &mut t.creation_score);
-                score(d.bonus_detection, &mut t.bonus_detection);
-                score(d.bonus_redetection, &mut t.bonus_redetection);
-                score(d.missed_detection_penalty, &mut t.missed_detection_penalty);
+                score(c.creation_score, &mut t.creation_score);
+                score(c.bonus_detection, &mut t.bonus_detection);
+                score(c.bonus_redetection, &mut t.bonus_redetection);
+                score(c.missed_detection_penalty, &mut t.missed_detection_penalty);
                 score(
-                    d.missed_redetection_penalty,
+                    c.missed_redetection_penalty,
                     &mut t.missed_redetection_penalty,
                 );
                 Ok(Effect::Changed)
             }
-            Param::CamTargeting(t) => {
-                let stream = self.stream_named(t.stream.as_str())?;
-                let cam = Self::cam(t.cam)?;
-                p.validate().map_err(|e| Refusal::invalid(e.to_string()))?;
+            ViewControlKind::Targeting => {
+                let stream = self.stream_named(text(&c.stream, "stream")?)?;
+                let cam = Self::cam(c.cam)?;
+                if TargetingMode::try_from(c.targeting_mode).is_err() {
+                    return Err(Refusal::invalid(format!(
+                        "targeting mode {} is not one of 0-3",
+                        c.targeting_mode
+                    )));
+                }
+                range("yaw", c.yaw_rad, -PI, PI)?;
+                range("pitch", c.pitch_rad, -FRAC_PI_2, FRAC_PI_2)?;
+                range("roll", c.roll_rad, -FRAC_PI_2, FRAC_PI_2)?;
+                if c.lock_flags > LOCK_YAW | LOCK_PITCH | LOCK_ROLL {
+                    return Err(Refusal::invalid(format!(
+                        "lock flags {:#b} name an unknown axis",
+                        c.lock_flags
+                    )));
+                }
+                offsets(c)?;
+                range("latitude", c.lat_deg, -90.0, 90.0)?;
+                range("longitude", c.lon_deg, -180.0, 180.0)?;
+                if c.lon_deg == 180.0 {
+                    return Err(Refusal::invalid("longitude 180 is -180"));
+                }
+                range("altitude", c.alt_rel_m, -1000.0, 10000.0)?;
                 Ok(Effect::Targeting {
                     stream,
                     cam,
-                    targeting: t,
+                    targeting: Targeting {
+                        mode: c.targeting_mode,
+                        euler_delta: c.euler_delta != 0,
+                        yaw: c.yaw_rad,
+                        pitch: c.pitch_rad,
+                        roll: c.roll_rad,
+                        lock_flags: c.lock_flags,
+                        x_offset: c.x_offset,
+                        y_offset: c.y_offset,
+                        latitude: c.lat_deg,
+                        longitude: c.lon_deg,
+                        altitude: c.alt_rel_m,
+                    },
                 })
             }
-            Param::CamOpticsAndControl(o) => {
-                let stream = self.stream_named(o.stream.as_str())?;
-                let cam = Self::cam(o.cam)?;
-                p.validate().map_err(|e| Refusal::invalid(e.to_string()))?;
+            ViewControlKind::Optics => {
+                let stream = self.stream_named(text(&c.stream, "stream")?)?;
+                let cam = Self::cam(c.cam)?;
+                range("zoom", f64::from(c.zoom), ZOOM_MIN, ZOOM_MAX)?;
+                range("fov", c.fov_rad, 0.0, PI)?;
+                if CropMode::try_from(c.crop_mode).is_err() {
+                    return Err(Refusal::invalid(format!(
+                        "crop mode {} is not one of 0-2",
+                        c.crop_mode
+                    )));
+                }
                 Ok(Effect::Optics {
                     stream,
                     cam,
-                    optics: o,
+                    optics: Optics {
+                        zoom: c.zoom,
+                        fov: c.fov_rad,
+                        crop_mode: c.crop_mode,
+                    },
                 })
             }
-            Param::SingleTargetTracking(s) => {
-                let stream = self.stream_named(s.stream.as_str())?;
-                let cam = Self::cam(s.cam)?;
-                p.validate().map_err(|e| Refusal::invalid(e.to_string()))?;
-                let request = match s.command {
-                    0 => SttRequest::Disable,
-                    1 if s.rel_frame == 0 => SttRequest::Global {
-                        yaw: s.yaw_global,
-                        pitch: s.pitch_global,
+            ViewControlKind::SingleTarget => {
+                let stream = self.stream_named(text(&c.stream, "stream")?)?;
+                let cam = Self::cam(c.cam)?;
+                let command = TrackCommand::try_from(c.track_command).map_err(|_| {
+                    Refusal::invalid(format!("unknown track command {}", c.track_command))
+                })?;
+                let reference = ReferenceFrame::try_from(c.reference).map_err(|_| {
+                    Refusal::invalid(format!("unknown reference frame {}", c.reference))
+                })?;
+                offsets(c)?;
+                range("zoom", f64::from(c.track_zoom), 0.0, 10.0)?;
+                range("yaw", c.yaw_rad, -PI, PI)?;
+                range("pitch", c.pitch_rad, -FRAC_PI_2, FRAC_PI_2)?;
+                let request = match command {
+                    TrackCommand::Disable => SttRequest::Disable,
+                    TrackCommand::Direction if reference == ReferenceFrame::Global => {
+                        SttRequest::Global {
+                            yaw: c.yaw_rad,
+                            pitch: c.pitch_rad,
+                        }
+                    }
+                    TrackCommand::Direction => SttRequest::ViewOffset {
+                        x: c.x_offset,
+                        y: c.y_offset,
                     },
-                    1 => SttRequest::ViewOffset {
-                        x: s.x_offset,
-                        y: s.y_offset,
+                    TrackCommand::Detection => SttRequest::Detection(c.detection_id),
+                    TrackCommand::Nudge => SttRequest::Nudge {
+                        x: c.x_offset,
+                        y: c.y_offset,
                     },
-                    2 => SttRequest::Detection(s.detection_id),
-                    3 => SttRequest::Nudge {
-                        x: s.x_offset,
-                        y: s.y_offset,
-                    },
-                    _ => SttRequest::NoOp,
+                    TrackCommand::NoOp => SttRequest::NoOp,
                 };
                 Ok(Effect::Stt {
                     stream,
                     cam,
                     request,
-                    zoom_level: s.zoom,
-                    rel_frame: s.rel_frame,
+                    zoom_level: c.track_zoom,
+                    rel_frame: reference.to_wire(),
                 })
             }
-            // Refused above.
-            Param::SystemStatus(_)
-            | Param::Model(_)
-            | Param::DetectedRoi(_)
-            | Param::CamOffset(_)
-            | Param::Sensor(_)
-            | Param::CamDepthEstimation(_) => Err(Refusal::invalid(format!(
-                "{} is not settable",
-                ptype.name()
-            ))),
+            ViewControlKind::DirectionAt => {
+                let stream = self.stream_named(text(&c.stream, "stream")?)?;
+                let cam = Self::cam(c.cam)?;
+                offsets(c)?;
+                Ok(Effect::DirectionAt {
+                    stream,
+                    cam,
+                    x: c.x_offset,
+                    y: c.y_offset,
+                })
+            }
         }
     }
+}
+
+/// A name from another process: refused if it is not UTF-8.
+fn text<'a, const N: usize>(s: &'a FixedStr<N>, what: &str) -> Result<&'a str, Refusal> {
+    s.try_as_str()
+        .ok_or_else(|| Refusal::invalid(format!("{what} is not UTF-8")))
+}
+
+/// `v` finite and within `min..=max`.
+fn range(name: &str, v: f64, min: f64, max: f64) -> Result<(), Refusal> {
+    if !v.is_finite() {
+        return Err(Refusal::invalid(format!("{name} is not finite")));
+    }
+    if v < min || v > max {
+        return Err(Refusal::invalid(format!(
+            "{name} {v} is outside [{min}, {max}]"
+        )));
+    }
+    Ok(())
+}
+
+/// The view offsets of `c`, each within −1..1.
+fn offsets(c: &ViewControl) -> Result<(), Refusal> {
+    range("x offset", c.x_offset, -1.0, 1.0)?;
+    range("y offset", c.y_offset, -1.0, 1.0)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use digiview_proto::{
-        Ai, BoundingBox, Capture, Detection, ModelName, SingleTargetTracking, StreamName,
-        VideoOutput,
-    };
     use skymesh_ipc_types::VisionOrigin;
 
     fn params() -> Params {
@@ -517,40 +592,32 @@ mod tests {
         }
     }
 
-    fn set(p: &mut Params, param: &Param) -> Result<Effect, Refusal> {
-        let (t, data) = param.encode();
-        let c = VisionControl {
+    /// A control of `kind` for stream `stream`.
+    fn ctl(kind: ViewControlKind, stream: &str) -> ViewControl {
+        ViewControl {
             request_id: 7,
-            kind: VisionControlKind::DigiViewSet.to_wire(),
+            kind: kind.to_wire(),
             origin: VisionOrigin::DigiView.to_wire(),
-            param: t as u8,
-            data,
-            ..VisionControl::default()
-        };
-        p.apply(&c)
+            stream: FixedStr::new(stream),
+            ..ViewControl::default()
+        }
     }
 
-    fn stream(name: &str) -> StreamName {
-        StreamName::new(name).unwrap()
-    }
-
-    fn video(name: &str, w: u16, h: u16, layout: u8, overlay: u8) -> Param {
-        Param::VideoOutput(VideoOutput {
-            stream: stream(name),
+    fn video(name: &str, w: u16, h: u16, layout: u8, overlay: u8) -> ViewControl {
+        ViewControl {
             width: w,
             height: h,
             layout_mode: layout,
             overlay_mode: overlay,
-            views: vec![BoundingBox::default()],
-            ..VideoOutput::default()
-        })
+            ..ctl(ViewControlKind::Output, name)
+        }
     }
 
     #[test]
     fn video_output_clamps_ignores_and_keeps_per_the_document() {
         let mut p = params();
         assert_eq!(
-            set(&mut p, &video("main", 1920, 1080, 4, 3)),
+            p.apply_view(&video("main", 1920, 1080, 4, 3)),
             Ok(Effect::Changed)
         );
         let s = &p.streams[0];
@@ -560,7 +627,7 @@ mod tests {
         );
         // Above the maximum: clamped; out-of-range modes leave the setting unchanged.
         assert_eq!(
-            set(&mut p, &video("main", 4000, 2000, 9, 9)),
+            p.apply_view(&video("main", 4000, 2000, 9, 9)),
             Ok(Effect::Changed)
         );
         let s = &p.streams[0];
@@ -570,14 +637,14 @@ mod tests {
         );
         // Below the minimum: the whole operation is ignored.
         let before = p.clone();
-        let e = set(&mut p, &video("main", 320, 720, 1, 1)).unwrap_err();
+        let e = p.apply_view(&video("main", 320, 720, 1, 1)).unwrap_err();
         assert_eq!(e.result, VisionResult::Ignored);
         assert_eq!(p, before);
         // Unknown stream: ignored; the other stream is addressed by name.
-        let e = set(&mut p, &video("nope", 800, 600, 1, 1)).unwrap_err();
+        let e = p.apply_view(&video("nope", 800, 600, 1, 1)).unwrap_err();
         assert_eq!(e.result, VisionResult::Ignored);
         assert!(e.message.contains("nope"), "{}", e.message);
-        set(&mut p, &video("aux", 800, 600, 6, 5)).unwrap();
+        p.apply_view(&video("aux", 800, 600, 6, 5)).unwrap();
         assert_eq!((p.streams[1].out_width, p.streams[1].layout_mode), (800, 6));
         assert_eq!(p.streams[0].out_width, 1920);
     }
@@ -585,15 +652,14 @@ mod tests {
     #[test]
     fn ai_models_must_exist_and_empty_names_keep() {
         let mut p = params();
-        let ai = |enabled, scan: &str, track: &str| {
-            Param::Ai(Ai {
-                enabled,
-                scan_model: ModelName::new(scan).unwrap(),
-                track_model: ModelName::new(track).unwrap(),
-            })
+        let ai = |enabled: bool, scan: &str, track: &str| ViewControl {
+            ai_enabled: u8::from(enabled),
+            scan_model: FixedStr::new(scan),
+            track_model: FixedStr::new(track),
+            ..ctl(ViewControlKind::Ai, "")
         };
         assert_eq!(
-            set(&mut p, &ai(false, "motion-bg", "")),
+            p.apply_view(&ai(false, "motion-bg", "")),
             Ok(Effect::AiChanged)
         );
         assert!(!p.ai_enabled);
@@ -602,7 +668,7 @@ mod tests {
             ("motion-bg", MODELS[0])
         );
         let before = p.clone();
-        let e = set(&mut p, &ai(true, "yolo-v9", "motion-bg")).unwrap_err();
+        let e = p.apply_view(&ai(true, "yolo-v9", "motion-bg")).unwrap_err();
         assert_eq!(e.result, VisionResult::Ignored);
         assert!(e.message.contains("yolo-v9"));
         assert_eq!(p, before, "nothing changes on an unknown model");
@@ -611,8 +677,8 @@ mod tests {
     #[test]
     fn detection_keeps_out_of_range_values_and_score_255() {
         let mut p = params();
-        let d = Detection {
-            mode: 3,
+        let d = ViewControl {
+            detection_mode: 3,
             sorting_mode: 2,
             track_confidence: 0.6,
             scan_confidence: 0.995,
@@ -623,8 +689,9 @@ mod tests {
             bonus_redetection: 5,
             missed_detection_penalty: SCORE_KEEP,
             missed_redetection_penalty: 0,
+            ..ctl(ViewControlKind::Detection, "")
         };
-        assert_eq!(set(&mut p, &Param::Detection(d)), Ok(Effect::Changed));
+        assert_eq!(p.apply_view(&d), Ok(Effect::Changed));
         let t = p.tracker;
         let def = TrackerParams::default();
         assert_eq!(p.detection_mode, 3);
@@ -640,13 +707,10 @@ mod tests {
         assert_eq!(t.bonus_redetection, 5);
         assert_eq!(t.missed_detection_penalty, def.missed_detection_penalty);
         assert_eq!(t.missed_redetection_penalty, 0);
-        set(
-            &mut p,
-            &Param::Detection(Detection {
-                sorting_mode: 3,
-                ..d
-            }),
-        )
+        p.apply_view(&ViewControl {
+            sorting_mode: 3,
+            ..d
+        })
         .unwrap();
         assert_eq!(
             p.tracker.sorting_mode, 2,
@@ -657,16 +721,13 @@ mod tests {
     #[test]
     fn capture_names_the_stream() {
         let mut p = params();
-        let c = |name: &str, single_image, record_video| {
-            Param::Capture(Capture {
-                stream: stream(name),
-                single_image,
-                record_video,
-                ..Capture::default()
-            })
+        let c = |name: &str, image: bool, record: bool| ViewControl {
+            capture_image: u8::from(image),
+            record: u8::from(record),
+            ..ctl(ViewControlKind::Capture, name)
         };
         assert_eq!(
-            set(&mut p, &c("aux", true, false)),
+            p.apply_view(&c("aux", true, false)),
             Ok(Effect::Capture {
                 stream: 1,
                 single_image: true,
@@ -674,7 +735,7 @@ mod tests {
             })
         );
         assert_eq!(
-            set(&mut p, &c("main", false, true)),
+            p.apply_view(&c("main", false, true)),
             Ok(Effect::Capture {
                 stream: 0,
                 single_image: false,
@@ -682,7 +743,7 @@ mod tests {
             })
         );
         assert_eq!(
-            set(&mut p, &c("x", true, true)).unwrap_err().result,
+            p.apply_view(&c("x", true, true)).unwrap_err().result,
             VisionResult::Ignored
         );
     }
@@ -690,164 +751,216 @@ mod tests {
     #[test]
     fn cameras_are_checked_and_ranges_validated() {
         let mut p = params();
-        let t = CamTargeting {
-            stream: stream("main"),
+        let t = ViewControl {
             cam: 2,
-            mode: 1,
-            latitude: 47.0,
-            longitude: 8.0,
-            altitude: -50.0,
-            ..CamTargeting::default()
+            targeting_mode: 1,
+            lat_deg: 47.0,
+            lon_deg: 8.0,
+            alt_rel_m: -50.0,
+            ..ctl(ViewControlKind::Targeting, "main")
         };
-        match set(&mut p, &Param::CamTargeting(t)) {
+        match p.apply_view(&t) {
             Ok(Effect::Targeting {
                 stream: 0,
                 cam: 2,
                 targeting,
-            }) => assert_eq!(targeting.mode, 1),
+            }) => assert_eq!(
+                (targeting.mode, targeting.latitude, targeting.altitude),
+                (1, 47.0, -50.0)
+            ),
             other => panic!("{other:?}"),
         }
-        let e = set(&mut p, &Param::CamTargeting(CamTargeting { cam: 4, ..t })).unwrap_err();
+        let e = p.apply_view(&ViewControl { cam: 4, ..t }).unwrap_err();
         assert_eq!(e.result, VisionResult::Ignored);
-        let e = set(
-            &mut p,
-            &Param::CamTargeting(CamTargeting {
-                stream: stream("zz"),
+        let e = p
+            .apply_view(&ViewControl {
+                stream: FixedStr::new("zz"),
                 ..t
-            }),
-        )
-        .unwrap_err();
+            })
+            .unwrap_err();
         assert_eq!(e.result, VisionResult::Ignored);
-        let e = set(
-            &mut p,
-            &Param::CamTargeting(CamTargeting { pitch: 2.0, ..t }),
-        )
-        .unwrap_err();
-        assert_eq!(e.result, VisionResult::Invalid);
+        for bad in [
+            ViewControl {
+                pitch_rad: 2.0,
+                ..t
+            },
+            ViewControl {
+                yaw_rad: f64::NAN,
+                ..t
+            },
+            ViewControl { x_offset: 1.5, ..t },
+            ViewControl {
+                lon_deg: 180.0,
+                ..t
+            },
+            ViewControl { lock_flags: 8, ..t },
+            ViewControl {
+                targeting_mode: 4,
+                ..t
+            },
+        ] {
+            let e = p.apply_view(&bad).unwrap_err();
+            assert_eq!(e.result, VisionResult::Invalid, "{bad:?}");
+        }
+        let e = p
+            .apply_view(&ViewControl {
+                pitch_rad: 2.0,
+                ..t
+            })
+            .unwrap_err();
         assert!(e.message.contains("pitch"), "{}", e.message);
-        let o = CamOpticsAndControl {
-            stream: stream("aux"),
+        let o = ViewControl {
             cam: 1,
             zoom: 20,
-            fov: 1.0,
+            fov_rad: 1.0,
             crop_mode: 2,
+            ..ctl(ViewControlKind::Optics, "aux")
         };
         assert_eq!(
-            set(&mut p, &Param::CamOpticsAndControl(o)),
+            p.apply_view(&o),
             Ok(Effect::Optics {
                 stream: 1,
                 cam: 1,
-                optics: o
+                optics: Optics {
+                    zoom: 20,
+                    fov: 1.0,
+                    crop_mode: 2
+                }
             })
         );
-        let e = set(
-            &mut p,
-            &Param::CamOpticsAndControl(CamOpticsAndControl { fov: 4.0, ..o }),
-        )
-        .unwrap_err();
-        assert_eq!(e.result, VisionResult::Invalid);
+        for bad in [
+            ViewControl { fov_rad: 4.0, ..o },
+            ViewControl { zoom: -128, ..o },
+            ViewControl { crop_mode: 3, ..o },
+        ] {
+            let e = p.apply_view(&bad).unwrap_err();
+            assert_eq!(e.result, VisionResult::Invalid, "{bad:?}");
+        }
     }
 
     #[test]
     fn single_target_commands_resolve() {
         let mut p = params();
-        let s = SingleTargetTracking {
-            command: 1,
-            stream: stream("main"),
+        let s = ViewControl {
+            track_command: TrackCommand::Direction.to_wire(),
             cam: 0,
-            // Exact in the wire's fixed point (× 32767).
             x_offset: 1.0,
             y_offset: -1.0,
             detection_id: 9,
-            zoom: 3,
-            yaw_global: 1.0,
-            pitch_global: -0.5,
-            rel_frame: 2,
-            ..SingleTargetTracking::default()
+            track_zoom: 3,
+            yaw_rad: 1.0,
+            pitch_rad: -0.5,
+            reference: ReferenceFrame::Camera.to_wire(),
+            ..ctl(ViewControlKind::SingleTarget, "main")
         };
-        let req =
-            |p: &mut Params, s: SingleTargetTracking| match set(p, &Param::SingleTargetTracking(s))
-            {
-                Ok(Effect::Stt {
-                    request,
-                    zoom_level,
-                    ..
-                }) => {
-                    assert_eq!(zoom_level, s.zoom);
-                    request
-                }
-                other => panic!("{other:?}"),
-            };
+        let req = |p: &mut Params, s: ViewControl| match p.apply_view(&s) {
+            Ok(Effect::Stt {
+                request,
+                zoom_level,
+                rel_frame,
+                ..
+            }) => {
+                assert_eq!((zoom_level, rel_frame), (s.track_zoom, s.reference));
+                request
+            }
+            other => panic!("{other:?}"),
+        };
+        let cmd = |c: TrackCommand| ViewControl {
+            track_command: c.to_wire(),
+            ..s
+        };
         assert_eq!(req(&mut p, s), SttRequest::ViewOffset { x: 1.0, y: -1.0 });
         assert_eq!(
-            req(&mut p, SingleTargetTracking { rel_frame: 0, ..s }),
+            req(
+                &mut p,
+                ViewControl {
+                    reference: ReferenceFrame::Global.to_wire(),
+                    ..s
+                }
+            ),
             SttRequest::Global {
                 yaw: 1.0,
                 pitch: -0.5
             }
         );
         assert_eq!(
-            req(&mut p, SingleTargetTracking { command: 2, ..s }),
+            req(&mut p, cmd(TrackCommand::Detection)),
             SttRequest::Detection(9)
         );
         assert_eq!(
-            req(&mut p, SingleTargetTracking { command: 3, ..s }),
+            req(&mut p, cmd(TrackCommand::Nudge)),
             SttRequest::Nudge { x: 1.0, y: -1.0 }
         );
-        assert_eq!(
-            req(&mut p, SingleTargetTracking { command: 0, ..s }),
-            SttRequest::Disable
-        );
-        assert_eq!(
-            req(&mut p, SingleTargetTracking { command: 4, ..s }),
-            SttRequest::NoOp
-        );
-        let e = set(
-            &mut p,
-            &Param::SingleTargetTracking(SingleTargetTracking { zoom: 11, ..s }),
-        )
-        .unwrap_err();
-        assert_eq!(e.result, VisionResult::Invalid);
+        assert_eq!(req(&mut p, cmd(TrackCommand::Disable)), SttRequest::Disable);
+        assert_eq!(req(&mut p, cmd(TrackCommand::NoOp)), SttRequest::NoOp);
+        for bad in [
+            ViewControl {
+                track_zoom: 11,
+                ..s
+            },
+            ViewControl {
+                track_command: 5,
+                ..s
+            },
+            ViewControl { reference: 3, ..s },
+            ViewControl {
+                pitch_rad: 1.6,
+                ..s
+            },
+        ] {
+            let e = p.apply_view(&bad).unwrap_err();
+            assert_eq!(e.result, VisionResult::Invalid, "{bad:?}");
+        }
     }
 
     #[test]
-    fn unsettable_unsupported_and_garbage() {
+    fn direction_at_checks_the_view_and_the_offsets() {
         let mut p = params();
-        let raw = |p: &mut Params, param: u8, data: [u8; DATA_LEN]| {
-            p.apply(&VisionControl {
+        let d = ViewControl {
+            cam: 3,
+            x_offset: 0.5,
+            y_offset: -0.25,
+            ..ctl(ViewControlKind::DirectionAt, "aux")
+        };
+        assert_eq!(
+            p.apply_view(&d),
+            Ok(Effect::DirectionAt {
+                stream: 1,
+                cam: 3,
+                x: 0.5,
+                y: -0.25
+            })
+        );
+        let e = p
+            .apply_view(&ViewControl {
+                y_offset: -1.5,
+                ..d
+            })
+            .unwrap_err();
+        assert_eq!(e.result, VisionResult::Invalid);
+        let e = p.apply_view(&ViewControl { cam: 4, ..d }).unwrap_err();
+        assert_eq!(e.result, VisionResult::Ignored);
+    }
+
+    #[test]
+    fn unknown_kinds_and_protocol_payloads_are_invalid() {
+        let mut p = params();
+        for k in [0u8, 9, 200] {
+            let e = p
+                .apply_view(&ViewControl {
+                    kind: k,
+                    ..ViewControl::default()
+                })
+                .unwrap_err();
+            assert_eq!(e.result, VisionResult::Invalid);
+        }
+        let e = p
+            .apply(&VisionControl {
                 kind: VisionControlKind::DigiViewSet.to_wire(),
-                param,
-                data,
                 ..VisionControl::default()
             })
-        };
-        for t in [
-            ParamType::SystemStatus,
-            ParamType::Model,
-            ParamType::DetectedRoi,
-            ParamType::CamOffset,
-        ] {
-            let e = raw(&mut p, t as u8, [0; DATA_LEN]).unwrap_err();
-            assert_eq!(e.result, VisionResult::Invalid, "{t:?}");
-            assert!(e.message.contains("not settable"));
-        }
-        for t in [ParamType::Sensor, ParamType::CamDepthEstimation] {
-            let e = raw(&mut p, t as u8, [0; DATA_LEN]).unwrap_err();
-            assert_eq!(e.result, VisionResult::Unsupported, "{t:?}");
-        }
-        assert_eq!(
-            raw(&mut p, 99, [0; DATA_LEN]).unwrap_err().result,
-            VisionResult::Invalid
-        );
-        // A bool byte of 7 in AI cannot be decoded.
-        let mut data = [0u8; DATA_LEN];
-        data[0] = 7;
-        let e = raw(&mut p, ParamType::Ai as u8, data).unwrap_err();
+            .unwrap_err();
         assert_eq!(e.result, VisionResult::Invalid);
-        // Garbage everywhere: never a panic, always an answer.
-        for t in 0..=255u8 {
-            let _ = raw(&mut p, t, [0xff; DATA_LEN]);
-        }
         let e = p
             .apply(&VisionControl {
                 kind: 200,
@@ -855,6 +968,16 @@ mod tests {
             })
             .unwrap_err();
         assert_eq!(e.result, VisionResult::Invalid);
+        // Garbage everywhere: never a panic, always an answer.
+        for k in 0..=255u8 {
+            let mut c = ViewControl {
+                kind: k,
+                ..ctl(ViewControlKind::Ai, "main")
+            };
+            c.yaw_rad = f64::INFINITY;
+            c.targeting_mode = 0xff;
+            let _ = p.apply_view(&c);
+        }
     }
 
     #[test]

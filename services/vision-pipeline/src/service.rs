@@ -1,5 +1,6 @@
 //! The service loop: frames in, output frames and [`VisionState`] out, every
-//! [`VisionControl`] answered by exactly one [`VisionReply`].
+//! [`VisionControl`] answered by exactly one [`VisionReply`] and every
+//! [`ViewControl`] by exactly one [`ViewReply`].
 //!
 //! One task does everything, one thing at a time: a control, a frame of stream 0 or
 //! a frame of stream 1 (whichever is ready; two streams are processed one after the
@@ -34,8 +35,9 @@ use std::time::{Duration, Instant};
 use nalgebra::{Point2, UnitQuaternion};
 use skymesh_ipc_types::{
     CameraIntrinsics, FixedStr, FrameHeader, LensModel, PixelFormat, SttState, VehicleState,
-    VisionControl, VisionControlKind, VisionDemand, VisionDetection, VisionReply, VisionResult,
-    VisionState, VISION_DEMAND_LEASE_NS, VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
+    ViewControl, ViewControlKind, ViewReply, VisionControl, VisionControlKind, VisionDemand,
+    VisionDetection, VisionReply, VisionResult, VisionState, VISION_DEMAND_LEASE_NS,
+    VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
 };
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Context, FrameError, FramePublisher, WarnLimiter};
@@ -139,15 +141,21 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         let event = tokio::select! {
             _ = ctx.shutdown.cancelled() => break,
             c = ports.control.recv_with(|c| *c) => Event::Control(c?),
+            c = ports.view.recv_with(|c| *c) => Event::View(c?),
             d = ports.demand.recv() => Event::Demand(d?),
             (i, r) = next_frame(&mut ports.streams) => { r?; Event::Frame(i) }
             _ = tick.tick() => Event::Tick,
         };
         let mut replies = Vec::new();
+        let mut view_replies = Vec::new();
         match event {
             Event::Control(c) => {
                 demand.last_control = Some(Instant::now());
                 replies.push(pipeline.control(&c));
+            }
+            Event::View(c) => {
+                demand.last_control = Some(Instant::now());
+                view_replies.push(pipeline.view_control(&c));
             }
             Event::Demand(d) => {
                 demand.word(&d, monotonic_ns());
@@ -192,11 +200,18 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
             demand.last_control = Some(Instant::now());
             replies.push(pipeline.control(&c));
         }
-        if !replies.is_empty() {
+        while let Some(c) = ports.view.try_recv()? {
+            demand.last_control = Some(Instant::now());
+            view_replies.push(pipeline.view_control(&c));
+        }
+        if !replies.is_empty() || !view_replies.is_empty() {
             // The state that contains the changes, then the replies.
             pipeline.publish_state(&mut ports.sinks)?;
             for r in replies {
                 ports.sinks.reply(r)?;
+            }
+            for r in view_replies {
+                ports.sinks.view_reply(r)?;
             }
         }
         let why = demand.why(&pipeline, ports.output_readers());
@@ -229,6 +244,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
 
 enum Event {
     Control(VisionControl),
+    View(ViewControl),
     Demand(VisionDemand),
     Frame(usize),
     Tick,
@@ -383,27 +399,9 @@ impl Pipeline {
     /// contains the change is).
     fn control(&mut self, c: &VisionControl) -> VisionReply {
         let outcome = self.params.apply(c).and_then(|effect| self.effect(effect));
-        // The layout follows VIDEO_OUTPUT at once, not at the next frame: the state
-        // published with the reply shows the views the SET asked for.
-        for (s, p) in self.streams.iter_mut().zip(&self.params.streams) {
-            s.layout = layout::compute(p.layout_mode, p.overlay_mode, p.out_width, p.out_height);
-        }
-        let (result, message) = match outcome {
-            Ok(()) => (VisionResult::Applied, String::new()),
-            Err(r) => (r.result, r.message),
-        };
-        let kind = VisionControlKind::try_from(c.kind).map_or("unknown", |k| k.as_str());
-        self.metrics.control(kind, result.as_str());
-        if result != VisionResult::Applied {
-            tracing::info!(request_id = c.request_id, kind, origin = c.origin, %result, message, "control not applied");
-        } else {
-            tracing::debug!(
-                request_id = c.request_id,
-                kind,
-                origin = c.origin,
-                "control applied"
-            );
-        }
+        let (result, message) = self.answered(outcome, c.request_id, c.origin, || {
+            VisionControlKind::try_from(c.kind).map_or("unknown", |k| k.as_str())
+        });
         VisionReply {
             request_id: c.request_id,
             result: result.to_wire(),
@@ -412,6 +410,76 @@ impl Pipeline {
             message: FixedStr::new(&message),
             ..VisionReply::default()
         }
+    }
+
+    /// Applies one view control; returns its reply (published once the state that
+    /// contains the change is).
+    fn view_control(&mut self, c: &ViewControl) -> ViewReply {
+        let mut reply = ViewReply {
+            request_id: c.request_id,
+            kind: c.kind,
+            origin: c.origin,
+            ..ViewReply::default()
+        };
+        let outcome = self.params.apply_view(c).and_then(|effect| match effect {
+            Effect::DirectionAt { stream, cam, x, y } => {
+                let d = self.direction_at(stream, cam, x, y)?;
+                reply.yaw_global_rad = d.global.yaw;
+                reply.pitch_global_rad = d.global.pitch;
+                reply.yaw_camera_rad = d.camera.yaw;
+                reply.pitch_camera_rad = d.camera.pitch;
+                Ok(())
+            }
+            effect => self.effect(effect),
+        });
+        let (result, message) = self.answered(outcome, c.request_id, c.origin, || {
+            c.kind().map_or("unknown", |k: ViewControlKind| k.as_str())
+        });
+        reply.result = result.to_wire();
+        reply.message = FixedStr::new(&message);
+        reply
+    }
+
+    /// After a control: the layout follows the output settings at once (the state
+    /// published with the reply shows the views asked for); metrics and log.
+    fn answered(
+        &mut self,
+        outcome: Result<(), Refusal>,
+        request_id: u64,
+        origin: u8,
+        kind: impl FnOnce() -> &'static str,
+    ) -> (VisionResult, String) {
+        for (s, p) in self.streams.iter_mut().zip(&self.params.streams) {
+            s.layout = layout::compute(p.layout_mode, p.overlay_mode, p.out_width, p.out_height);
+        }
+        let (result, message) = match outcome {
+            Ok(()) => (VisionResult::Applied, String::new()),
+            Err(r) => (r.result, r.message),
+        };
+        let kind = kind();
+        self.metrics.control(kind, result.as_str());
+        if result != VisionResult::Applied {
+            tracing::info!(request_id, kind, origin, %result, message, "control not applied");
+        } else {
+            tracing::debug!(request_id, kind, origin, "control applied");
+        }
+        (result, message)
+    }
+
+    /// The direction at offset (x, y) of camera `cam`'s view as the state publishes
+    /// it (its last rendered orientation, field of view and rectangle).
+    fn direction_at(&self, stream: usize, cam: u8, x: f64, y: f64) -> Result<Direction, Refusal> {
+        let s = &self.streams[stream];
+        let c = usize::from(cam);
+        let rect = s.layout.views.get(c).copied();
+        let active = rect.is_some() && !s.layout.debug_source;
+        let state = s.cams[c].state(active, rect.unwrap_or([0; 4]));
+        views::cam_offset(&state, f64::from(s.heading), x, y).ok_or_else(|| {
+            Refusal::ignored(format!(
+                "camera {cam} of `{}` has no view direction yet",
+                s.name
+            ))
+        })
     }
 
     /// A capture is running or asked for (it needs frames).
@@ -510,6 +578,8 @@ impl Pipeline {
                 zoom_level,
                 rel_frame,
             } => self.stt(stream, cam, request, zoom_level, rel_frame),
+            // A question: answered by `view_control`, nothing changes.
+            Effect::DirectionAt { .. } => Ok(()),
         }
     }
 

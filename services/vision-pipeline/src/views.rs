@@ -43,7 +43,6 @@
 //! - **Panoramic** (crop mode 2): yaw linear across the width (`hfov` edge to edge), a
 //!   pinhole vertically with the same angular scale at the centre row ([`view_ray`]).
 
-use digiview_proto::{CamOpticsAndControl, CamTargeting};
 use nalgebra::{Point2, Quaternion, Unit, UnitQuaternion, Vector3};
 use skymesh_ipc_types::{
     CropMode, TargetingMode, VirtualCamState, LOCK_PITCH, LOCK_ROLL, LOCK_YAW,
@@ -71,6 +70,39 @@ const MAX_DT_S: f64 = 1.0;
 const DETECTION_IDS: std::ops::RangeInclusive<u8> = 0..=253;
 /// No detection chosen yet.
 const NO_DETECTION: u8 = 255;
+
+/// How to aim a virtual camera (a `ViewControl` of kind `Targeting`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Targeting {
+    /// [`TargetingMode`] as stored on the wire.
+    pub mode: u8,
+    /// Add the angles to the current ones.
+    pub euler_delta: bool,
+    /// Radians, in the frames the lock flags select.
+    pub yaw: f64,
+    pub pitch: f64,
+    pub roll: f64,
+    /// `LOCK_*` bits.
+    pub lock_flags: u8,
+    /// Normalised −1..1 (x right, y up).
+    pub x_offset: f64,
+    pub y_offset: f64,
+    /// Coordinal target: degrees, and metres relative to the vehicle.
+    pub latitude: f64,
+    pub longitude: f64,
+    pub altitude: f64,
+}
+
+/// A virtual camera's optics (a `ViewControl` of kind `Optics`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Optics {
+    /// −127..127, 0 none, positive in.
+    pub zoom: i8,
+    /// Horizontal field of view, radians.
+    pub fov: f64,
+    /// [`CropMode`] as stored on the wire.
+    pub crop_mode: u8,
+}
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ViewError {
@@ -176,8 +208,8 @@ impl VirtualCamera {
         }
     }
 
-    /// CAM_TARGETING SET (already range-checked).
-    pub fn set_targeting(&mut self, t: &CamTargeting) -> Result<(), ViewError> {
+    /// A targeting request (already range-checked).
+    pub fn set_targeting(&mut self, t: &Targeting) -> Result<(), ViewError> {
         let Ok(mode) = TargetingMode::try_from(t.mode) else {
             return Err(ViewError::Ignored(format!(
                 "targeting mode {} is not one of 0-3; left unchanged",
@@ -196,7 +228,7 @@ impl VirtualCamera {
         ];
         if !values.iter().all(|v| v.is_finite()) {
             return Err(ViewError::Invalid(
-                "CAM_TARGETING with a non-finite value".into(),
+                "a targeting request with a non-finite value".into(),
             ));
         }
         if mode == TargetingMode::Coordinal && t.latitude.abs() > 90.0 {
@@ -236,10 +268,10 @@ impl VirtualCamera {
         Ok(())
     }
 
-    /// CAM_OPTICS_AND_CONTROL SET (already range-checked). Zoom and crop mode are
-    /// applied; a FOV outside 0.1..3.14 rad is left unchanged and reported as
+    /// An optics request (already range-checked). Zoom and crop mode are applied; a
+    /// FOV outside 0.1..3.14 rad is left unchanged and reported as
     /// [`ViewError::Ignored`] (after applying the rest).
-    pub fn set_optics(&mut self, o: &CamOpticsAndControl) -> Result<(), ViewError> {
+    pub fn set_optics(&mut self, o: &Optics) -> Result<(), ViewError> {
         let crop = match o.crop_mode {
             0 => CropMode::Default,
             1 => CropMode::Rectified,
@@ -736,13 +768,13 @@ mod tests {
         (a - b).abs() <= tolerance
     }
 
-    fn targeting(mode: u8, yaw: f64, pitch: f64, lock_flags: u8) -> CamTargeting {
-        CamTargeting {
+    fn targeting(mode: u8, yaw: f64, pitch: f64, lock_flags: u8) -> Targeting {
+        Targeting {
             mode,
             yaw,
             pitch,
             lock_flags,
-            ..CamTargeting::default()
+            ..Targeting::default()
         }
     }
 
@@ -809,7 +841,7 @@ mod tests {
         let mut cam = VirtualCamera::new(1.0);
         let flags = LOCK_YAW | LOCK_PITCH | LOCK_ROLL;
         cam.set_targeting(&targeting(0, 3.0, 1.0, flags)).unwrap();
-        let delta = CamTargeting {
+        let delta = Targeting {
             euler_delta: true,
             ..targeting(0, 0.5, 1.0, flags)
         };
@@ -818,7 +850,7 @@ mod tests {
         assert!(close(f64::from(s.yaw_rad), 3.5 - 2.0 * PI, 1e-6), "{s:?}");
         assert!(close(f64::from(s.pitch_rad), FRAC_PI_2, 1e-6));
         assert_eq!(s.euler_delta, 1);
-        let back = CamTargeting {
+        let back = Targeting {
             euler_delta: true,
             ..targeting(0, -0.5, -0.25, flags)
         };
@@ -853,7 +885,7 @@ mod tests {
         let pose = CameraPose::from_parts(centre, 40f64.to_radians());
         for (x, y) in [(0.5, 0.0), (0.0, -0.5), (-0.7, 0.3)] {
             let mut cam = base.clone();
-            let t = CamTargeting {
+            let t = Targeting {
                 x_offset: x,
                 y_offset: y,
                 ..targeting(0, 0.0, 0.0, LOCK_PITCH | LOCK_ROLL)
@@ -874,7 +906,7 @@ mod tests {
     fn coordinal_keeps_a_ground_point_centred() {
         let ground = here().offset_by(&Vector3::new(30.0, -20.0, 50.0));
         let mut cam = VirtualCamera::new(1.0);
-        let t = CamTargeting {
+        let t = Targeting {
             latitude: ground.lat_deg,
             longitude: ground.lon_deg,
             altitude: -50.0,
@@ -986,11 +1018,10 @@ mod tests {
     #[test]
     fn zoom_narrows_the_view() {
         let mut cam = VirtualCamera::new(1.6);
-        let optics = |zoom, fov, crop_mode| CamOpticsAndControl {
+        let optics = |zoom, fov, crop_mode| Optics {
             zoom,
             fov,
             crop_mode,
-            ..CamOpticsAndControl::default()
         };
         cam.set_optics(&optics(32, 1.6, 1)).unwrap();
         assert!(close(cam.effective_hfov(), 0.8, 1e-12));

@@ -1,18 +1,19 @@
 //! The pipeline in-process on the real bus (its own iceoryx2 domain), fed synthetic
 //! frames rendered by the camera's renderer at 50 m looking down with known targets:
-//! detections match the truth, VIDEO_OUTPUT resizes the output, CAM_TARGETING aims a
-//! view at a target, every control is answered and garbage is Invalid; the pipeline
+//! detections match the truth, an `Output` control resizes the output, `Targeting`
+//! aims a view at a target, `DirectionAt` its centre is the view's direction, every
+//! control is answered and garbage is Invalid; the pipeline
 //! reads frames only while its output is used, and publishes the state that contains
 //! a control's change before the control's reply.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use digiview_proto::{CamTargeting, Param, ParamType, StreamName, VideoOutput};
 use skymesh_camera::synthetic::{FrameStamp, Synthetic};
 use skymesh_ipc_types::{
-    topics, SceneTruth, ServiceId, VehicleState, VisionControl, VisionControlKind, VisionDemand,
-    VisionOrigin, VisionReply, VisionResult, VisionState, MAX_FRAME_LEN,
+    topics, view, FixedStr, SceneTruth, ServiceId, VehicleState, ViewControl, ViewControlKind,
+    ViewReply, VisionControl, VisionDemand, VisionOrigin, VisionReply, VisionResult, VisionState,
+    MAX_FRAME_LEN,
 };
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::ipc::DomainGuard;
@@ -74,15 +75,14 @@ fn vehicle() -> VehicleState {
     }
 }
 
-fn set(request_id: u64, param: &Param) -> VisionControl {
-    let (t, data) = param.encode();
-    VisionControl {
+/// A view control of `kind` for stream `main`.
+fn ctl(request_id: u64, kind: ViewControlKind) -> ViewControl {
+    ViewControl {
         request_id,
-        kind: VisionControlKind::DigiViewSet.to_wire(),
+        kind: kind.to_wire(),
         origin: VisionOrigin::DigiView.to_wire(),
-        param: t as u8,
-        data,
-        ..VisionControl::default()
+        stream: FixedStr::new("main"),
+        ..ViewControl::default()
     }
 }
 
@@ -119,6 +119,12 @@ async fn detections_views_and_controls_on_the_bus() {
     let replies = tool
         .subscriber::<VisionReply>(&topics::vision_reply())
         .expect("reply subscriber");
+    let mut view_pub = tool
+        .publisher::<ViewControl>(&view::view_control())
+        .expect("view control publisher");
+    let mut view_replies = tool
+        .subscriber::<ViewReply>(&view::view_reply())
+        .expect("view reply subscriber");
     let state_sub = tool
         .subscriber::<VisionState>(&topics::vision_state())
         .expect("state subscriber");
@@ -161,13 +167,10 @@ async fn detections_views_and_controls_on_the_bus() {
         truth.expect("a pose")
     };
 
-    let mut replies_seen: Vec<VisionReply> = Vec::new();
+    // (request id, result) of every reply, vision and view.
+    let mut replies_seen: Vec<(u64, VisionResult)> = Vec::new();
     let mut next_id = 100u64;
     let mut sent_ids: Vec<u64> = Vec::new();
-    let send = |control: &mut skymesh_runtime::Publisher<VisionControl>, c: VisionControl| {
-        control.publish(c).expect("publish control");
-        c.request_id
-    };
 
     // 1. Detections match the rendered targets.
     let deadline = tokio::time::Instant::now() + PATIENCE;
@@ -248,49 +251,41 @@ async fn detections_views_and_controls_on_the_bus() {
         lon_deg: target.lon_deg,
         alt_msl_m: f64::from(target.alt_msl_m),
     };
-    // DigiView carries latitude and longitude as degrees × 1000 (FACTS.md), about
-    // 100 m steps: the view must point at the position the wire can say, which is
-    // the target's position quantised.
-    let q = |x: f64| digiview_proto::from_milli(digiview_proto::to_milli(x));
-    let commanded = GeoPosition {
-        lat_deg: q(tpos.lat_deg),
-        lon_deg: q(tpos.lon_deg),
-        alt_msl_m: f64::from(v.alt_msl_m) + q(tpos.alt_msl_m - f64::from(v.alt_msl_m)),
-    };
-    let tdir = YawPitch::of(&me.ned_to(&commanded)).expect("direction");
-    let video = Param::VideoOutput(VideoOutput {
-        stream: StreamName::new("main").unwrap(),
+    let tdir = YawPitch::of(&me.ned_to(&tpos)).expect("direction");
+    let video = ViewControl {
         width: 800,
         height: 600,
         layout_mode: 0,
         overlay_mode: 2,
-        ..VideoOutput::default()
-    });
-    let aim = Param::CamTargeting(CamTargeting {
-        stream: StreamName::new("main").unwrap(),
+        ..ctl(0, ViewControlKind::Output)
+    };
+    let aim = ViewControl {
         cam: 0,
-        mode: 1,
+        targeting_mode: 1,
         lock_flags: 0b111,
-        latitude: target.lat_deg,
-        longitude: target.lon_deg,
-        // Relative to the system (DigiView's meaning).
-        altitude: f64::from(target.alt_msl_m) - f64::from(v.alt_msl_m),
-        ..CamTargeting::default()
-    });
-    let mut garbage = set(0, &Param::CamTargeting(CamTargeting::default()));
-    garbage.param = ParamType::Ai as u8;
-    garbage.data = [7; 64];
-    for mut c in [set(0, &video), set(0, &aim), garbage] {
+        lat_deg: target.lat_deg,
+        lon_deg: target.lon_deg,
+        // Relative to the vehicle.
+        alt_rel_m: f64::from(target.alt_msl_m) - f64::from(v.alt_msl_m),
+        ..ctl(0, ViewControlKind::Targeting)
+    };
+    let garbage = ViewControl {
+        pitch_rad: f64::NAN,
+        ..ctl(0, ViewControlKind::Targeting)
+    };
+    for mut c in [video, aim, garbage] {
         c.request_id = next_id;
         next_id += 1;
-        sent_ids.push(send(&mut control, c));
+        view_pub.publish(c).expect("publish view control");
+        sent_ids.push(c.request_id);
     }
     let bogus_kind = VisionControl {
         request_id: next_id,
         kind: 99,
         ..VisionControl::default()
     };
-    sent_ids.push(send(&mut control, bogus_kind));
+    control.publish(bogus_kind).expect("publish control");
+    sent_ids.push(bogus_kind.request_id);
 
     let deadline = tokio::time::Instant::now() + PATIENCE;
     let mut out_size = None;
@@ -304,7 +299,10 @@ async fn detections_views_and_controls_on_the_bus() {
         feed(&mut frames);
         tokio::time::sleep(Duration::from_millis(100)).await;
         while let Some(r) = replies.try_recv().expect("reply") {
-            replies_seen.push(r);
+            replies_seen.push((r.request_id, r.result()));
+        }
+        while let Some(r) = view_replies.try_recv().expect("view reply") {
+            replies_seen.push((r.request_id, r.result()));
         }
         while let Some(sz) = output
             .try_recv_with(|h, _| (h.width, h.height))
@@ -319,19 +317,36 @@ async fn detections_views_and_controls_on_the_bus() {
             }
         }
     }
+
+    // 5. The direction at the centre of view 0 is the view's own direction.
+    let at = ctl(next_id + 1, ViewControlKind::DirectionAt);
+    view_pub.publish(at).expect("publish view control");
+    let reply = loop {
+        let r = view_replies
+            .recv_timeout(PATIENCE)
+            .await
+            .expect("view reply")
+            .expect("a view reply");
+        if r.request_id == at.request_id {
+            break r;
+        }
+    };
+    assert_eq!(reply.result(), VisionResult::Applied, "{reply:?}");
+    let cam0 = state_sub.latest().expect("state").expect("a state").streams[0].cams[0];
+    assert!(
+        angle_diff_deg(reply.pitch_global_rad, f64::from(cam0.view_pitch_rad)) < 0.1
+            && reply.yaw_camera_rad.abs() < 1e-3
+            && reply.pitch_camera_rad.abs() < 1e-3,
+        "{reply:?} vs {cam0:?}"
+    );
     shutdown.cancel();
     task.await.expect("join").expect("vision run");
 
     for id in &sent_ids {
-        let n = replies_seen.iter().filter(|r| r.request_id == *id).count();
+        let n = replies_seen.iter().filter(|r| r.0 == *id).count();
         assert_eq!(n, 1, "request {id}: {replies_seen:?}");
     }
-    let result = |id: u64| {
-        replies_seen
-            .iter()
-            .find(|r| r.request_id == id)
-            .map(|r| r.result())
-    };
+    let result = |id: u64| replies_seen.iter().find(|r| r.0 == id).map(|r| r.1);
     assert_eq!(result(sent_ids[0]), Some(VisionResult::Applied));
     assert_eq!(result(sent_ids[1]), Some(VisionResult::Applied));
     assert_eq!(result(sent_ids[2]), Some(VisionResult::Invalid));
@@ -390,15 +405,15 @@ async fn frames_are_read_only_on_demand_and_replies_follow_their_state() {
     let mut vehicle_pub = tool
         .publisher::<VehicleState>(&topics::vehicle_state(1))
         .expect("vehicle publisher");
-    let mut control = tool
-        .publisher::<VisionControl>(&topics::vision_control())
-        .expect("control publisher");
+    let mut view_pub = tool
+        .publisher::<ViewControl>(&view::view_control())
+        .expect("view control publisher");
     let mut demand = tool
         .publisher::<VisionDemand>(&topics::vision_demand())
         .expect("demand publisher");
-    let mut replies = tool
-        .subscriber::<VisionReply>(&topics::vision_reply())
-        .expect("reply subscriber");
+    let mut view_replies = tool
+        .subscriber::<ViewReply>(&view::view_reply())
+        .expect("view reply subscriber");
     let state_sub = tool
         .subscriber::<VisionState>(&topics::vision_state())
         .expect("state subscriber");
@@ -486,17 +501,14 @@ async fn frames_are_read_only_on_demand_and_replies_follow_their_state() {
         .enumerate()
     {
         let id = 500 + i as u64;
-        let aim = Param::CamTargeting(CamTargeting {
-            stream: StreamName::new("main").unwrap(),
-            cam: 0,
-            mode: 0,
-            yaw,
-            pitch,
-            ..Default::default()
-        });
-        control.publish(set(id, &aim)).expect("publish control");
+        let aim = ViewControl {
+            yaw_rad: yaw,
+            pitch_rad: pitch,
+            ..ctl(id, ViewControlKind::Targeting)
+        };
+        view_pub.publish(aim).expect("publish view control");
         let reply = loop {
-            let r = replies
+            let r = view_replies
                 .recv_timeout(PATIENCE)
                 .await
                 .expect("reply")
