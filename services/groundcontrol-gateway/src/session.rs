@@ -28,7 +28,7 @@ use tokio_util::codec::Decoder;
 use tokio_util::sync::CancellationToken;
 
 use crate::drops::Drops;
-use crate::inbound::{Inbound, RefuseReason, Verdict};
+use crate::inbound::{self, Inbound, RefuseReason, Verdict};
 use crate::ipc::Commands;
 use crate::metrics::DisconnectReason;
 
@@ -166,10 +166,13 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
                     ctx.client,
                     ctx.peer,
                     &format_args!(
-                        "more than {} records per second (burst {}); dropped unanswered",
+                        "more than {} records per second (burst {}); dropped",
                         limits.max_records_per_s, limits.record_burst
                     ),
                 );
+                if let Some(end) = inbound::refusal_reply(&record).and_then(|r| reply(ctx, r)) {
+                    return end;
+                }
                 continue;
             }
             if let Some(end) = handle(&mut inbound, &record, ctx) {
@@ -210,11 +213,7 @@ fn handle(inbound: &mut Inbound, record: &Record, ctx: &SessionCtx) -> Option<En
     let metrics = ctx.drops.metrics();
     metrics.record_in(record.kind);
     match inbound.on_record(record) {
-        Verdict::Reply(reply) => match ctx.replies.try_send(reply) {
-            Ok(()) => None,
-            Err(mpsc::error::TrySendError::Full(_)) => Some(End::Overflow),
-            Err(mpsc::error::TrySendError::Closed(_)) => Some(End::Cancelled),
-        },
+        Verdict::Reply(record) => reply(ctx, record),
         Verdict::Publish(cmd) => match ctx.commands.publish(*cmd) {
             Ok(request_id) => {
                 metrics.commands_published.inc();
@@ -232,8 +231,17 @@ fn handle(inbound: &mut Inbound, record: &Record, ctx: &SessionCtx) -> Option<En
         Verdict::Stored | Verdict::Ignored => None,
         Verdict::Refused(r) => {
             ctx.drops.refused(r.reason, ctx.client, ctx.peer, &r.detail);
-            None
+            r.reply.and_then(|record| reply(ctx, record))
         }
+    }
+}
+
+/// Queues `record` for the client; `Some` ends the session.
+fn reply(ctx: &SessionCtx, record: Record) -> Option<End> {
+    match ctx.replies.try_send(record) {
+        Ok(()) => None,
+        Err(mpsc::error::TrySendError::Full(_)) => Some(End::Overflow),
+        Err(mpsc::error::TrySendError::Closed(_)) => Some(End::Cancelled),
     }
 }
 

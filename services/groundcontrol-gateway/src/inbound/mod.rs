@@ -36,7 +36,10 @@
 //!   for "all", it loops over the ids. Ids that are no drone are refused by the
 //!   queue.
 //! - **No record answers a refusal**: the protocol has none. Refusals are logged
-//!   and counted by [`RefuseReason`].
+//!   and counted by [`RefuseReason`]. Except the geofence commands: a refused one
+//!   is answered `ACK_CMD_TIMEOUT` ([`refusal_reply`]), as the hub answers the
+//!   queue's refusal of one, so a client never believes a fence is in force that
+//!   is not.
 
 use std::collections::HashMap;
 
@@ -102,11 +105,28 @@ impl RefuseReason {
     }
 }
 
-/// A refused record: the counted reason and a line for the log.
+/// A refused record: the counted reason, a line for the log, and the record that
+/// answers it, if the protocol has one ([`refusal_reply`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Refusal {
     pub reason: RefuseReason,
     pub detail: String,
+    pub reply: Option<Record>,
+}
+
+/// The answer to a refused record: `ACK_CMD_TIMEOUT` (the protocol's one failure
+/// record) for a geofence command, echoing its context and type; nothing for any
+/// other record.
+pub fn refusal_reply(r: &Record) -> Option<Record> {
+    matches!(
+        r.net_type(),
+        Some(
+            NetCmdType::CmdSetGeofence
+                | NetCmdType::CmdSetGeofencePosition
+                | NetCmdType::CmdReconfigureGeofence
+        )
+    )
+    .then(|| Record::ack(false, r.context, r.kind))
 }
 
 /// What to do with one record.
@@ -127,6 +147,7 @@ fn refused(reason: RefuseReason, detail: impl Into<String>) -> Verdict {
     Verdict::Refused(Refusal {
         reason,
         detail: detail.into(),
+        reply: None,
     })
 }
 
@@ -199,8 +220,11 @@ impl Inbound {
                 )
             }
             t if t.is_command() => {
-                let verdict = self.command(t, r);
+                let mut verdict = self.command(t, r);
                 self.last_param_context = None;
+                if let Verdict::Refused(refusal) = &mut verdict {
+                    refusal.reply = refusal_reply(r);
+                }
                 verdict
             }
             // DATA_BLOB, CLIENT_INFO.

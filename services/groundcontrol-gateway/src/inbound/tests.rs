@@ -221,3 +221,46 @@ fn pending_parameters_are_bounded() {
     let p = Record::floats(NetCmdType::ExtParam2, 3, 0, 0, [0.0; 4]);
     assert_eq!(ib.on_record(&p), Verdict::Stored);
 }
+
+#[test]
+fn a_refused_geofence_command_is_answered_ack_cmd_timeout() {
+    let fence = |t| Record::floats(t, 4, 0, 0, [10.0, 10.0, 5.0, 0.0]);
+    let timeout = |t: NetCmdType| Some(Record::ack(false, 4, t.id()));
+    // Not privileged.
+    let mut ib = Inbound::new(1, false);
+    for t in [
+        NetCmdType::CmdSetGeofence,
+        NetCmdType::CmdSetGeofencePosition,
+        NetCmdType::CmdReconfigureGeofence,
+    ] {
+        match ib.on_record(&fence(t)) {
+            Verdict::Refused(r) => {
+                assert_eq!(r.reason, RefuseReason::NotPrivileged);
+                assert_eq!(r.reply, timeout(t), "{t}");
+            }
+            other => panic!("{t}: {other:?}"),
+        }
+    }
+    // Privileged, but NaN: refused as invalid, still answered.
+    let mut ib = Inbound::new(1, true);
+    let nan = Record::floats(NetCmdType::CmdSetGeofence, 4, 0, 0, [f32::NAN; 4]);
+    match ib.on_record(&nan) {
+        Verdict::Refused(r) => {
+            assert_eq!(r.reason, RefuseReason::InvalidValue);
+            assert_eq!(r.reply, timeout(NetCmdType::CmdSetGeofence));
+        }
+        other => panic!("{other:?}"),
+    }
+    // Other refusals have no record.
+    let mut ib = Inbound::new(1, false);
+    let emergency = Record::floats(NetCmdType::CmdEmergencyMode, 2, 1, 0, [0.0; 4]);
+    match ib.on_record(&emergency) {
+        Verdict::Refused(r) => assert_eq!(r.reply, None),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(refusal_reply(&emergency), None);
+    assert_eq!(
+        refusal_reply(&fence(NetCmdType::CmdSetGeofence)),
+        timeout(NetCmdType::CmdSetGeofence)
+    );
+}
