@@ -7,6 +7,9 @@
 //! - SYSTEM_STATUS carries temperature 0 while the pipeline could not read one;
 //! - MODEL with no model listed, DETECTED_ROI matching no detection, CAM_OFFSET whose
 //!   view has no direction yet (no frame rendered) → DATA_ERROR;
+//! - CAM_OFFSET is the one GET the state cannot answer (the client chooses the
+//!   point): once its stream, camera and offsets check out it becomes the pipeline's
+//!   `DirectionAt` question ([`Answer::Ask`]), answered by the session;
 //! - DETECTED_ROI: index 0–253 is the position in the pipeline's sorted detection
 //!   list; 254 every detection shown in the overlay, 255 every known one; each reply
 //!   carries its position among the replies sent (`index`) and how many were sent
@@ -29,6 +32,16 @@ use skymesh_ipc_types::{
 
 use crate::refusal::Refusal;
 
+/// How a GET is answered.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Answer {
+    /// These CURRENT payloads, now.
+    Now(Vec<Param>),
+    /// CAM_OFFSET: ask the pipeline where this point of the view looks; its reply
+    /// completes the payload.
+    Ask(CamOffset),
+}
+
 /// Why a GET gets no CURRENT reply: the reason (its reply type is
 /// [`Refusal::reply_type`]) and a detail for the log.
 #[derive(Debug, Clone, PartialEq)]
@@ -47,14 +60,18 @@ impl NoAnswer {
 }
 
 /// The CURRENT payloads that answer a GET of `frame.param_type` (MODEL and
-/// DETECTED_ROI may have several; every other type exactly one).
+/// DETECTED_ROI may have several; every other type exactly one), or the question
+/// that answers it.
 pub fn answer_get(
     state: &VisionState,
     frame: &Frame,
     roi_rel_frame: u8,
-) -> Result<Vec<Param>, NoAnswer> {
+) -> Result<Answer, NoAnswer> {
     let pt = frame.param_type;
-    Ok(match pt {
+    if pt == ParamType::CamOffset {
+        return cam_offset(state, frame);
+    }
+    Ok(Answer::Now(match pt {
         ParamType::SystemStatus => vec![Param::SystemStatus(SystemStatus {
             status: state.status,
             error: 0,
@@ -157,7 +174,8 @@ pub fn answer_get(
                 crop_mode: c.crop_mode,
             })]
         }
-        ParamType::CamOffset => vec![cam_offset(state, frame)?],
+        // Answered above.
+        ParamType::CamOffset => Vec::new(),
         ParamType::SingleTargetTracking => {
             let (stream_name, s) = stream(state, frame)?;
             let t = &s.stt;
@@ -188,7 +206,7 @@ pub fn answer_get(
                 format!("{} is disabled as in DigiView", pt.name()),
             ))
         }
-    })
+    }))
 }
 
 /// A bus name as a wire name (bus names are at most as long; the empty name if not).
@@ -247,9 +265,10 @@ fn cam<'a>(
     }
 }
 
-/// CAM_OFFSET: the GET carries the whole payload; x/y are read from it.
-fn cam_offset(state: &VisionState, frame: &Frame) -> Result<Param, NoAnswer> {
-    let (stream_name, s, cam_id, c) = cam(state, frame)?;
+/// CAM_OFFSET: the GET carries the whole payload; x/y are read from it. The
+/// direction is the pipeline's to compute: the answer is a question.
+fn cam_offset(state: &VisionState, frame: &Frame) -> Result<Answer, NoAnswer> {
+    let (stream_name, _, cam_id, _) = cam(state, frame)?;
     let Ok(Param::CamOffset(req)) = Param::decode(ParamType::CamOffset, &frame.data) else {
         return Err(NoAnswer::new(
             Refusal::BadPayload,
@@ -264,24 +283,14 @@ fn cam_offset(state: &VisionState, frame: &Frame) -> Result<Param, NoAnswer> {
             ));
         }
     }
-    let heading = f64::from(s.vehicle_heading_rad);
-    let d =
-        skymesh_vision_pipeline::views::cam_offset(c, heading, req.x, req.y).ok_or_else(|| {
-            NoAnswer::new(
-                Refusal::NotFound,
-                format!("CAM_OFFSET: camera {cam_id} of `{stream_name}` has no view direction yet"),
-            )
-        })?;
-    Ok(Param::CamOffset(CamOffset {
+    let request = CamOffset {
         stream: stream_name,
         cam: cam_id,
         x: req.x,
         y: req.y,
-        yaw_global: d.global.yaw,
-        pitch_global: d.global.pitch,
-        yaw_rel: d.camera.yaw,
-        pitch_rel: d.camera.pitch,
-    }))
+        ..CamOffset::default()
+    };
+    Ok(Answer::Ask(request))
 }
 
 fn detected_roi(

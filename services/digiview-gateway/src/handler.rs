@@ -8,23 +8,27 @@
 //! | CURRENT, ACKNOWLEDGEMENT, an error type (DigiView's own replies) | UNKNOWN |
 //! | QUIT (whatever its parameter type) | close the connection |
 //! | GET, interval 0 | the answer once; cancels a periodic GET of that type |
+//! | GET CAM_OFFSET (checked) | the pipeline's `DirectionAt` answer ([`Ask`]), once or periodically |
 //! | GET, interval 1–99 ms | DATA_ERROR (DigiView ignores it; skymesh says so) |
 //! | GET, interval ≥ 100 ms | the answer now, then every interval (replaces an earlier periodic GET of that type) |
-//! | SET | FORBIDDEN (address not allowed), UNKNOWN (SENSOR, CAM_DEPTH_ESTIMATION), DATA_ERROR (GET-only type, payload refused), else forwarded to the pipeline |
+//! | SET | FORBIDDEN (address not allowed), UNKNOWN (SENSOR, CAM_DEPTH_ESTIMATION), DATA_ERROR (GET-only type, payload refused), else translated ([`crate::translate`]) and sent to the pipeline |
 //!
 //! The session (`session.rs`) carries the steps out; [`replies_for_bytes`] runs a
 //! whole byte stream through the codec and this handler (the fuzz target).
 
 use bytes::BytesMut;
 use digiview_proto::{
-    BadFrame, Frame, FrameCodec, FrameError, MessageType, Param, ParamType, MIN_INTERVAL_MS,
+    BadFrame, CamOffset, Frame, FrameCodec, FrameError, MessageType, Param, ParamType,
+    MIN_INTERVAL_MS,
 };
-use skymesh_ipc_types::VisionState;
+use skymesh_ipc_types::{ViewControl, ViewReply, VisionResult, VisionState};
 use tokio_util::codec::Decoder;
 
-use crate::answer::{answer_get, NoAnswer};
+use crate::answer::{answer_get, Answer, NoAnswer};
+use crate::ipc::CallError;
 use crate::refusal::Refusal;
 use crate::reply::Reply;
+use crate::translate;
 
 /// What the handler needs to know about the client and the gateway.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,15 +53,83 @@ pub enum Periodic {
 pub enum Step {
     /// Send these now (may be none).
     Reply(Vec<Reply>),
-    /// A GET's replies and its effect on periodic replies.
+    /// A GET's replies and its effect on periodic replies; `ask`: its answer is the
+    /// pipeline's (then `replies` is empty).
     Get {
         replies: Vec<Reply>,
         periodic: Periodic,
+        ask: Option<Box<Ask>>,
     },
     /// A checked SET: forward to the pipeline, reply with its answer.
     Set(Frame),
     /// Close the connection.
     Quit,
+}
+
+/// A GET whose answer is the pipeline's: send [`Ask::control`], then
+/// [`Ask::answer`] its reply.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ask {
+    /// The GET (its timestamp and interval are echoed).
+    pub frame: Frame,
+    /// The payload to complete with the pipeline's answer.
+    pub request: CamOffset,
+}
+
+impl Ask {
+    /// The question for the pipeline.
+    pub fn control(&self) -> ViewControl {
+        translate::direction_at(&self.request)
+    }
+
+    /// The replies to the GET once the pipeline answered (or did not).
+    pub fn answer(&self, result: Result<ViewReply, CallError>) -> (Vec<Reply>, Option<NoAnswer>) {
+        let pt = self.frame.param_type;
+        let refused = |reason: Refusal, detail: String| {
+            (
+                vec![Reply::bare(
+                    reason.reply_type(),
+                    self.frame.timestamp,
+                    pt as u8,
+                )],
+                Some(NoAnswer { reason, detail }),
+            )
+        };
+        match result {
+            Ok(reply) => {
+                let message = reply.message.as_str();
+                match reply.result() {
+                    VisionResult::Applied => (
+                        vec![Reply::current(
+                            &self.frame,
+                            &Param::CamOffset(translate::cam_offset(&self.request, &reply)),
+                        )],
+                        None,
+                    ),
+                    VisionResult::Ignored => {
+                        refused(Refusal::NotFound, format!("{}: {message}", pt.name()))
+                    }
+                    VisionResult::Unsupported => refused(
+                        Refusal::PipelineUnsupported,
+                        format!("{}: {message}", pt.name()),
+                    ),
+                    r @ (VisionResult::Invalid | VisionResult::Failed) => refused(
+                        Refusal::PipelineRefused,
+                        format!("{} {}: {message}", pt.name(), r.as_str()),
+                    ),
+                }
+            }
+            Err(e) => refused(Refusal::PipelineTimeout, format!("{}: {e}", pt.name())),
+        }
+    }
+}
+
+/// A GET's answer now: replies (and why some were refused), or a question.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Answered {
+    pub replies: Vec<Reply>,
+    pub refusal: Option<NoAnswer>,
+    pub ask: Option<Box<Ask>>,
 }
 
 /// A step and, if the frame was refused (entirely or in part), why.
@@ -154,7 +226,11 @@ fn get(frame: &Frame, rules: &Rules, state: Option<&VisionState>) -> Handled {
             format!("GET interval {interval} ms is below the minimum {MIN_INTERVAL_MS} ms"),
         );
     }
-    let (replies, refusal) = answer(frame, state, rules.roi_rel_frame);
+    let Answered {
+        replies,
+        refusal,
+        ask,
+    } = answer(frame, state, rules.roi_rel_frame);
     let periodic = if interval == 0 {
         Periodic::Cancel(frame.param_type)
     } else if refusal
@@ -166,17 +242,17 @@ fn get(frame: &Frame, rules: &Rules, state: Option<&VisionState>) -> Handled {
         Periodic::Start(*frame)
     };
     Handled {
-        step: Step::Get { replies, periodic },
+        step: Step::Get {
+            replies,
+            periodic,
+            ask,
+        },
         refusal,
     }
 }
 
-/// The replies to a GET now (also each tick of a periodic GET).
-pub fn answer(
-    frame: &Frame,
-    state: Option<&VisionState>,
-    roi_rel_frame: u8,
-) -> (Vec<Reply>, Option<NoAnswer>) {
+/// The answer to a GET now (also each tick of a periodic GET).
+pub fn answer(frame: &Frame, state: Option<&VisionState>, roi_rel_frame: u8) -> Answered {
     let result = match state {
         // Disabled types say so even while the pipeline is down.
         _ if is_disabled(frame.param_type) => Err(NoAnswer {
@@ -190,18 +266,28 @@ pub fn answer(
         Some(s) => answer_get(s, frame, roi_rel_frame),
     };
     match result {
-        Ok(params) => (
-            params.iter().map(|p| Reply::current(frame, p)).collect(),
-            None,
-        ),
-        Err(no) => (
-            vec![Reply::bare(
+        Ok(Answer::Now(params)) => Answered {
+            replies: params.iter().map(|p| Reply::current(frame, p)).collect(),
+            refusal: None,
+            ask: None,
+        },
+        Ok(Answer::Ask(request)) => Answered {
+            replies: Vec::new(),
+            refusal: None,
+            ask: Some(Box::new(Ask {
+                frame: *frame,
+                request,
+            })),
+        },
+        Err(no) => Answered {
+            replies: vec![Reply::bare(
                 no.reason.reply_type(),
                 frame.timestamp,
                 frame.param_type as u8,
             )],
-            Some(no),
-        ),
+            refusal: Some(no),
+            ask: None,
+        },
     }
 }
 

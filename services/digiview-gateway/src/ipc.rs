@@ -3,8 +3,8 @@
 //! | topic | direction | type | who in the gateway |
 //! |---|---|---|---|
 //! | `skymesh/vision/state` | subscribe (latest value) | `VisionState` | [`BusTask`] → a `watch` every session reads |
-//! | `skymesh/vision/control` | publish | `VisionControl` (`DigiViewSet`) | [`BusTask`], for [`BusHandle::set`] |
-//! | `skymesh/vision/reply` | subscribe | `VisionReply` | [`BusTask`], routed to the waiting session by `request_id` |
+//! | `skymesh/vision/view_control` | publish | `ViewControl` (a SET translated, or CAM_OFFSET's question) | [`BusTask`], for [`BusHandle::call`] |
+//! | `skymesh/vision/view_reply` | subscribe | `ViewReply` | [`BusTask`], routed to the waiting session by `request_id` |
 //! | `skymesh/vision/demand` | publish | `VisionDemand` | [`BusTask`]: `wanted` while a client is connected (renewed every second), so the pipeline (and the camera) work only then |
 //!
 //! Read your writes: the pipeline publishes the state that contains a SET's change
@@ -12,25 +12,24 @@
 //! so a GET after the ACKNOWLEDGEMENT reads the new value.
 //!
 //! Sessions never touch the bus: they read the newest state from the `watch` and
-//! send SETs through a channel with a oneshot for the answer. Other requesters
-//! (autopilot-link) number their own requests, so replies are matched on
-//! `origin == DigiView` and `kind == DigiViewSet` as well as `request_id`.
+//! send requests through a channel with a oneshot for the answer. Other requesters
+//! number their own requests, so replies are matched on `origin == DigiView` as
+//! well as `request_id`.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use digiview_proto::DATA_LEN;
 use skymesh_ipc_types::{
-    topics, VisionControl, VisionControlKind, VisionDemand, VisionOrigin, VisionReply, VisionState,
+    topics, view, ViewControl, ViewReply, VisionDemand, VisionOrigin, VisionState,
 };
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-/// SETs queued for the bus task.
+/// Requests queued for the bus task.
 const CALL_QUEUE: usize = 256;
 /// How often the demand word is renewed while a client is connected (the pipeline
 /// keeps it for `VISION_DEMAND_LEASE_NS`, 3 s).
@@ -43,17 +42,16 @@ pub struct Latest {
     pub received: Instant,
 }
 
-/// One SET for the pipeline; the bus task answers on `answer`.
+/// One request for the pipeline; the bus task numbers it and answers on `answer`.
 #[derive(Debug)]
-struct SetCall {
-    param: u8,
-    data: [u8; DATA_LEN],
-    answer: oneshot::Sender<VisionReply>,
+struct Call {
+    control: ViewControl,
+    answer: oneshot::Sender<ViewReply>,
 }
 
-/// Why a SET got no `VisionReply`.
+/// Why a request got no `ViewReply`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum SetError {
+pub enum CallError {
     #[error("no answer from the vision pipeline within {0:?}")]
     Timeout(Duration),
     #[error("the gateway's bus task has stopped")]
@@ -64,7 +62,7 @@ pub enum SetError {
 #[derive(Debug, Clone)]
 pub struct BusHandle {
     state: watch::Receiver<Option<Arc<Latest>>>,
-    calls: mpsc::Sender<SetCall>,
+    calls: mpsc::Sender<Call>,
     clients: Arc<watch::Sender<usize>>,
 }
 
@@ -92,55 +90,57 @@ impl BusHandle {
             .cloned()
     }
 
-    /// Forwards one checked DigiView SET and waits up to `timeout` for the answer.
-    pub async fn set(
+    /// Sends one request (its `request_id` and `origin` are the gateway's) and waits
+    /// up to `timeout` for the answer.
+    pub async fn call(
         &self,
-        param: u8,
-        data: [u8; DATA_LEN],
+        control: ViewControl,
         timeout: Duration,
-    ) -> Result<VisionReply, SetError> {
+    ) -> Result<ViewReply, CallError> {
         let (tx, rx) = oneshot::channel();
-        let call = SetCall {
-            param,
-            data,
+        let call = Call {
+            control,
             answer: tx,
         };
         let wait = async {
-            self.calls.send(call).await.map_err(|_| SetError::BusGone)?;
-            rx.await.map_err(|_| SetError::BusGone)
+            self.calls
+                .send(call)
+                .await
+                .map_err(|_| CallError::BusGone)?;
+            rx.await.map_err(|_| CallError::BusGone)
         };
         tokio::time::timeout(timeout, wait)
             .await
-            .unwrap_or(Err(SetError::Timeout(timeout)))
+            .unwrap_or(Err(CallError::Timeout(timeout)))
     }
 }
 
 /// The task that owns every port.
 #[derive(Debug)]
 pub struct BusTask {
-    control: Publisher<VisionControl>,
+    control: Publisher<ViewControl>,
     demand: Publisher<VisionDemand>,
     clients: watch::Receiver<usize>,
     states: Subscriber<VisionState>,
-    replies: Subscriber<VisionReply>,
-    calls: mpsc::Receiver<SetCall>,
+    replies: Subscriber<ViewReply>,
+    calls: mpsc::Receiver<Call>,
     state_tx: watch::Sender<Option<Arc<Latest>>>,
-    /// Sessions waiting for a `VisionReply`, by `request_id`. Entries whose session
-    /// gave up (timeout, disconnect) are dropped at the next SET.
-    pending: HashMap<u64, oneshot::Sender<VisionReply>>,
+    /// Sessions waiting for a `ViewReply`, by `request_id`. Entries whose session
+    /// gave up (timeout, disconnect) are dropped at the next request.
+    pending: HashMap<u64, oneshot::Sender<ViewReply>>,
     last_request: u64,
 }
 
 impl BusTask {
-    /// Opens the three topics.
+    /// Opens the four topics.
     pub fn open(bus: &Bus) -> anyhow::Result<(BusTask, BusHandle)> {
         let (state_tx, state_rx) = watch::channel(None);
         let (calls_tx, calls_rx) = mpsc::channel(CALL_QUEUE);
         let (clients_tx, clients_rx) = watch::channel(0);
         let task = BusTask {
             control: bus
-                .publisher::<VisionControl>(&topics::vision_control())
-                .context("opening the vision_control topic")?,
+                .publisher::<ViewControl>(&view::view_control())
+                .context("opening the view_control topic")?,
             demand: bus
                 .publisher::<VisionDemand>(&topics::vision_demand())
                 .context("opening the vision_demand topic")?,
@@ -149,8 +149,8 @@ impl BusTask {
                 .subscriber::<VisionState>(&topics::vision_state())
                 .context("opening the vision_state topic")?,
             replies: bus
-                .subscriber::<VisionReply>(&topics::vision_reply())
-                .context("opening the vision_reply topic")?,
+                .subscriber::<ViewReply>(&view::view_reply())
+                .context("opening the view_reply topic")?,
             calls: calls_rx,
             state_tx,
             pending: HashMap::new(),
@@ -231,8 +231,7 @@ impl BusTask {
                         Ok(None) => {}
                         Err(e) => break Err(e),
                     }
-                    let ours = reply.origin == VisionOrigin::DigiView.to_wire()
-                        && reply.kind == VisionControlKind::DigiViewSet.to_wire();
+                    let ours = reply.origin == VisionOrigin::DigiView.to_wire();
                     if let Some(tx) = ours.then(|| pending.remove(&reply.request_id)).flatten() {
                         // The session may have given up meanwhile.
                         let _ = tx.send(reply);
@@ -243,13 +242,10 @@ impl BusTask {
                     let Some(call) = call else { break Ok(()) };
                     pending.retain(|_, tx| !tx.is_closed());
                     last_request = last_request.wrapping_add(1).max(1);
-                    let request = VisionControl {
+                    let request = ViewControl {
                         request_id: last_request,
-                        kind: VisionControlKind::DigiViewSet.to_wire(),
                         origin: VisionOrigin::DigiView.to_wire(),
-                        param: call.param,
-                        data: call.data,
-                        ..VisionControl::default()
+                        ..call.control
                     };
                     if let Err(e) = control.publish(request) {
                         break Err(e);

@@ -4,10 +4,11 @@
 //! virtual cameras, detections and tracker.
 //!
 //! The gateway *translates*: GETs are answered from the pipeline's newest
-//! `VisionState`; SETs are checked (FORBIDDEN for addresses not in `write_allowed`,
-//! DATA_ERROR for payloads out of range) and forwarded as `VisionControl`; the
-//! pipeline *decides* and its `VisionReply` becomes ACKNOWLEDGEMENT, DATA_ERROR or
-//! UNKNOWN.
+//! `VisionState` (CAM_OFFSET by the pipeline's `DirectionAt` answer); SETs are
+//! checked (FORBIDDEN for addresses not in `write_allowed`, DATA_ERROR for payloads
+//! out of range) and sent as the pipeline's `ViewControl`, in its units; the
+//! pipeline *decides* and its `ViewReply` becomes ACKNOWLEDGEMENT, DATA_ERROR or
+//! UNKNOWN. The gateway knows the DigiView wire; the pipeline never sees it.
 //!
 //! | module | role |
 //! |---|---|
@@ -15,6 +16,7 @@
 //! | [`privilege`] | the `write_allowed` address/network list |
 //! | [`handler`] | what one frame becomes (pure; the fuzz target's entry) |
 //! | [`answer`] | GET answers from a `VisionState` (pure) |
+//! | [`translate`] | DigiView parameters ↔ `ViewControl` / `ViewReply` (pure) |
 //! | [`reply`] | outgoing frames; pipeline result → DigiView code |
 //! | [`refusal`] | why a frame was refused: metric label and reply type |
 //! | `session` | one connection: reader (frames, SETs, periodic GETs, limits) and writer (bounded queue) |
@@ -36,6 +38,7 @@ pub mod refusal;
 pub mod reply;
 pub mod service;
 mod session;
+pub mod translate;
 
 use std::sync::Arc;
 use std::time::Duration;

@@ -1,11 +1,14 @@
 //! One DigiView connection: a reader that cuts 88-byte frames, runs each through
-//! [`crate::handler`], forwards SETs to the pipeline and keeps the client's periodic
-//! GETs; and a writer that drains the connection's bounded outgoing queue.
+//! [`crate::handler`], sends SETs (translated) and CAM_OFFSET questions to the
+//! pipeline and keeps the client's periodic GETs; and a writer that drains the
+//! connection's bounded outgoing queue.
 //!
 //! A client affects only itself: its partial frame, its rate limit, its periodic
-//! GETs and its outgoing queue are its own. While one of its SETs waits for the
-//! pipeline (at most `set_timeout`), its further frames wait in the socket (replies
-//! stay in request order) but its periodic replies go on; other clients never wait.
+//! GETs and its outgoing queue are its own. While one of its SETs or CAM_OFFSET GETs
+//! waits for the pipeline (at most `set_timeout`), its further frames wait in the
+//! socket (replies stay in request order) but its periodic replies go on; a periodic
+//! CAM_OFFSET asks again only once its last question is answered. Other clients
+//! never wait.
 //!
 //! Frames have no sync word, so after garbage that is not a multiple of 88 bytes
 //! every later frame is cut at the wrong place and fails its checksum: the client
@@ -20,8 +23,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use bytes::BytesMut;
-use digiview_proto::{Frame, FrameCodec, MessageType, ParamType, FRAME_LEN};
-use skymesh_ipc_types::{VisionReply, VisionResult};
+use digiview_proto::{Frame, FrameCodec, MessageType, Param, ParamType, FRAME_LEN};
+use skymesh_ipc_types::{ViewControl, ViewReply, VisionResult};
 use skymesh_runtime::TokenBucket;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
@@ -33,11 +36,12 @@ use tokio_util::sync::CancellationToken;
 
 use crate::config::Settings;
 use crate::drops::Drops;
-use crate::handler::{self, Handled, Periodic, Rules, Step};
-use crate::ipc::{BusHandle, SetError};
+use crate::handler::{self, Answered, Ask, Handled, Periodic, Rules, Step};
+use crate::ipc::{BusHandle, CallError};
 use crate::metrics::DisconnectReason;
 use crate::refusal::Refusal;
 use crate::reply::{set_reply_type, Reply};
+use crate::translate;
 
 /// Bytes asked of the socket per read.
 const READ_CHUNK: usize = 4096;
@@ -132,14 +136,24 @@ struct PeriodicGet {
 /// What woke the reader.
 enum Event {
     Read(std::io::Result<usize>),
-    SetDone(Box<SetOutcome>),
+    Done(Box<Outcome>),
+    PeriodicAsked(Box<Asked>),
     Tick,
     PartialTimeout,
 }
 
-type SetOutcome = (Frame, Result<VisionReply, SetError>, Duration);
+/// The pipeline's answer to a question (or why none came).
+type Asked = (Ask, Result<ViewReply, CallError>);
 
-type PendingSet = Pin<Box<dyn Future<Output = SetOutcome> + Send>>;
+/// A request the reader waited for.
+enum Outcome {
+    Set(Box<(Frame, Result<ViewReply, CallError>, Duration)>),
+    Ask(Box<Asked>),
+}
+
+type Pending = Pin<Box<dyn Future<Output = Outcome> + Send>>;
+
+type PendingAsk = Pin<Box<dyn Future<Output = Asked> + Send>>;
 
 struct Reader<'a> {
     ctx: &'a SessionCtx,
@@ -150,8 +164,10 @@ struct Reader<'a> {
     rate: TokenBucket,
     /// By parameter type: a new periodic GET of a type replaces the old one.
     periodic: BTreeMap<ParamType, PeriodicGet>,
-    /// The SET waiting for the pipeline; no further frame is read meanwhile.
-    pending: Option<PendingSet>,
+    /// The SET or GET waiting for the pipeline; no further frame is read meanwhile.
+    pending: Option<Pending>,
+    /// A periodic GET's question in flight (frames are read meanwhile).
+    periodic_ask: Option<PendingAsk>,
     /// When the partial frame in `buf` was begun.
     partial_since: Option<Instant>,
 }
@@ -170,6 +186,7 @@ impl<'a> Reader<'a> {
             ),
             periodic: BTreeMap::new(),
             pending: None,
+            periodic_ask: None,
             partial_since: None,
         }
     }
@@ -189,10 +206,15 @@ impl<'a> Reader<'a> {
                 let reading = self.pending.is_none();
                 let buf = &mut self.buf;
                 let pending = &mut self.pending;
+                let asking = self.periodic_ask.is_some();
+                let periodic_ask = &mut self.periodic_ask;
                 tokio::select! {
                     r = read.read_buf(buf), if reading => Event::Read(r),
                     done = async { Box::new(pending.as_mut().expect("guarded").await) }, if !reading => {
-                        Event::SetDone(done)
+                        Event::Done(done)
+                    }
+                    asked = async { Box::new(periodic_ask.as_mut().expect("guarded").await) }, if asking => {
+                        Event::PeriodicAsked(asked)
                     }
                     _ = tokio::time::sleep_until(next_tick.unwrap_or_else(Instant::now)), if next_tick.is_some() => {
                         Event::Tick
@@ -207,10 +229,23 @@ impl<'a> Reader<'a> {
                 Event::Read(Ok(0)) => Err(End::Truncated(self.buf.len())),
                 Event::Read(Ok(_)) => Ok(()),
                 Event::Read(Err(e)) => Err(End::Io(e)),
-                Event::SetDone(done) => {
-                    let (frame, result, took) = *done;
+                Event::Done(done) => {
                     self.pending = None;
-                    self.set_done(&frame, result, took)
+                    match *done {
+                        Outcome::Set(set) => {
+                            let (frame, result, took) = *set;
+                            self.set_done(&frame, result, took)
+                        }
+                        Outcome::Ask(asked) => {
+                            let (ask, result) = *asked;
+                            self.asked(&ask, result)
+                        }
+                    }
+                }
+                Event::PeriodicAsked(asked) => {
+                    self.periodic_ask = None;
+                    let (ask, result) = *asked;
+                    self.asked(&ask, result)
                 }
                 Event::Tick => self.tick(),
                 Event::PartialTimeout => {
@@ -278,23 +313,79 @@ impl<'a> Reader<'a> {
         }
         match step {
             Step::Reply(replies) => self.send_all(replies),
-            Step::Get { replies, periodic } => {
+            Step::Get {
+                replies,
+                periodic,
+                ask,
+            } => {
                 self.send_all(replies)?;
                 self.change_periodic(periodic);
+                if let Some(ask) = ask {
+                    let asking = self.ask(*ask);
+                    self.pending = Some(Box::pin(
+                        async move { Outcome::Ask(Box::new(asking.await)) },
+                    ));
+                }
                 Ok(())
             }
             Step::Set(frame) => {
-                let bus = self.ctx.bus.clone();
-                let timeout = self.ctx.settings.set_timeout;
+                // The handler forwards only SETs that decode and validate.
+                let Some(control) = Param::decode(frame.param_type, &frame.data)
+                    .ok()
+                    .and_then(|p| translate::set_control(&p))
+                else {
+                    self.ctx.drops.refused(
+                        Refusal::BadPayload,
+                        self.ctx.client,
+                        self.ctx.peer,
+                        &format_args!(
+                            "SET {}: no pipeline request for it",
+                            frame.param_type.name()
+                        ),
+                    );
+                    return self.send_all(vec![Reply::bare(
+                        Refusal::BadPayload.reply_type(),
+                        frame.timestamp,
+                        frame.param_type as u8,
+                    )]);
+                };
+                let asking = self.call(control);
                 self.pending = Some(Box::pin(async move {
                     let started = Instant::now();
-                    let r = bus.set(frame.param_type as u8, frame.data, timeout).await;
-                    (frame, r, started.elapsed())
+                    let r = asking.await;
+                    Outcome::Set(Box::new((frame, r, started.elapsed())))
                 }));
                 Ok(())
             }
             Step::Quit => Err(End::Quit),
         }
+    }
+
+    /// Sends `control` to the pipeline; the answer within `set_timeout`.
+    fn call(
+        &self,
+        control: ViewControl,
+    ) -> impl Future<Output = Result<ViewReply, CallError>> + Send + 'static {
+        let bus = self.ctx.bus.clone();
+        let timeout = self.ctx.settings.set_timeout;
+        async move { bus.call(control, timeout).await }
+    }
+
+    /// Asks the pipeline a GET's question.
+    fn ask(&self, ask: Ask) -> impl Future<Output = Asked> + Send + 'static {
+        let asking = self.call(ask.control());
+        async move { (ask, asking.await) }
+    }
+
+    /// Replies to a GET the pipeline answered.
+    fn asked(&self, ask: &Ask, result: Result<ViewReply, CallError>) -> Result<(), End> {
+        let (replies, refusal) = ask.answer(result);
+        if let Some(r) = refusal {
+            self.ctx
+                .drops
+                .refused(r.reason, self.ctx.client, self.ctx.peer, &r.detail);
+        }
+        self.send_all(replies)
     }
 
     fn change_periodic(&mut self, change: Periodic) {
@@ -321,16 +412,26 @@ impl<'a> Reader<'a> {
         let latest = self.ctx.bus.fresh_state(self.ctx.settings.state_timeout);
         let state = latest.as_deref().map(|l| &*l.state);
         let mut out = Vec::new();
+        let mut question = None;
         for p in self.periodic.values_mut().filter(|p| p.next <= now) {
-            let (replies, refusal) = handler::answer(&p.frame, state, self.ctx.rules.roi_rel_frame);
+            let Answered {
+                replies,
+                refusal,
+                ask,
+            } = handler::answer(&p.frame, state, self.ctx.rules.roi_rel_frame);
             if let Some(r) = refusal {
                 self.ctx
                     .drops
                     .refused(r.reason, self.ctx.client, self.ctx.peer, &r.detail);
             }
             out.extend(replies);
+            question = question.or(ask);
             // Late ticks are not caught up in a burst.
             p.next = (p.next + interval(&p.frame)).max(now);
+        }
+        // One question at a time: a tick while the last is unanswered is skipped.
+        if let Some(ask) = question.filter(|_| self.periodic_ask.is_none()) {
+            self.periodic_ask = Some(Box::pin(self.ask(*ask)));
         }
         self.send_all(out)
     }
@@ -338,7 +439,7 @@ impl<'a> Reader<'a> {
     fn set_done(
         &mut self,
         frame: &Frame,
-        result: Result<VisionReply, SetError>,
+        result: Result<ViewReply, CallError>,
         took: Duration,
     ) -> Result<(), End> {
         let metrics = self.ctx.drops.metrics();

@@ -6,13 +6,13 @@ mod common;
 
 use std::time::Duration;
 
-use common::{known_state, payload, Client, Gateway, PATIENCE};
+use common::{fake_direction, known_state, payload, Client, Gateway, PATIENCE};
 use digiview_proto::{
     Ai, BoundingBox, CamOffset, CamOpticsAndControl, CamTargeting, Capture, DetectedRoi, Detection,
     FixedName, Frame, GetRequest, MessageType, Model, Param, ParamType, RoiSelector,
     SingleTargetTracking, StreamName, SystemStatus, VideoOutput, DATA_LEN,
 };
-use skymesh_ipc_types::{VisionControlKind, VisionOrigin, VisionResult};
+use skymesh_ipc_types::{ViewControlKind, VisionOrigin, VisionResult};
 
 fn main_stream() -> StreamName {
     FixedName::new("main").unwrap()
@@ -273,10 +273,9 @@ async fn detected_roi_one_visible_and_all() {
 }
 
 #[tokio::test]
-async fn cam_offset_equals_the_pipeline_geometry() {
-    let gw = Gateway::start().await;
+async fn cam_offset_is_the_pipelines_direction_in_wire_units() {
+    let mut gw = Gateway::start().await;
     let mut c = gw.client().await;
-    let s = known_state();
     let request = Param::CamOffset(CamOffset {
         stream: main_stream(),
         cam: 1,
@@ -290,25 +289,31 @@ async fn cam_offset_equals_the_pipeline_geometry() {
         unreachable!()
     };
     let got = get_one(&mut c, ParamType::CamOffset, data).await;
-    let d = skymesh_vision_pipeline::views::cam_offset(
-        &s.streams[0].cams[1],
-        f64::from(s.streams[0].vehicle_heading_rad),
-        sent.x,
-        sent.y,
-    )
-    .expect("a direction for the fake camera");
+    let asked = gw.next_control().await;
+    assert_eq!(asked.kind(), Ok(ViewControlKind::DirectionAt));
+    assert_eq!(
+        (
+            asked.stream.as_str(),
+            asked.cam,
+            asked.x_offset,
+            asked.y_offset
+        ),
+        ("main", 1, sent.x, sent.y)
+    );
+    let [yg, pg, yc, pc] = fake_direction(sent.x, sent.y);
     let want = Param::CamOffset(CamOffset {
         stream: main_stream(),
         cam: 1,
         x: sent.x,
         y: sent.y,
-        yaw_global: d.global.yaw,
-        pitch_global: d.global.pitch,
-        yaw_rel: d.camera.yaw,
-        pitch_rel: d.camera.pitch,
+        yaw_global: yg,
+        pitch_global: pg,
+        yaw_rel: yc,
+        pitch_rel: pc,
     });
-    assert_eq!(got, wire(want));
-    // x outside [-1, 1] cannot be encoded as i16 except -32768: DATA_ERROR.
+    assert_eq!(got, wire(want.clone()));
+    // x outside [-1, 1] cannot be encoded as i16 except -32768: DATA_ERROR, the
+    // pipeline is not asked.
     let mut bad = data;
     bad[9..11].copy_from_slice(&i16::MIN.to_le_bytes());
     c.get(ParamType::CamOffset, bad, 0, 8).await;
@@ -319,6 +324,42 @@ async fn cam_offset_equals_the_pipeline_geometry() {
         8,
     )
     .await;
+    // A camera the layout does not show: DATA_ERROR from the state.
+    let mut hidden = data;
+    hidden[8] = 7;
+    c.get(ParamType::CamOffset, hidden, 0, 9).await;
+    expect_code(
+        &mut c,
+        MessageType::DataError,
+        ParamType::CamOffset as u8,
+        9,
+    )
+    .await;
+    assert!(gw.controls.try_recv().is_err());
+    // The pipeline has no direction for the view yet: DATA_ERROR; no answer: UNKNOWN.
+    gw.answer_with(Some((VisionResult::Ignored, "no view direction yet")));
+    c.get(ParamType::CamOffset, data, 0, 10).await;
+    expect_code(
+        &mut c,
+        MessageType::DataError,
+        ParamType::CamOffset as u8,
+        10,
+    )
+    .await;
+    gw.answer_with(None);
+    c.get(ParamType::CamOffset, data, 0, 11).await;
+    expect_code(&mut c, MessageType::Unknown, ParamType::CamOffset as u8, 11).await;
+    // Periodic: the pipeline is asked at every tick.
+    gw.answer_with(Some((VisionResult::Applied, "")));
+    c.get(ParamType::CamOffset, data, 100, 12).await;
+    for _ in 0..3 {
+        let r = c.recv().await;
+        assert_eq!(
+            (r.message_type, r.timestamp, r.interval_ms),
+            (MessageType::Current as u8, 12, 100)
+        );
+        assert_eq!(payload(&r), wire(want.clone()));
+    }
     gw.stop().await;
 }
 
@@ -344,10 +385,16 @@ async fn sets_reach_the_pipeline_and_its_answers_come_back() {
     )
     .await;
     let ctl = gw.next_control().await;
-    assert_eq!(ctl.kind, VisionControlKind::DigiViewSet.to_wire());
+    assert_eq!(ctl.kind(), Ok(ViewControlKind::Ai));
     assert_eq!(ctl.origin, VisionOrigin::DigiView.to_wire());
-    assert_eq!(ctl.param, ParamType::Ai as u8);
-    assert_eq!(ctl.data, ai_set().encode().1);
+    assert_eq!(
+        (
+            ctl.ai_enabled,
+            ctl.scan_model.as_str(),
+            ctl.track_model.as_str()
+        ),
+        (0, "blobs", "people")
+    );
     assert_ne!(ctl.request_id, 0);
 
     gw.answer_with(Some((VisionResult::Ignored, "no such model")));

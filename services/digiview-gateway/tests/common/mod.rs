@@ -1,7 +1,8 @@
 //! The in-process harness: digiview-gateway on loopback port 0 in its own iceoryx2
 //! domain, a FAKE PIPELINE task on a tool node (publishes a known `VisionState`,
-//! answers every `VisionControl` with a chosen result and records it), and a raw
-//! TCP DigiView client built on the same codec.
+//! answers every `ViewControl` with a chosen result and records it; a
+//! `DirectionAt` is answered with [`fake_direction`]), and a raw TCP DigiView
+//! client built on the same codec.
 #![allow(dead_code)] // each test crate uses its own subset
 
 use std::net::{IpAddr, SocketAddr};
@@ -13,8 +14,8 @@ use bytes::BytesMut;
 use digiview_proto::{Frame, FrameCodec, MessageType, Param, ParamType, RawFrame};
 use skymesh_digiview_gateway::{bind, run, Settings};
 use skymesh_ipc_types::{
-    topics, FixedStr, ServiceId, VirtualCamState, VisionControl, VisionDetection, VisionReply,
-    VisionResult, VisionState,
+    topics, view, FixedStr, ServiceId, ViewControl, ViewControlKind, ViewReply, VirtualCamState,
+    VisionDetection, VisionResult, VisionState,
 };
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Stats};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -149,6 +150,12 @@ pub fn known_state() -> VisionState {
     s
 }
 
+/// The fake pipeline's direction at offset (x, y) of any view: global yaw/pitch,
+/// then relative to the camera's axis (radians).
+pub fn fake_direction(x: f64, y: f64) -> [f64; 4] {
+    [0.5 + x, -0.25 + y / 2.0, x / 2.0, y / 4.0]
+}
+
 /// How the fake pipeline answers: a result and message, or silence.
 pub type Answer = Option<(VisionResult, &'static str)>;
 
@@ -157,8 +164,8 @@ pub struct Gateway {
     pub domain: Domain,
     pub stats: Stats,
     pub tcp: SocketAddr,
-    /// Every `VisionControl` the fake pipeline received.
-    pub controls: mpsc::UnboundedReceiver<VisionControl>,
+    /// Every `ViewControl` the fake pipeline received.
+    pub controls: mpsc::UnboundedReceiver<ViewControl>,
     /// How the fake pipeline answers the next controls.
     pub answer: Arc<Mutex<Answer>>,
     /// The state it publishes (every 100 ms).
@@ -190,11 +197,11 @@ impl Gateway {
         let tool = Bus::open(&domain, "pipeline-fake", ServiceId::Tool, 0, Stats::new())
             .expect("tool bus");
         let mut control_sub = tool
-            .subscriber::<VisionControl>(&topics::vision_control())
-            .expect("vision_control subscriber");
+            .subscriber::<ViewControl>(&view::view_control())
+            .expect("view_control subscriber");
         let mut reply_pub = tool
-            .publisher::<VisionReply>(&topics::vision_reply())
-            .expect("vision_reply publisher");
+            .publisher::<ViewReply>(&view::view_reply())
+            .expect("view_reply publisher");
         let mut state_pub = tool
             .publisher::<VisionState>(&topics::vision_state())
             .expect("vision_state publisher");
@@ -216,16 +223,25 @@ impl Gateway {
                             }
                         }
                         c = control_sub.recv() => {
-                            let c = c.expect("vision_control");
+                            let c = c.expect("view_control");
                             let a = *answer.lock().unwrap();
                             if let Some((result, message)) = a {
-                                reply_pub.publish(VisionReply {
+                                let [yg, pg, yc, pc] = if c.kind() == Ok(ViewControlKind::DirectionAt) {
+                                    fake_direction(c.x_offset, c.y_offset)
+                                } else {
+                                    [0.0; 4]
+                                };
+                                reply_pub.publish(ViewReply {
                                     request_id: c.request_id,
                                     result: result.to_wire(),
                                     kind: c.kind,
                                     origin: c.origin,
+                                    yaw_global_rad: yg,
+                                    pitch_global_rad: pg,
+                                    yaw_camera_rad: yc,
+                                    pitch_camera_rad: pc,
                                     message: FixedStr::new(message),
-                                    ..VisionReply::default()
+                                    ..ViewReply::default()
                                 }).expect("publish reply");
                             }
                             let _ = controls_tx.send(c);
@@ -295,10 +311,10 @@ impl Gateway {
     }
 
     /// The next control the fake pipeline received.
-    pub async fn next_control(&mut self) -> VisionControl {
+    pub async fn next_control(&mut self) -> ViewControl {
         tokio::time::timeout(PATIENCE, self.controls.recv())
             .await
-            .expect("a VisionControl within patience")
+            .expect("a ViewControl within patience")
             .expect("pipeline task alive")
     }
 
