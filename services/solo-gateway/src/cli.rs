@@ -238,16 +238,18 @@ pub fn message_for(cmd: &Cmd) -> Result<Option<SoloMessage>, String> {
     }))
 }
 
-/// Mean Earth radius, metres (dead reckoning over a few hundred metres).
-const EARTH_RADIUS_M: f64 = 6_371_000.0;
-
-/// `start` moved `north_m` and `east_m` metres (flat-earth approximation).
+/// `start` moved `north_m` and `east_m` metres (the local tangent plane at `start`,
+/// the workspace's WGS-84 geodesy).
 pub fn moved(start: Location, north_m: f64, east_m: f64) -> Location {
-    let dlat = (north_m / EARTH_RADIUS_M).to_degrees();
-    let dlon = (east_m / (EARTH_RADIUS_M * start.lat_deg.to_radians().cos())).to_degrees();
+    let frame = skymesh_geo::LocalFrame::new(skymesh_geo::Geodetic::new(
+        start.lat_deg,
+        start.lon_deg,
+        0.0,
+    ));
+    let (lat_deg, lon_deg) = frame.from_ne(north_m, east_m);
     Location {
-        lat_deg: start.lat_deg + dlat,
-        lon_deg: start.lon_deg + dlon,
+        lat_deg,
+        lon_deg,
         alt_m: start.alt_m,
     }
 }
@@ -331,9 +333,11 @@ mod tests {
             lon_deg: 10.0,
             alt_m: 5.0,
         };
-        let north = moved(start, 111.195, 0.0);
+        // WGS-84 at 60°: 0.001° is 111.412 m of meridian and 55.800 m of parallel
+        // (the 6,371 km sphere this used before read 111.195 m and 55.597 m).
+        let north = moved(start, 111.412, 0.0);
         assert!((north.lat_deg - 60.001).abs() < 1e-6, "{north:?}");
-        let east = moved(start, 0.0, 55.597);
+        let east = moved(start, 0.0, 55.800);
         assert!((east.lon_deg - 10.001).abs() < 1e-6, "{east:?}");
         assert_eq!(east.alt_m, 5.0);
     }

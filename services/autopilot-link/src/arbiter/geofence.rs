@@ -10,15 +10,12 @@
 //! point of it has clearance ≥ `r` (so it crosses no boundary): the fence shrunk by
 //! the margin is where the clearance is at least the margin.
 //!
-//! **Frame.** Vertices and vehicle positions are projected onto a plane tangent to
-//! the ellipsoid at the first vertex of the first polygon (x north, y east, metres;
-//! WGS84 meridional and normal radii of curvature at that latitude). Both go through
-//! the same projection, so inside/outside is decided consistently; what the flat-earth
-//! approximation distorts is distance, by a relative error of about tan(φ₀)·Δφ (Δφ the
-//! north-south extent from the origin in radians): 0.03 % within 1 km and 0.3 %
-//! within 10 km below 60° latitude — centimetres at fence scales, far below GNSS
-//! error. Fences are assumed to be smaller than a few tens of kilometres and away
-//! from the poles and the antimeridian (longitudes are unwrapped around the origin).
+//! **Frame.** Vertices and vehicle positions are projected onto the plane tangent to
+//! the WGS-84 ellipsoid at the first vertex of the first polygon (x north, y east,
+//! metres; [`skymesh_geo::LocalFrame`], the workspace's one geodesy). Both go through
+//! the same projection, so inside/outside is decided consistently; the tangent plane
+//! shortens distances from the origin by s³/(6R²), 4 mm at 10 km. Fences are assumed
+//! to be smaller than a few tens of kilometres.
 //!
 //! **Inside** means inside at least one keep-in polygon (if there are any), outside
 //! every keep-out polygon, and `floor ≤ alt_rel ≤ ceiling`. Polygons may be convex or
@@ -31,41 +28,24 @@ use skymesh_ipc_types::{FenceError, FenceKind, GeofenceSet};
 /// A point or direction in the local plane: x north, y east, metres.
 pub type Ne = Vector2<f64>;
 
-const WGS84_A: f64 = 6_378_137.0;
-const WGS84_E2: f64 = 6.694_379_990_14e-3;
 /// Shorter crossings than this are the same crossing (a ray through a vertex).
 const SAME_CROSSING_M: f64 = 1e-6;
 
-/// Flat-earth projection around an origin (see the module doc for its error).
+/// The tangent-plane projection around an origin (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LocalFrame {
-    lat0_deg: f64,
-    lon0_deg: f64,
-    m_per_deg_lat: f64,
-    m_per_deg_lon: f64,
-}
+pub struct LocalFrame(skymesh_geo::LocalFrame);
 
 impl LocalFrame {
     pub fn new(lat0_deg: f64, lon0_deg: f64) -> Self {
-        let phi = lat0_deg.to_radians();
-        let w = (1.0 - WGS84_E2 * phi.sin().powi(2)).sqrt();
-        let meridional = WGS84_A * (1.0 - WGS84_E2) / w.powi(3);
-        let normal = WGS84_A / w;
-        LocalFrame {
-            lat0_deg,
-            lon0_deg,
-            m_per_deg_lat: meridional.to_radians(),
-            m_per_deg_lon: (normal * phi.cos()).to_radians(),
-        }
+        LocalFrame(skymesh_geo::LocalFrame::new(skymesh_geo::Geodetic::new(
+            lat0_deg, lon0_deg, 0.0,
+        )))
     }
 
     /// Latitude/longitude in degrees → local north/east metres.
     pub fn to_local(&self, lat_deg: f64, lon_deg: f64) -> Ne {
-        let dlon = (lon_deg - self.lon0_deg + 540.0).rem_euclid(360.0) - 180.0;
-        Ne::new(
-            (lat_deg - self.lat0_deg) * self.m_per_deg_lat,
-            dlon * self.m_per_deg_lon,
-        )
+        let [n, e] = self.0.to_ne(lat_deg, lon_deg);
+        Ne::new(n, e)
     }
 }
 

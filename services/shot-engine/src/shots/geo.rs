@@ -1,16 +1,10 @@
 //! Geodetic helpers: a local tangent plane (north/east/down metres) around an origin,
-//! distances, bearings and offsets.
-//!
-//! Flat earth with the WGS-84 radii of curvature at the origin: exact round trips,
-//! centimetre accuracy within a few kilometres, which is all a shot covers.
+//! distances, bearings and offsets, on the workspace's WGS-84 geodesy
+//! ([`skymesh_geo`]): north/east exact in the tangent plane, down the altitude
+//! difference, exact round trips.
 
 use nalgebra::Vector3;
 pub(crate) use skymesh_runtime::angle::{wrap_180, wrap_360};
-
-/// WGS-84 semi-major axis, metres.
-const WGS84_A: f64 = 6_378_137.0;
-/// WGS-84 first eccentricity squared.
-const WGS84_E2: f64 = 6.694_379_990_14e-3;
 
 /// A position: latitude/longitude in degrees, altitude in metres above home.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -23,25 +17,25 @@ pub struct GeoPoint {
     pub alt_rel_m: f32,
 }
 
-/// Local tangent plane (flat earth, WGS-84 radii at the origin; good to centimetres
-/// within a few km) around `origin`.
+impl GeoPoint {
+    fn geodetic(&self) -> skymesh_geo::Geodetic {
+        skymesh_geo::Geodetic::new(self.lat_deg, self.lon_deg, f64::from(self.alt_rel_m))
+    }
+}
+
+/// Local tangent frame (local level: down is the altitude difference) around `origin`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalFrame {
     origin: GeoPoint,
-    /// Metres per degree of latitude at the origin (meridian radius).
-    m_per_deg_lat: f64,
-    /// Metres per degree of longitude at the origin (prime-vertical radius × cos lat).
-    m_per_deg_lon: f64,
+    frame: skymesh_geo::LocalFrame,
 }
 
 impl LocalFrame {
     /// A frame centred on `origin` (NED zero there, down relative to its altitude).
     pub fn new(origin: GeoPoint) -> Self {
-        let (m_per_deg_lat, m_per_deg_lon) = metres_per_degree(origin.lat_deg);
         LocalFrame {
             origin,
-            m_per_deg_lat,
-            m_per_deg_lon,
+            frame: skymesh_geo::LocalFrame::new(origin.geodetic()),
         }
     }
 
@@ -52,70 +46,49 @@ impl LocalFrame {
 
     /// Geodetic → north, east, down metres from the origin.
     pub fn to_ned(&self, p: &GeoPoint) -> Vector3<f64> {
+        let [n, e] = self.frame.to_ne(p.lat_deg, p.lon_deg);
         Vector3::new(
-            (p.lat_deg - self.origin.lat_deg) * self.m_per_deg_lat,
-            wrap_180(p.lon_deg - self.origin.lon_deg) * self.m_per_deg_lon,
+            n,
+            e,
             f64::from(self.origin.alt_rel_m) - f64::from(p.alt_rel_m),
         )
     }
 
     /// North, east, down metres from the origin → geodetic.
     pub fn to_geo(&self, ned: &Vector3<f64>) -> GeoPoint {
+        let (lat_deg, lon_deg) = self.frame.from_ne(ned.x, ned.y);
         GeoPoint {
-            lat_deg: self.origin.lat_deg + ned.x / self.m_per_deg_lat,
-            lon_deg: wrap_180(self.origin.lon_deg + ned.y / self.m_per_deg_lon),
+            lat_deg,
+            lon_deg,
             alt_rel_m: (f64::from(self.origin.alt_rel_m) - ned.z) as f32,
         }
     }
 }
 
-/// Metres per degree of latitude and of longitude at `lat_deg` (WGS-84).
-fn metres_per_degree(lat_deg: f64) -> (f64, f64) {
-    let (s, c) = lat_deg.to_radians().sin_cos();
-    let w = 1.0 - WGS84_E2 * s * s;
-    let meridian = WGS84_A * (1.0 - WGS84_E2) / (w * w.sqrt());
-    let prime_vertical = WGS84_A / w.sqrt();
-    let rad = std::f64::consts::PI / 180.0;
-    // Near the poles a degree of longitude shrinks to nothing; keep the division finite.
-    (meridian * rad, (prime_vertical * c).max(1.0) * rad)
-}
-
-/// North and east metres from `a` to `b`, flat earth at their mid latitude.
-fn north_east(a: &GeoPoint, b: &GeoPoint) -> (f64, f64) {
-    let (m_lat, m_lon) = metres_per_degree(0.5 * (a.lat_deg + b.lat_deg));
-    (
-        (b.lat_deg - a.lat_deg) * m_lat,
-        wrap_180(b.lon_deg - a.lon_deg) * m_lon,
-    )
-}
-
 /// Straight-line distance including the altitude difference, metres.
 pub fn distance_m(a: &GeoPoint, b: &GeoPoint) -> f64 {
-    let ground = ground_distance_m(a, b);
-    let up = f64::from(b.alt_rel_m) - f64::from(a.alt_rel_m);
-    ground.hypot(up)
+    skymesh_geo::distance_m(&a.geodetic(), &b.geodetic())
 }
 
 /// Horizontal distance, metres.
 pub fn ground_distance_m(a: &GeoPoint, b: &GeoPoint) -> f64 {
-    let (n, e) = north_east(a, b);
-    n.hypot(e)
+    skymesh_geo::ground_distance_m(&a.geodetic(), &b.geodetic())
 }
 
 /// Bearing from `from` to `to`, degrees 0..360, north = 0, clockwise (0 when the
 /// points coincide).
 pub fn bearing_deg(from: &GeoPoint, to: &GeoPoint) -> f64 {
-    let (n, e) = north_east(from, to);
-    if n == 0.0 && e == 0.0 {
-        return 0.0;
-    }
-    wrap_360(e.atan2(n).to_degrees())
+    skymesh_geo::bearing_deg(&from.geodetic(), &to.geodetic())
 }
 
 /// The point `distance_m` from `p` along `bearing_deg`, at `p`'s altitude.
 pub fn offset(p: &GeoPoint, bearing_deg: f64, distance_m: f64) -> GeoPoint {
-    let (s, c) = bearing_deg.to_radians().sin_cos();
-    LocalFrame::new(*p).to_geo(&Vector3::new(distance_m * c, distance_m * s, 0.0))
+    let g = skymesh_geo::offset(&p.geodetic(), bearing_deg, distance_m);
+    GeoPoint {
+        lat_deg: g.lat_deg,
+        lon_deg: g.lon_deg,
+        alt_rel_m: p.alt_rel_m,
+    }
 }
 
 #[cfg(test)]
@@ -197,7 +170,9 @@ mod tests {
             "{}",
             bearing_deg(&o, &ne)
         );
-        // Across the antimeridian: due east is still east.
+        // Across the antimeridian: due east is still east (the geodesic's initial
+        // azimuth to a point of the same parallel, 90° − Δλ·sin φ/2 = 89.99991°; the
+        // flat earth this used before read exactly 90°).
         let a = GeoPoint {
             lat_deg: 10.0,
             lon_deg: 179.9995,
@@ -207,7 +182,7 @@ mod tests {
             lon_deg: -179.9995,
             ..a
         };
-        assert!((bearing_deg(&a, &b) - 90.0).abs() < 1e-6);
+        assert!((bearing_deg(&a, &b) - 89.999_91).abs() < 1e-5);
         assert!((ground_distance_m(&a, &b) - 109.6).abs() < 0.5);
         assert_eq!(bearing_deg(&a, &a), 0.0);
     }

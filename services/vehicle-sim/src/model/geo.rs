@@ -1,16 +1,11 @@
-//! Geodetic ↔ local NED conversion.
-//!
-//! Flat earth around the EKF origin, with ArduPilot's own scaling constant, so
-//! positions the simulator reports convert back exactly the way ArduPilot's
-//! `Location::get_distance_NE` would on a real vehicle over the few kilometres a
-//! simulated flight covers.
+//! Geodetic ↔ local NED conversion around the EKF origin: the workspace's WGS-84
+//! geodesy ([`skymesh_geo::LocalFrame`], local level: north/east in the tangent
+//! plane, down the altitude difference). The positions the simulator reports are
+//! where a GNSS would put the metres it flew, in the model every service converts
+//! them back with (ArduPilot's own flat sphere differs by 0.3 % north–south).
 
 use nalgebra::Vector3;
-use skymesh_runtime::angle::wrap_180;
 pub use skymesh_runtime::angle::{wrap_2pi, wrap_pi};
-
-/// Metres per degree of latitude (ArduPilot `LOCATION_SCALING_FACTOR` × 1e7).
-const METRES_PER_DEGREE: f64 = 111_318.845_021_450_34;
 
 /// A WGS84 position with altitude above mean sea level.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,18 +40,19 @@ pub fn deg_to_e7(deg: f64) -> i32 {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalFrame {
     origin: GeoPoint,
-    /// Metres per degree of longitude at the origin's latitude.
-    metres_per_deg_lon: f64,
+    frame: skymesh_geo::LocalFrame,
 }
 
 impl LocalFrame {
     /// A frame centred on `origin`.
     pub fn new(origin: GeoPoint) -> Self {
-        // Clamp like ArduPilot's longitude_scale so the poles don't divide by zero.
-        let scale = origin.lat_deg.to_radians().cos().max(0.01);
         Self {
             origin,
-            metres_per_deg_lon: METRES_PER_DEGREE * scale,
+            frame: skymesh_geo::LocalFrame::new(skymesh_geo::Geodetic::new(
+                origin.lat_deg,
+                origin.lon_deg,
+                origin.alt_msl_m,
+            )),
         }
     }
 
@@ -67,20 +63,21 @@ impl LocalFrame {
 
     /// Local NED metres → geodetic.
     pub fn to_geo(&self, ned: &Vector3<f64>) -> GeoPoint {
+        let g = self.frame.from_ned((*ned).into());
         GeoPoint {
-            lat_deg: self.origin.lat_deg + ned.x / METRES_PER_DEGREE,
-            lon_deg: wrap_180(self.origin.lon_deg + ned.y / self.metres_per_deg_lon),
-            alt_msl_m: self.origin.alt_msl_m - ned.z,
+            lat_deg: g.lat_deg,
+            lon_deg: g.lon_deg,
+            alt_msl_m: g.alt_m,
         }
     }
 
     /// Geodetic → local NED metres.
     pub fn to_ned(&self, geo: &GeoPoint) -> Vector3<f64> {
-        Vector3::new(
-            (geo.lat_deg - self.origin.lat_deg) * METRES_PER_DEGREE,
-            wrap_180(geo.lon_deg - self.origin.lon_deg) * self.metres_per_deg_lon,
-            self.origin.alt_msl_m - geo.alt_msl_m,
-        )
+        Vector3::from(self.frame.to_ned(&skymesh_geo::Geodetic::new(
+            geo.lat_deg,
+            geo.lon_deg,
+            geo.alt_msl_m,
+        )))
     }
 }
 
@@ -112,10 +109,12 @@ mod tests {
 
     #[test]
     fn hundred_metres_north_is_about_0_0009_degrees() {
+        // WGS-84's meridian at 35.4° S: 0.000 901 3° per 100 m (ArduPilot's sphere,
+        // which the simulator used before, reads 0.000 898 3°).
         let f = LocalFrame::new(cmac());
         let g = f.to_geo(&Vector3::new(100.0, 0.0, 0.0));
-        assert!((g.lat_deg - cmac().lat_deg - 0.000_898_3).abs() < 1e-6);
-        assert_eq!(g.lon_deg, cmac().lon_deg);
+        assert!((g.lat_deg - cmac().lat_deg - 0.000_901_3).abs() < 1e-7);
+        assert!((g.lon_deg - cmac().lon_deg).abs() < 1e-12);
     }
 
     #[test]

@@ -162,10 +162,23 @@ fn allowed_is_inside_some_keep_in_and_outside_every_keep_out() {
     let p = |n: f64, e: f64| m.to_geo(Vector3::new(n, e, -10.0));
     assert!(fence.contains(&p(30.0, 30.0)));
     assert!(fence.contains(&p(0.0, 130.0)), "the second keep-in");
-    assert!(fence.contains(&p(50.0, 0.0)), "on the edge");
+    // An edge's midpoint as the fence sees it: the fence works in the tangent plane at
+    // its first vertex, where a straight edge of the point mass's plane bends by
+    // ~0.1 mm (the flat-earth frames this used before were scalings of each other).
+    let edge_middle = |zone: usize| {
+        let v = &fence.zones()[zone].polygon;
+        let geo = |q: &[f64; 2]| crate::shots::geo::GeoPoint {
+            lat_deg: q[0],
+            lon_deg: q[1],
+            alt_rel_m: 0.0,
+        };
+        let f = crate::shots::geo::LocalFrame::new(geo(&fence.zones()[0].polygon[0]));
+        f.to_geo(&((f.to_ned(&geo(&v[2])) + f.to_ned(&geo(&v[3]))) / 2.0))
+    };
+    assert!(fence.contains(&edge_middle(0)), "on the edge");
     assert!(!fence.contains(&p(0.0, 70.0)), "between the keep-ins");
     assert!(!fence.contains(&p(5.0, 5.0)), "in the keep-out");
-    assert!(!fence.contains(&p(10.0, 0.0)), "on the keep-out's edge");
+    assert!(!fence.contains(&edge_middle(2)), "on the keep-out's edge");
     assert!(Fence::empty().contains(&p(1e4, 1e4)));
     // Only keep-outs: everywhere else is allowed.
     let only_out = Fence::new(vec![zone(

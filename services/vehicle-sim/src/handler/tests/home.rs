@@ -10,16 +10,16 @@ use crate::telemetry;
 
 const OK: MavResult = MavResult::MAV_RESULT_ACCEPTED;
 
-/// Metres per degree of latitude (the model's own constant).
-const M_PER_DEG: f64 = 111_318.845_021_450_34;
+/// Metres per degree of latitude near the origin (WGS-84 at 35.4° S; to a metre in
+/// the f32 latitude test below).
+const M_PER_DEG: f64 = 110_947.0;
 
-/// A point `north_m` north of the origin (the initial home) at `alt_msl_m`.
+/// A point `north_m` north of the origin (the initial home) at `alt_msl_m`, in the
+/// model's own frame (WGS-84; it was ArduPilot's 111 318.8 m per degree sphere).
 fn north_of_origin(v: &Vehicle, north_m: f64, alt_msl_m: f64) -> GeoPoint {
-    let o = v.frame().origin();
     GeoPoint {
-        lat_deg: o.lat_deg + north_m / M_PER_DEG,
-        lon_deg: o.lon_deg,
         alt_msl_m,
+        ..v.frame().to_geo(&nalgebra::Vector3::new(north_m, 0.0, 0.0))
     }
 }
 
