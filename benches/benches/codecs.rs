@@ -839,7 +839,7 @@ fn mavlink_header() -> mavlink::MavHeader {
 }
 
 fn mavlink_frame(c: &mut Criterion) {
-    use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
+    use mavlink_frame::{FrameParser, RawFrame};
     let mut g = c.benchmark_group("mavlink_frame");
     let mut parser = FrameParser::new();
     for (name, msg) in mavlink_messages() {

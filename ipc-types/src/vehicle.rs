@@ -85,9 +85,10 @@ wire_enum! {
 /// Kinematic state, published at the rate ATTITUDE arrives from the autopilot.
 ///
 /// Topic: [`crate::topics::vehicle_state`]. Position fields come from the latest
-/// GLOBAL_POSITION_INT (their own stamp in `position_stamp_ns`); attitude from ATTITUDE.
+/// GLOBAL_POSITION_INT (their own stamp in `position_stamp_ns`); attitude from ATTITUDE;
+/// the ellipsoid height from the latest GPS_RAW_INT.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.VehicleState.v1")]
+#[type_name("skymesh.VehicleState.v2")]
 #[repr(C)]
 pub struct VehicleState {
     pub header: SampleHeader,
@@ -97,7 +98,11 @@ pub struct VehicleState {
     pub position_valid: u8,
     /// 1 once an attitude has been received.
     pub attitude_valid: u8,
-    pub reserved: u8,
+    /// 1 while the latest GPS_RAW_INT with a 3D fix carried `alt_ellipsoid` (a
+    /// MAVLink 2 extension field; autopilots send 0 when they do not know it):
+    /// `alt_ellipsoid_m` and `geoid_undulation_m` hold values. 0: ignore both
+    /// (autopilot-link sets them NaN).
+    pub alt_ellipsoid_valid: u8,
     /// Autopilot time since boot of the attitude, ms.
     pub time_boot_ms: u32,
     /// WGS84 latitude, degrees.
@@ -108,6 +113,14 @@ pub struct VehicleState {
     pub alt_msl_m: f32,
     /// Altitude above home, m.
     pub alt_rel_m: f32,
+    /// The GPS receiver's height above the WGS-84 ellipsoid, m (GPS_RAW_INT
+    /// `alt_ellipsoid`); NaN unless `alt_ellipsoid_valid`.
+    pub alt_ellipsoid_m: f32,
+    /// Height of the geoid (mean sea level) above the WGS-84 ellipsoid where the
+    /// vehicle is, m: GPS_RAW_INT `alt_ellipsoid - alt` of the same fix. Add it to an
+    /// MSL altitude (`alt_msl_m`, home's) for a height above the ellipsoid. NaN
+    /// unless `alt_ellipsoid_valid`.
+    pub geoid_undulation_m: f32,
     /// Velocity north, east, down, m/s.
     pub vel_ned_mps: [f32; 3],
     /// Heading over ground, degrees 0..360.
@@ -122,7 +135,7 @@ pub struct VehicleState {
     /// `CLOCK_MONOTONIC` ns when the position fields were last updated.
     pub position_stamp_ns: u64,
 }
-crate::assert_layout!(VehicleState, size = 120, align = 8);
+crate::assert_layout!(VehicleState, size = 128, align = 8);
 
 /// Mode, health and link state, published on change and at 1 Hz.
 ///

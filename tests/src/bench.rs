@@ -12,7 +12,7 @@ use skymesh_ipc_types::{
     VehicleState, VehicleStatus,
 };
 
-use skymesh_autopilot_link::frame::FrameParser;
+use mavlink_frame::FrameParser;
 use skymesh_runtime::realtime::{self, RealtimePriority};
 
 use crate::{Mesh, MeshOptions};

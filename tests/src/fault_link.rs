@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use mavlink::dialects::ardupilotmega::MavMessage;
-use skymesh_autopilot_link::frame::FrameParser;
+use mavlink_frame::FrameParser;
 
 use crate::{Mesh, MeshOptions};
 

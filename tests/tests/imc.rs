@@ -11,7 +11,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use imc_proto::{ChannelOp, ChannelState, Message, SystemType};
-use skymesh_autopilot_link::frame::FrameParser;
+use mavlink_frame::FrameParser;
 use skymesh_e2e::{binary, Mesh, MeshOptions};
 use skymesh_imc_gateway::client::ImcClient;
 use skymesh_ipc_types::FlightMode;

@@ -16,7 +16,7 @@ use skymesh_runtime::{ConfigError, ServiceConfig};
 
 use crate::arbiter::ArbiterSettings;
 use crate::gimbal_v2::VisionSettings;
-use crate::signing::{SigningKey, SigningSettings};
+use crate::signing::{load_key, SigningSettings};
 
 /// Where the autopilot is, as written in `connection`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -477,7 +477,7 @@ impl RawSigning {
         }
         indices.sort_unstable();
         // The key's bytes never appear in an error.
-        let key = SigningKey::load(std::path::Path::new(&path))
+        let key = load_key(std::path::Path::new(&path))
             .map_err(|e| ConfigError::invalid("signing.key_file", e.to_string()))?;
         Ok(Some(SigningSettings {
             key,
@@ -853,7 +853,7 @@ mod tests {
         assert_eq!(signing.endpoints, vec![1, 2]);
         assert_eq!(
             signing.key,
-            crate::signing::SigningKey::from_hex(HEX_KEY).unwrap()
+            mavlink_frame::signing::SigningKey::from_hex(HEX_KEY).unwrap()
         );
         // Refused with the key named, and never with the key's bytes in the message.
         let short = KeyFile::new(&HEX_KEY[..40]);

@@ -52,10 +52,10 @@ use tokio::task::{JoinHandle, JoinSet};
 use tokio_util::sync::CancellationToken;
 
 use crate::config::Endpoint;
-use crate::frame::{FrameParser, RawFrame};
 use crate::hub::{label, DropReason, EndpointMetrics, Hub};
 use crate::router::MAX_ENDPOINTS;
 use crate::signing::{EndpointSigning, Signing, SigningSettings};
+use mavlink_frame::{FrameParser, RawFrame};
 
 /// The signing of one endpoint, if it requires signing.
 type Sig = Option<Arc<EndpointSigning>>;
@@ -829,9 +829,9 @@ async fn serve_stream(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::signing::{signature_is_valid, signed_parts, SigningKey};
     use mavlink::dialects::ardupilotmega::{MavMessage, ATTITUDE_DATA};
     use mavlink::MavHeader;
+    use mavlink_frame::signing::{signature_is_valid, signed_parts, SigningKey};
 
     const PATIENCE: Duration = Duration::from_secs(10);
 

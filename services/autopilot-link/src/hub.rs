@@ -26,9 +26,9 @@ use tokio::sync::mpsc;
 
 use crate::config::Endpoint;
 use crate::endpoints::UdpSink;
-use crate::frame::RawFrame;
 use crate::link::{Outbox, WriteError};
 use crate::router::{Learned, Link, Router};
+use mavlink_frame::RawFrame;
 
 /// Label values longer than this (with the key and the other label) would not fit
 /// the stats sample's 72-byte label field: such endpoints are labelled `#<index>`.
@@ -241,7 +241,7 @@ impl Hub {
     }
 
     fn to_local(&self, frame: &RawFrame) {
-        let targeted = matches!(frame.target(), crate::frame::Target::Component(..));
+        let targeted = matches!(frame.target(), mavlink_frame::Target::Component(..));
         if !targeted && !LOCAL_BROADCAST_IDS.contains(&frame.message_id()) {
             return;
         }

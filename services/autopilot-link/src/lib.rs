@@ -14,10 +14,9 @@
 //! |---|---|
 //! | [`config`] | TOML → [`Settings`] |
 //! | [`link`] | transports, reader/writer threads, reconnect |
-//! | [`frame`] | raw MAVLink frames: split, check, target (pure) |
 //! | [`router`] | MAVLink routing table and COMMAND_ACK attribution (pure) |
 //! | [`endpoints`] | router endpoints (ground stations): sockets and their tasks |
-//! | [`signing`] | MAVLink 2 message signing on router endpoints |
+//! | [`signing`] | MAVLink 2 message signing on router endpoints (framing and signing: `mavlink-frame`) |
 //! | [`hub`] | moves frames between autopilot and endpoints; router metrics |
 //! | [`telemetry`] | MAVLink → samples (pure) |
 //! | [`payload`] | gimbal attitude and GoPro → `PayloadState` (pure) |
@@ -35,7 +34,6 @@ pub mod arbiter;
 pub mod commands;
 pub mod config;
 pub mod endpoints;
-pub mod frame;
 pub mod gimbal_v2;
 pub mod hub;
 pub mod link;

@@ -42,11 +42,11 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
 use crate::config::Endpoint;
-use crate::frame::{message_info, FrameParser, RawFrame, COMMAND_ACK_ID};
 use crate::hub::Hub;
 use crate::metrics::Metrics;
 use crate::router::{AckLedger, AckOwner};
 use crate::transport::{self, Received};
+use mavlink_frame::{message_info, FrameParser, RawFrame};
 
 pub use crate::transport::POLL;
 
@@ -621,11 +621,10 @@ fn decode_for_service(
         }
     };
     metrics.received(msg.message_name());
-    if id == COMMAND_ACK_ID {
-        let command = u16::from_le_bytes([frame.payload_byte(0), frame.payload_byte(1)]);
-        let target = (frame.payload_byte(8), frame.payload_byte(9));
-        let owner =
-            lock_ledger(ledger).on_ack(command, frame.payload_byte(2), target, Instant::now());
+    if let MavMessage::COMMAND_ACK(ack) = &msg {
+        let command = ack.command as u16;
+        let target = (ack.target_system, ack.target_component);
+        let owner = lock_ledger(ledger).on_ack(command, ack.result as u8, target, Instant::now());
         if owner == AckOwner::Endpoint {
             tracing::debug!(
                 command,

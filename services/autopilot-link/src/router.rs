@@ -30,7 +30,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
-use crate::frame::Target;
+use mavlink_frame::Target;
 
 /// At most this many endpoints (they share an 8-bit destination mask and the stats
 /// sample's 384 series).

@@ -10,6 +10,7 @@
 //! | lat, lon, alt msl, alt rel, NED velocity, heading | latest GLOBAL_POSITION_INT |
 //! | roll, pitch, yaw, body rates, `time_boot_ms` | the ATTITUDE itself |
 //! | quaternion | ATTITUDE_QUATERNION of the same instant (±100 ms) if it arrives, else from the Euler angles |
+//! | alt ellipsoid, geoid undulation | latest GPS_RAW_INT with a 3D fix and `alt_ellipsoid` set |
 //!
 //! `VehicleStatus` comes from HEARTBEAT (mode, armed, system status), EKF_STATUS_REPORT,
 //! GPS_RAW_INT, SYS_STATUS/BATTERY_STATUS, HOME_POSITION and STATUSTEXT. Link state
@@ -19,8 +20,8 @@ use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::{
-    EkfStatusFlags, MavAutopilot, MavMessage, MavModeFlag, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA,
-    HEARTBEAT_DATA,
+    EkfStatusFlags, GpsFixType, MavAutopilot, MavMessage, MavModeFlag, ATTITUDE_DATA,
+    GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA, HEARTBEAT_DATA,
 };
 use mavlink::MavHeader;
 use nalgebra::UnitQuaternion;
@@ -80,6 +81,21 @@ struct Position {
     stamp_ns: u64,
 }
 
+#[derive(Debug, Clone, Copy)]
+struct Ellipsoid {
+    alt_m: f32,
+    undulation_m: f32,
+}
+
+/// The ellipsoid height of a GPS_RAW_INT, if it carries one.
+fn ellipsoid(g: &GPS_RAW_INT_DATA) -> Option<Ellipsoid> {
+    let fix = g.fix_type as u8 >= GpsFixType::GPS_FIX_TYPE_3D_FIX as u8;
+    (fix && g.alt_ellipsoid != 0).then(|| Ellipsoid {
+        alt_m: (f64::from(g.alt_ellipsoid) / 1000.0) as f32,
+        undulation_m: ((i64::from(g.alt_ellipsoid) - i64::from(g.alt)) as f64 / 1000.0) as f32,
+    })
+}
+
 /// Latest LOCAL_POSITION_NED: position and velocity in the EKF origin frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalPosition {
@@ -98,6 +114,10 @@ pub struct Telemetry {
     position: Option<Position>,
     /// Latest ATTITUDE_QUATERNION: `time_boot_ms` and w, x, y, z.
     quaternion: Option<(u32, [f32; 4])>,
+    /// From the latest GPS_RAW_INT: its height above the WGS-84 ellipsoid and the
+    /// geoid undulation (`alt_ellipsoid - alt`), m; `None` without a 3D fix or
+    /// when the autopilot does not send `alt_ellipsoid` (0, or MAVLink 1).
+    ellipsoid: Option<Ellipsoid>,
     local: Option<LocalPosition>,
     /// Every status field except link state, header and heartbeat age.
     status: VehicleStatus,
@@ -115,6 +135,7 @@ impl Telemetry {
             foreign: BTreeSet::new(),
             position: None,
             quaternion: None,
+            ellipsoid: None,
             local: None,
             status: VehicleStatus {
                 vehicle_id,
@@ -183,6 +204,7 @@ impl Telemetry {
                     u8::from(e.flags.contains(EKF_REQUIRED) && !e.flags.intersects(EKF_FORBIDDEN));
             }
             MavMessage::GPS_RAW_INT(g) => {
+                self.ellipsoid = ellipsoid(g);
                 self.status.gps_fix = GpsFix::try_from(g.fix_type as u8)
                     .unwrap_or(GpsFix::NoGps)
                     .to_wire();
@@ -287,8 +309,15 @@ impl Telemetry {
             yaw_rad: a.yaw,
             body_rates_radps: [a.rollspeed, a.pitchspeed, a.yawspeed],
             heading_deg: yaw_heading,
+            alt_ellipsoid_m: f32::NAN,
+            geoid_undulation_m: f32::NAN,
             ..VehicleState::default()
         };
+        if let Some(e) = self.ellipsoid {
+            s.alt_ellipsoid_valid = 1;
+            s.alt_ellipsoid_m = e.alt_m;
+            s.geoid_undulation_m = e.undulation_m;
+        }
         if let Some(p) = self.position {
             // Before the EKF has a position, ArduPilot reports 0/0: not a position.
             s.position_valid = u8::from(p.lat_deg != 0.0 || p.lon_deg != 0.0);
@@ -564,6 +593,40 @@ mod tests {
     }
 
     #[test]
+    fn state_carries_the_ellipsoid_height_of_the_latest_gps_fix() {
+        let mut t = Telemetry::new(1);
+        let ap = from(1, 1);
+        let gps = |fix_type, alt_ellipsoid| {
+            MavMessage::GPS_RAW_INT(GPS_RAW_INT_DATA {
+                fix_type,
+                alt: 594_000,
+                alt_ellipsoid,
+                ..Default::default()
+            })
+        };
+        let s = t.handle(&ap, &attitude(1, 0.0, 0.0, 0.0), 0).state.unwrap();
+        assert_eq!(s.alt_ellipsoid_valid, 0);
+        assert!(s.alt_ellipsoid_m.is_nan() && s.geoid_undulation_m.is_nan());
+        t.handle(&ap, &gps(GpsFixType::GPS_FIX_TYPE_3D_FIX, 613_600), 0);
+        let s = t.handle(&ap, &attitude(2, 0.0, 0.0, 0.0), 0).state.unwrap();
+        assert_eq!(s.alt_ellipsoid_valid, 1);
+        assert_eq!(s.alt_ellipsoid_m, 613.6);
+        assert!((s.geoid_undulation_m - 19.6).abs() < 1e-4);
+        // Not sent (0, as ArduPilot without an undulation and MAVLink 1 give) or
+        // no 3D fix: unknown again.
+        for (fix, alt) in [
+            (GpsFixType::GPS_FIX_TYPE_RTK_FIXED, 0),
+            (GpsFixType::GPS_FIX_TYPE_2D_FIX, 613_600),
+        ] {
+            t.handle(&ap, &gps(GpsFixType::GPS_FIX_TYPE_3D_FIX, 613_600), 0);
+            t.handle(&ap, &gps(fix, alt), 0);
+            let s = t.handle(&ap, &attitude(3, 0.0, 0.0, 0.0), 0).state.unwrap();
+            assert_eq!(s.alt_ellipsoid_valid, 0, "{fix:?} {alt}");
+            assert!(s.alt_ellipsoid_m.is_nan());
+        }
+    }
+
+    #[test]
     fn an_attitude_quaternion_of_the_same_instant_is_used_as_is() {
         let mut t = Telemetry::new(1);
         let ap = from(1, 1);
@@ -665,6 +728,7 @@ mod tests {
             &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                 severity: MavSeverity::MAV_SEVERITY_CRITICAL,
                 text: "PreArm: EKF attitude is bad".into(),
+                ..Default::default()
             }),
             0,
         );
@@ -696,6 +760,7 @@ mod tests {
         let ack = MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
             command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
             result: MavResult::MAV_RESULT_DENIED,
+            ..Default::default()
         });
         assert_eq!(t.handle(&from(1, 1), &ack, 0).command_ack, Some((400, 2)));
         assert_eq!(t.handle(&from(2, 1), &ack, 0).command_ack, None);

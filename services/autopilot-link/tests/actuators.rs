@@ -14,9 +14,9 @@ use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA, SERVO_OUTPUT_RAW_DATA,
 };
 use mavlink::{MavHeader, MessageData};
+use mavlink_frame::{FrameParser, RawFrame};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::endpoints::Bound;
-use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
 use skymesh_autopilot_link::Settings;
 use skymesh_ipc_types::{AckResult, Command, CommandSource, RefusalReason, ZoomMode};
 use tokio::net::UdpSocket;

@@ -34,13 +34,18 @@ enum Reply {
 }
 
 fn ack(command: MavCmd, result: MavResult) -> MavMessage {
-    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+        command,
+        result,
+        ..Default::default()
+    })
 }
 
 fn text(s: &str) -> MavMessage {
     MavMessage::STATUSTEXT(STATUSTEXT_DATA {
         severity: MavSeverity::MAV_SEVERITY_CRITICAL,
         text: s.into(),
+        ..Default::default()
     })
 }
 

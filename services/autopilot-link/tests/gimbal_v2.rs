@@ -87,6 +87,7 @@ impl FakeAutopilot {
                             let ack = MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
                                 command: c.command,
                                 result: MavResult::MAV_RESULT_ACCEPTED,
+                                ..Default::default()
                             });
                             let _ = conn.send(&header, &ack);
                         }

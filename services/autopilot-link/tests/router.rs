@@ -19,9 +19,9 @@ use mavlink::dialects::ardupilotmega::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, SYSTEM_TIME_DATA,
 };
 use mavlink::{Connectable, Connection, MavConnection, MavHeader, Message, UdpConfig, UdpMode};
+use mavlink_frame::{FrameParser, RawFrame};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::endpoints::Bound;
-use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
 use skymesh_autopilot_link::Settings;
 use skymesh_ipc_types::{AckResult, Command, FlightMode};
 use tokio::net::UdpSocket;

@@ -20,11 +20,12 @@ use mavlink::dialects::ardupilotmega::{
     HEARTBEAT_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use mavlink::{MavHeader, Message};
+use mavlink_frame::signing::{sign, timestamp_at, SigningKey};
+use mavlink_frame::{FrameParser, RawFrame};
 use sha2::{Digest, Sha256};
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::endpoints::Bound;
-use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
-use skymesh_autopilot_link::signing::{sign, timestamp_at, SigningKey, SigningSettings};
+use skymesh_autopilot_link::signing::SigningSettings;
 use skymesh_autopilot_link::Settings;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::UdpSocket;
@@ -350,10 +351,10 @@ fn signatures_match_pymavlink_and_the_spec_written_out() {
         .expect("our parser takes a signed frame");
     assert!(f.is_signed());
     assert_eq!(marker(&f), Some(0.0));
-    let mut decoder = skymesh_vehicle_sim::codec::FrameDecoder::new();
+    let mut decoder = mavlink_frame::FrameDecoder::new();
     decoder.push(&want);
     match decoder.next_frame() {
-        Some(Ok(skymesh_vehicle_sim::codec::Inbound::Message { msg, header, .. })) => {
+        Some(Ok(mavlink_frame::Inbound::Message { msg, header, .. })) => {
             assert_eq!(msg.message_id(), COMMAND_LONG);
             assert_eq!((header.system_id, header.component_id), (255, 190));
         }

@@ -11,7 +11,7 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use crate::model::{GeoPoint, LocalFrame, VehicleParams};
+use crate::model::{GeoPoint, LocalFrame, VehicleParams, CMAC_GEOID_UNDULATION_M};
 
 /// The shipped default configuration, with every option commented.
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../deploy/vehicle-sim.toml");
@@ -45,6 +45,9 @@ pub struct RawConfig {
     pub home_lon: f64,
     /// Home / ground altitude above mean sea level, metres.
     pub home_alt_msl: f64,
+    /// Height of the geoid above the WGS-84 ellipsoid at home, metres (GPS_RAW_INT
+    /// `alt_ellipsoid` = MSL altitude + this); the default suits the default home.
+    pub geoid_undulation_m: f64,
     /// Initial heading, degrees clockwise from north.
     pub home_heading_deg: f64,
     /// Seconds after start until the EKF reports a good position (arming is refused before).
@@ -133,6 +136,7 @@ impl Default for RawConfig {
             home_lat: -35.363_261,
             home_lon: 149.165_230,
             home_alt_msl: 584.0,
+            geoid_undulation_m: CMAC_GEOID_UNDULATION_M,
             home_heading_deg: 353.0,
             ekf_ready_after_s: 0.0,
             battery_capacity_mah: 5200.0,
@@ -377,6 +381,8 @@ impl RawConfig {
         range("home_lat", self.home_lat, -90.0, 90.0)?;
         range("home_lon", self.home_lon, -180.0, 180.0)?;
         range("home_alt_msl", self.home_alt_msl, -500.0, 10_000.0)?;
+        // The geoid lies within about -107..+86 m of the ellipsoid everywhere.
+        range("geoid_undulation_m", self.geoid_undulation_m, -120.0, 100.0)?;
         range("home_heading_deg", self.home_heading_deg, 0.0, 360.0)?;
         range("ekf_ready_after_s", self.ekf_ready_after_s, 0.0, 3600.0)?;
         range(
@@ -434,6 +440,7 @@ impl RawConfig {
                 lon_deg: self.home_lon,
                 alt_msl_m: self.home_alt_msl,
             },
+            geoid_undulation_m: self.geoid_undulation_m,
             initial_heading_rad: self.home_heading_deg.to_radians(),
             ekf_ready_after_s: self.ekf_ready_after_s,
             battery_capacity_mah: self.battery_capacity_mah,

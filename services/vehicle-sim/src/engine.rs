@@ -21,13 +21,13 @@ use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use tracing::{debug, error, info};
 
-use crate::codec::{self, Inbound};
 use crate::config::{Settings, StreamDefaults, PHYSICS_HZ};
 use crate::handler::{Handler, Outgoing, StreamRequest};
 use crate::model::{Event, Vehicle};
 use crate::stats::{self, SimStats};
 use crate::streams::StreamScheduler;
 use crate::telemetry;
+use mavlink_frame::Inbound;
 
 /// Identifies one link (a TCP client, or a UDP socket). The upper 32 bits are
 /// the index of the vehicle the link belongs to ([`link_id`]).
@@ -416,15 +416,11 @@ fn send(link: &mut Link, system_id: u8, out: &Outgoing, stats: &SimStats) {
     let mut buf = Vec::with_capacity(64);
     match out {
         Outgoing::Message(msg) | Outgoing::FromComponent { msg, .. } => {
-            codec::encode(header, msg, &mut buf)
+            mavlink_frame::encode(header, msg, &mut buf)
         }
         Outgoing::CommandAckRaw { command, result } => {
-            codec::encode_command_ack_raw(header, *command, *result, &mut buf)
+            mavlink_frame::encode_command_ack_raw(header, *command, *result, &mut buf)
         }
-        Outgoing::GimbalStatus(status) => {
-            codec::encode_gimbal_device_attitude_status(header, status, &mut buf)
-        }
-        Outgoing::ServoOutput(servos) => codec::encode_servo_output_raw(header, servos, &mut buf),
     }
     match link.tx.try_send(buf) {
         Ok(()) => stats::add(&stats.frames_out, 1),

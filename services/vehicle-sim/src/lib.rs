@@ -9,7 +9,7 @@
 //!   sequences) and the GoPro behind the gimbal's MAVLink bridge.
 //! - [`handler`]: MAVLink message in → vehicle change + replies out (pure).
 //! - [`telemetry`] / [`streams`]: state → messages, and which are due when.
-//! - [`codec`]: MAVLink 1/2 framing over byte buffers (pure).
+//! - MAVLink framing is the `mavlink-frame` crate's (shared with autopilot-link).
 //! - `engine` + `server`: the tokio task that owns the model and steps it at
 //!   100 Hz, and the thin TCP/UDP layer around it.
 //!
@@ -19,7 +19,6 @@
 
 #![forbid(unsafe_code)]
 
-pub mod codec;
 pub mod config;
 mod engine;
 pub mod handler;

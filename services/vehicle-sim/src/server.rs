@@ -17,10 +17,10 @@ use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 use tracing::{debug, info, warn};
 
-use crate::codec::{BadFrame, FrameDecoder};
 use crate::config::{Endpoint, Settings};
 use crate::engine::{link_id, LinkEvent, LinkId, LINK_QUEUE_FRAMES};
 use crate::stats::{self, SimStats};
+use mavlink_frame::{BadFrame, FrameDecoder};
 
 /// Read buffer per TCP client.
 const READ_CHUNK: usize = 4096;

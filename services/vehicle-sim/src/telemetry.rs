@@ -14,7 +14,6 @@ use mavlink::dialects::ardupilotmega::{
 };
 use mavlink::MessageData;
 
-use crate::codec::{GimbalDeviceAttitudeStatus, ServoOutputRaw};
 use crate::handler::Outgoing;
 use crate::model::Vehicle;
 
@@ -64,22 +63,17 @@ pub fn build(id: u32, v: &Vehicle, system_id: u8) -> Option<MavMessage> {
         EKF_STATUS_REPORT_DATA::ID => Some(ekf_status_report(v)),
         HOME_POSITION_DATA::ID => home_position(v),
         GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => Some(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(
-            gimbal_device_attitude_status(v).base,
+            gimbal_device_attitude_status(v),
         )),
-        SERVO_OUTPUT_RAW_DATA::ID => Some(MavMessage::SERVO_OUTPUT_RAW(servo_output_raw(v).base)),
+        SERVO_OUTPUT_RAW_DATA::ID => Some(MavMessage::SERVO_OUTPUT_RAW(servo_output_raw(v))),
         _ => None,
     }
 }
 
-/// Message `id` as it goes on the wire: GIMBAL_DEVICE_ATTITUDE_STATUS and
-/// SERVO_OUTPUT_RAW with their extension fields, GOPRO_HEARTBEAT from the gimbal
-/// (`None` without a GoPro), the rest as [`build`] makes them, from the autopilot.
+/// Message `id` as it goes on the wire: GOPRO_HEARTBEAT from the gimbal (`None`
+/// without a GoPro), the rest as [`build`] makes them, from the autopilot.
 pub fn build_outgoing(id: u32, v: &Vehicle, system_id: u8) -> Option<Outgoing> {
     match id {
-        GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID => {
-            Some(Outgoing::GimbalStatus(gimbal_device_attitude_status(v)))
-        }
-        SERVO_OUTPUT_RAW_DATA::ID => Some(Outgoing::ServoOutput(servo_output_raw(v))),
         GOPRO_HEARTBEAT_DATA::ID => gopro_heartbeat(v).map(Outgoing::from_gimbal),
         _ => build(id, v, system_id).map(Outgoing::Message),
     }
@@ -191,6 +185,13 @@ fn gps_raw_int(v: &Vehicle) -> MavMessage {
             GpsFixType::GPS_FIX_TYPE_NO_FIX
         },
         satellites_visible: if fix { SATELLITES } else { 0 },
+        // Height above the WGS-84 ellipsoid: MSL plus the geoid undulation at home.
+        alt_ellipsoid: if fix {
+            ((p.alt_msl_m + v.params().geoid_undulation_m) * 1000.0).round() as i32
+        } else {
+            0
+        },
+        ..GPS_RAW_INT_DATA::DEFAULT
     })
 }
 
@@ -282,6 +283,7 @@ fn battery_status(v: &Vehicle) -> MavMessage {
         battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
         mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
         battery_remaining: (b.remaining() * 100.0).round() as i8,
+        ..BATTERY_STATUS_DATA::DEFAULT
     })
 }
 
@@ -319,6 +321,7 @@ fn ekf_status_report(v: &Vehicle) -> MavMessage {
         compass_variance: 0.01,
         terrain_alt_variance: 0.0,
         flags,
+        airspeed_variance: 0.0,
     })
 }
 
@@ -339,25 +342,23 @@ fn home_position(v: &Vehicle) -> Option<MavMessage> {
 
 /// The gimbal attitude, as ArduPilot reports the mount it drives: yaw in the
 /// vehicle frame (relative to the nose), delta_yaw = the vehicle's heading.
-pub fn gimbal_device_attitude_status(v: &Vehicle) -> GimbalDeviceAttitudeStatus {
+pub fn gimbal_device_attitude_status(v: &Vehicle) -> GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
     let g = v.gimbal().attitude();
     let w = g.angular_velocity();
     let a = v.attitude();
     // Euler yaw rate from the body rates.
     let (sr, cr) = a.roll.sin_cos();
     let heading_rate = (a.rates.y * sr + a.rates.z * cr) / a.pitch.cos();
-    GimbalDeviceAttitudeStatus {
-        base: GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
-            time_boot_ms: time_boot_ms(v),
-            q: g.quaternion(),
-            angular_velocity_x: w.x as f32,
-            angular_velocity_y: w.y as f32,
-            angular_velocity_z: w.z as f32,
-            failure_flags: GimbalDeviceErrorFlags::empty(),
-            flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
-            target_system: 0,
-            target_component: 0,
-        },
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+        time_boot_ms: time_boot_ms(v),
+        q: g.quaternion(),
+        angular_velocity_x: w.x as f32,
+        angular_velocity_y: w.y as f32,
+        angular_velocity_z: w.z as f32,
+        failure_flags: GimbalDeviceErrorFlags::empty(),
+        flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+        target_system: 0,
+        target_component: 0,
         delta_yaw: a.yaw as f32,
         delta_yaw_velocity: if heading_rate.is_finite() {
             heading_rate as f32
@@ -372,7 +373,7 @@ pub fn gimbal_device_attitude_status(v: &Vehicle) -> GimbalDeviceAttitudeStatus 
 /// 1..=4 are the motors ([`Vehicle::motor_outputs`]: idle, flight throttle or a
 /// motor test), 5..=16 what MAV_CMD_DO_SET_SERVO last set on that channel (0 if
 /// never set).
-pub fn servo_output_raw(v: &Vehicle) -> ServoOutputRaw {
+pub fn servo_output_raw(v: &Vehicle) -> SERVO_OUTPUT_RAW_DATA {
     let servos = &v.payload().servos;
     let mut out = [0u16; 16];
     for (i, pwm) in out.iter_mut().enumerate() {
@@ -382,22 +383,27 @@ pub fn servo_output_raw(v: &Vehicle) -> ServoOutputRaw {
     for (pwm, motor) in out.iter_mut().zip(v.motor_outputs()) {
         *pwm = motor;
     }
-    let [s1, s2, s3, s4, s5, s6, s7, s8, rest @ ..] = out;
-    ServoOutputRaw {
-        base: SERVO_OUTPUT_RAW_DATA {
-            // ArduPilot sends its boot time in µs, wrapping at 32 bits.
-            time_usec: (v.time_s() * 1e6) as u64 as u32,
-            servo1_raw: s1,
-            servo2_raw: s2,
-            servo3_raw: s3,
-            servo4_raw: s4,
-            servo5_raw: s5,
-            servo6_raw: s6,
-            servo7_raw: s7,
-            servo8_raw: s8,
-            port: 0,
-        },
-        servo9_16: rest,
+    let [s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13, s14, s15, s16] = out;
+    SERVO_OUTPUT_RAW_DATA {
+        // ArduPilot sends its boot time in µs, wrapping at 32 bits.
+        time_usec: (v.time_s() * 1e6) as u64 as u32,
+        servo1_raw: s1,
+        servo2_raw: s2,
+        servo3_raw: s3,
+        servo4_raw: s4,
+        servo5_raw: s5,
+        servo6_raw: s6,
+        servo7_raw: s7,
+        servo8_raw: s8,
+        port: 0,
+        servo9_raw: s9,
+        servo10_raw: s10,
+        servo11_raw: s11,
+        servo12_raw: s12,
+        servo13_raw: s13,
+        servo14_raw: s14,
+        servo15_raw: s15,
+        servo16_raw: s16,
     }
 }
 
@@ -428,12 +434,18 @@ pub fn statustext(severity: MavSeverity, text: &str) -> MavMessage {
     MavMessage::STATUSTEXT(STATUSTEXT_DATA {
         severity,
         text: text[..end].into(),
+        ..STATUSTEXT_DATA::DEFAULT
     })
 }
 
-/// A COMMAND_ACK for a command the dialect knows.
+/// A COMMAND_ACK for a command the dialect knows, to every component (target
+/// 0/0, as autopilots without the extension fields answer).
 pub fn command_ack(command: MavCmd, result: MavResult) -> MavMessage {
-    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+        command,
+        result,
+        ..COMMAND_ACK_DATA::DEFAULT
+    })
 }
 
 #[cfg(test)]

@@ -384,7 +384,7 @@ async fn garbage_then_a_valid_frame_is_still_handled() {
     // Garbage without frame markers, then a command in the same write.
     let mut bytes: Vec<u8> = (0..200u32).map(|i| (i * 7 % 250) as u8).collect();
     let mut frame = Vec::new();
-    skymesh_vehicle_sim::codec::encode(
+    mavlink_frame::encode(
         GCS_HEADER,
         &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
             param1: 1.0,
@@ -454,7 +454,7 @@ async fn unknown_commands_are_unsupported_and_mavlink1_is_accepted() {
     // A command number no dialect has: the ACK carries the raw number, which
     // the typed decoder cannot represent, so count it on the sim side.
     let mut frame = Vec::new();
-    skymesh_vehicle_sim::codec::encode(
+    mavlink_frame::encode(
         GCS_HEADER,
         &MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
             command: MavCmd::MAV_CMD_DO_SET_MODE,
@@ -563,7 +563,7 @@ async fn udp_endpoint_answers_every_peer() {
         .await
         .expect("bind b");
     let mut hb = Vec::new();
-    skymesh_vehicle_sim::codec::encode(GCS_HEADER, &gcs_heartbeat(), &mut hb);
+    mavlink_frame::encode(GCS_HEADER, &gcs_heartbeat(), &mut hb);
     a.send_to(&hb, sim.addr).await.expect("send a");
     b.send_to(&hb, sim.addr).await.expect("send b");
     for sock in [&a, &b] {
@@ -572,9 +572,9 @@ async fn udp_endpoint_answers_every_peer() {
             loop {
                 let (n, from) = sock.recv_from(&mut buf).await.expect("recv");
                 assert_eq!(from, sim.addr);
-                let mut d = skymesh_vehicle_sim::codec::FrameDecoder::new();
+                let mut d = mavlink_frame::FrameDecoder::new();
                 d.push(&buf[..n]);
-                if let Some(Ok(skymesh_vehicle_sim::codec::Inbound::Message {
+                if let Some(Ok(mavlink_frame::Inbound::Message {
                     msg: MavMessage::HEARTBEAT(h),
                     ..
                 })) = d.next_frame()

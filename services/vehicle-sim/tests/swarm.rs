@@ -11,7 +11,7 @@ use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, GLOBAL_POSITION_INT_DATA,
     HEARTBEAT_DATA,
 };
-use skymesh_vehicle_sim::codec::{self, FrameDecoder, Inbound};
+use mavlink_frame::{self as codec, FrameDecoder, Inbound};
 use skymesh_vehicle_sim::{RawConfig, RawSwarm};
 
 /// Metres per degree of latitude (as the sim's flat-earth frame).

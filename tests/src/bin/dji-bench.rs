@@ -39,7 +39,7 @@ use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::MavMessage;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
-use skymesh_autopilot_link::frame::FrameParser;
+use mavlink_frame::FrameParser;
 use skymesh_e2e::bench::{arg, bench_thread_realtime, percentile, start_tapped_mesh, ControlPath};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, Command, ServiceId, VehicleCommand};

@@ -30,7 +30,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::{MavMessage, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use mavlink::MavHeader;
-use skymesh_autopilot_link::frame::{FrameParser, RawFrame};
+use mavlink_frame::{FrameParser, RawFrame};
 use skymesh_e2e::bench::{arg, bench_thread_realtime, percentile, start_tapped_mesh, ControlPath};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, VehicleState};

@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Result};
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::MavlinkReader;
-use skymesh_autopilot_link::frame::FrameParser;
+use mavlink_frame::FrameParser;
 use skymesh_e2e::bench::{arg, percentile, start_tapped_mesh_both};
 use skymesh_e2e::MeshOptions;
 use skymesh_ipc_types::{topics, VehicleState};

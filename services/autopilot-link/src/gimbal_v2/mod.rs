@@ -13,9 +13,9 @@
 //!   quaternion (`VirtualCamState::ned_from_cam_q`; its camera frame, x along the
 //!   optical axis, y right, z down, is MAVLink's gimbal frame), flag
 //!   `GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME`. Lock flags mirror the camera's
-//!   `lock_flags`. The workspace's `mavlink` build emits no MAVLink 2 extension
-//!   fields, so `delta_yaw` and `gimbal_device_id` of ATTITUDE_STATUS (and the
-//!   COMMAND_ACK target) are not sent.
+//!   `lock_flags`. ATTITUDE_STATUS's `delta_yaw`/`delta_yaw_velocity` are NaN
+//!   (unknown) and its `gimbal_device_id` 0 (the device is the sender).
+//!   COMMAND_ACKs carry the commander in `target_system`/`target_component`.
 //! - `gimbal_device_id`: manager and device are one component; INFORMATION and
 //!   STATUS name the component itself as the device, and ATTITUDE_STATUS comes from
 //!   that component, so ground stations pair them. Addressing a device accepts 0

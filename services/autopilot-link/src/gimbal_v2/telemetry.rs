@@ -134,6 +134,12 @@ impl GimbalV2 {
                 angular_velocity_y: f32::NAN,
                 angular_velocity_z: f32::NAN,
                 failure_flags: GimbalDeviceErrorFlags::empty(),
+                // The view's attitude is in the earth frame; we do not relate it
+                // to the vehicle's heading here.
+                delta_yaw: f32::NAN,
+                delta_yaw_velocity: f32::NAN,
+                // The device is the sending component itself.
+                gimbal_device_id: 0,
             },
         ))
     }
@@ -151,11 +157,16 @@ pub fn heartbeat() -> MavMessage {
     })
 }
 
-/// COMMAND_ACK for `command` to `to` (the workspace's `mavlink` build does not emit
-/// MAVLink 2 extension fields, so `target_system`/`target_component` stay 0: the
-/// ack is addressed by routing only).
-pub fn ack(command: MavCmd, result: MavResult, _to: (u8, u8)) -> MavMessage {
-    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+/// COMMAND_ACK for `command` addressed to `to` (system, component), the sender of
+/// the command, as ArduPilot addresses its acks.
+pub fn ack(command: MavCmd, result: MavResult, to: (u8, u8)) -> MavMessage {
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+        command,
+        result,
+        target_system: to.0,
+        target_component: to.1,
+        ..COMMAND_ACK_DATA::DEFAULT
+    })
 }
 
 #[cfg(test)]

@@ -17,10 +17,10 @@ use skymesh_runtime::{CounterFamily, IpcError, Publisher, Stats, Subscriber, War
 use tokio::sync::mpsc;
 
 use super::Service;
-use crate::frame::RawFrame;
 use crate::gimbal_v2::{GimbalV2, Incoming, Output, VisionSettings};
 use crate::hub::Hub;
 use crate::Lifecycle;
+use mavlink_frame::RawFrame;
 
 /// Frames waiting for the virtual gimbals; beyond this the hub drops them (counted).
 pub const INBOX: usize = 128;

@@ -18,10 +18,10 @@ use mavlink::dialects::ardupilotmega::{
 use mavlink::Message;
 use tracing::{debug, info};
 
-use crate::codec::{GimbalDeviceAttitudeStatus, Inbound, ServoOutputRaw};
 use crate::config::{COMPONENT_ID, GIMBAL_COMPONENT_ID};
 use crate::model::Vehicle;
 use crate::streams::IntervalRequest;
+use mavlink_frame::Inbound;
 
 pub use command::Cmd;
 
@@ -52,11 +52,6 @@ pub enum Outgoing {
         /// The result.
         result: MavResult,
     },
-    /// GIMBAL_DEVICE_ATTITUDE_STATUS with its extension fields, from the
-    /// autopilot (which drives the mount, as ArduPilot does).
-    GimbalStatus(GimbalDeviceAttitudeStatus),
-    /// SERVO_OUTPUT_RAW with servo outputs 9..=16, from the autopilot.
-    ServoOutput(ServoOutputRaw),
 }
 
 impl Outgoing {

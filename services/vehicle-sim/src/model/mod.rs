@@ -35,7 +35,7 @@ pub use gimbal::{Gimbal, GimbalAttitude, GimbalTarget, YawFrame};
 pub use gopro::{GoPro, GoProHeartbeat, GoProRefusal};
 pub use mode::FlightMode;
 pub use motors::{MotorTestRefusal, MotorTestRequest, TestThrottle};
-pub use params::VehicleParams;
+pub use params::{VehicleParams, CMAC_GEOID_UNDULATION_M};
 pub use payload::{
     CameraMode, CaptureRefusal, ImageSequence, MountTarget, Payload, Zoom, ZoomRefusal, MAX_IMAGES,
     MAX_ZOOM_STEPS, ZOOM_RATE_PCT_S, ZOOM_STEP_PCT,

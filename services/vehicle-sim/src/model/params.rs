@@ -8,6 +8,9 @@ use super::GeoPoint;
 pub struct VehicleParams {
     /// EKF origin and initial home; the ground is flat at its altitude.
     pub home: GeoPoint,
+    /// Height of the geoid (mean sea level) above the WGS-84 ellipsoid around
+    /// home, m: GPS_RAW_INT's `alt_ellipsoid` is the MSL altitude plus this.
+    pub geoid_undulation_m: f64,
     /// Initial heading, radians.
     pub initial_heading_rad: f64,
     /// Sim time until the EKF has a position, seconds (GPS fix comes at half of it).
@@ -46,6 +49,10 @@ pub struct VehicleParams {
     pub gopro: bool,
 }
 
+/// The geoid's height above the WGS-84 ellipsoid at SITL's CMAC field near
+/// Canberra (EGM96, about +20 m; a GNSS receiver reports the same kind of value).
+pub const CMAC_GEOID_UNDULATION_M: f64 = 19.6;
+
 impl Default for VehicleParams {
     /// ArduCopter defaults at SITL's CMAC field.
     fn default() -> Self {
@@ -55,6 +62,7 @@ impl Default for VehicleParams {
                 lon_deg: 149.165_230,
                 alt_msl_m: 584.0,
             },
+            geoid_undulation_m: CMAC_GEOID_UNDULATION_M,
             initial_heading_rad: 353.0_f64.to_radians(),
             ekf_ready_after_s: 0.0,
             battery_capacity_mah: 5200.0,

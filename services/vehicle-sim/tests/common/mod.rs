@@ -1,5 +1,5 @@
 //! Test harness: an in-process simulator on 127.0.0.1:0 and a fake ground
-//! station built on the crate's own codec.
+//! station built on the shared framer (`mavlink-frame`).
 
 #![allow(dead_code)]
 
@@ -11,7 +11,7 @@ use mavlink::dialects::ardupilotmega::{
     MavCmd, MavMessage, MavResult, COMMAND_LONG_DATA, HEARTBEAT_DATA,
 };
 use mavlink::MavHeader;
-use skymesh_vehicle_sim::codec::{self, FrameDecoder, Inbound};
+use mavlink_frame::{self as codec, FrameDecoder, Inbound};
 use skymesh_vehicle_sim::{bind, bind_all, run, run_all, RawConfig, SimStats};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -190,7 +190,7 @@ impl Gcs {
                 match r {
                     Ok(Inbound::Message { header, msg, .. }) => return (header, msg),
                     Ok(Inbound::UnknownCommand { .. }) => {}
-                    Err(skymesh_vehicle_sim::codec::BadFrame::Garbage { .. }) => {}
+                    Err(mavlink_frame::BadFrame::Garbage { .. }) => {}
                     Err(_) => self.bad_frames += 1,
                 }
             }

@@ -5,7 +5,6 @@ use mavlink::dialects::ardupilotmega::SERVO_OUTPUT_RAW_DATA;
 use mavlink::MessageData;
 
 use super::*;
-use crate::codec::ServoOutputRaw;
 use crate::model::Event;
 use crate::telemetry;
 
@@ -56,14 +55,13 @@ fn texts(v: &mut Vehicle) -> Vec<String> {
 
 /// SERVO_OUTPUT_RAW as streamed, outputs 1..=16.
 fn outputs(v: &Vehicle) -> [u16; 16] {
-    let Some(Outgoing::ServoOutput(ServoOutputRaw { base: b, servo9_16 })) =
+    let Some(Outgoing::Message(MavMessage::SERVO_OUTPUT_RAW(b))) =
         telemetry::build_outgoing(SERVO_OUTPUT_RAW_DATA::ID, v, 1)
     else {
         panic!("no SERVO_OUTPUT_RAW")
     };
     assert_eq!(b.port, 0);
-    let mut out = [0; 16];
-    out[..8].copy_from_slice(&[
+    [
         b.servo1_raw,
         b.servo2_raw,
         b.servo3_raw,
@@ -72,9 +70,15 @@ fn outputs(v: &Vehicle) -> [u16; 16] {
         b.servo6_raw,
         b.servo7_raw,
         b.servo8_raw,
-    ]);
-    out[8..].copy_from_slice(&servo9_16);
-    out
+        b.servo9_raw,
+        b.servo10_raw,
+        b.servo11_raw,
+        b.servo12_raw,
+        b.servo13_raw,
+        b.servo14_raw,
+        b.servo15_raw,
+        b.servo16_raw,
+    ]
 }
 
 /// A fresh vehicle on the ground with its start-up texts taken.
@@ -360,7 +364,7 @@ fn servo_output_raw_can_be_requested_and_streamed() {
         &r.replies[..],
         [
             Outgoing::Message(MavMessage::COMMAND_ACK(_)),
-            Outgoing::ServoOutput(_)
+            Outgoing::Message(MavMessage::SERVO_OUTPUT_RAW(_))
         ]
     ));
     let r = h.handle(

@@ -173,16 +173,16 @@ fn gimbal_attitude_status_is_in_the_vehicle_frame() {
     let (h, mut v) = setup();
     assert_eq!(pitchyaw(&h, &mut v, -30., 20., 32.), OK);
     run(&mut v, 2.0);
-    let Some(Outgoing::GimbalStatus(s)) =
+    let Some(Outgoing::Message(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(s))) =
         telemetry::build_outgoing(GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID, &v, 1)
     else {
         panic!("no gimbal status")
     };
     assert_eq!(
-        s.base.flags,
+        s.flags,
         GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME
     );
-    assert_eq!(s.base.failure_flags.bits(), 0);
+    assert_eq!(s.failure_flags.bits(), 0);
     assert_eq!(s.gimbal_device_id, 1);
     assert!((f64::from(s.delta_yaw) - v.attitude().yaw).abs() < 1e-6);
     // Roll 0, pitch −30°, yaw 20°: w, x, y, z (Hamilton, pitch then yaw).
@@ -193,13 +193,13 @@ fn gimbal_attitude_status_is_in_the_vehicle_frame() {
         p.sin() * y.cos(),
         p.cos() * y.sin(),
     ];
-    for (got, want) in s.base.q.iter().zip(expected) {
-        assert!((f64::from(*got) - want).abs() < 1e-6, "{:?}", s.base.q);
+    for (got, want) in s.q.iter().zip(expected) {
+        assert!((f64::from(*got) - want).abs() < 1e-6, "{:?}", s.q);
     }
     let w = [
-        s.base.angular_velocity_x,
-        s.base.angular_velocity_y,
-        s.base.angular_velocity_z,
+        s.angular_velocity_x,
+        s.angular_velocity_y,
+        s.angular_velocity_z,
     ];
     assert!(w.iter().all(|x| x.is_finite()), "{w:?}");
 
@@ -232,7 +232,7 @@ fn gimbal_attitude_status_is_in_the_vehicle_frame() {
         &r.replies[..],
         [
             Outgoing::Message(MavMessage::COMMAND_ACK(_)),
-            Outgoing::GimbalStatus(_)
+            Outgoing::Message(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(_))
         ]
     ));
 }

@@ -1,9 +1,12 @@
-//! Codec tests: partial, adjacent, corrupted, oversized and random input.
+//! Decoder tests: partial, adjacent, corrupted, oversized and random input;
+//! extension fields on the wire.
 
 use super::*;
+use crate::parser::MAX_BUFFERED;
+use crate::raw::{CHECKSUM_LEN, IFLAG_SIGNED, SIGNATURE_LEN, STX_V1, V2_HEADER as HEADER_V2};
 use mavlink::dialects::ardupilotmega::{
-    GimbalDeviceFlags, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType, COMMAND_ACK_DATA,
-    HEARTBEAT_DATA,
+    GimbalDeviceFlags, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType, COMMAND_LONG_DATA,
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA, HEARTBEAT_DATA, SERVO_OUTPUT_RAW_DATA,
 };
 
 fn hdr(seq: u8) -> MavHeader {
@@ -240,6 +243,7 @@ fn raw_command_ack_is_a_valid_command_ack() {
         vec![MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
             command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
             result: MavResult::MAV_RESULT_UNSUPPORTED,
+            ..COMMAND_ACK_DATA::DEFAULT
         })]
     );
 }
@@ -283,32 +287,40 @@ fn random_bytes_never_panic_and_a_later_frame_survives() {
     }
 }
 
-fn gimbal_status(delta_yaw: f32, device: u8) -> GimbalDeviceAttitudeStatus {
-    GimbalDeviceAttitudeStatus {
-        base: GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
-            time_boot_ms: 1234,
-            q: [0.9, -0.1, -0.2, 0.3],
-            flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
-            ..GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::DEFAULT
-        },
+/// Bytes of GIMBAL_DEVICE_ATTITUDE_STATUS's extension fields on the wire:
+/// delta_yaw, delta_yaw_velocity (f32), gimbal_device_id (u8).
+const GIMBAL_STATUS_EXTENSION_LEN: usize = 9;
+/// Bytes of SERVO_OUTPUT_RAW's extension fields: servo9_raw..servo16_raw (u16).
+const SERVO_OUTPUT_EXTENSION_LEN: usize = 16;
+
+fn gimbal_status(delta_yaw: f32, device: u8) -> GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+    GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+        time_boot_ms: 1234,
+        q: [0.9, -0.1, -0.2, 0.3],
+        flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
         delta_yaw,
         delta_yaw_velocity: -0.25,
         gimbal_device_id: device,
+        ..GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::DEFAULT
     }
+}
+
+fn gimbal_frame(seq: u8, status: &GIMBAL_DEVICE_ATTITUDE_STATUS_DATA) -> Vec<u8> {
+    v2(
+        seq,
+        &MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(status.clone()),
+    )
 }
 
 #[test]
 fn gimbal_status_carries_its_extension_fields() {
     type D = GIMBAL_DEVICE_ATTITUDE_STATUS_DATA;
+    let base_len = D::ENCODED_LEN - GIMBAL_STATUS_EXTENSION_LEN;
     let status = gimbal_status(1.5, 1);
-    let mut frame = Vec::new();
-    encode_gimbal_device_attitude_status(hdr(3), &status, &mut frame);
+    let frame = gimbal_frame(3, &status);
     // Full payload: nothing to truncate, the device id (last byte) is 1.
-    assert_eq!(
-        usize::from(frame[1]),
-        D::ENCODED_LEN + GIMBAL_STATUS_EXTENSION_LEN
-    );
-    let ext = &frame[HEADER_V2 + D::ENCODED_LEN..];
+    assert_eq!(usize::from(frame[1]), D::ENCODED_LEN);
+    let ext = &frame[HEADER_V2 + base_len..];
     assert_eq!(ext[0..4], 1.5f32.to_le_bytes());
     assert_eq!(ext[4..8], (-0.25f32).to_le_bytes());
     assert_eq!(ext[8], 1);
@@ -317,7 +329,6 @@ fn gimbal_status_carries_its_extension_fields() {
         HEADER_V2 + usize::from(frame[1]) + CHECKSUM_LEN
     );
 
-    // A decoder without the extensions reads the base fields and the checksum.
     let mut d = FrameDecoder::new();
     d.push(&frame);
     let (ok, bad) = drain(&mut d);
@@ -327,7 +338,7 @@ fn gimbal_status_carries_its_extension_fields() {
         vec![Inbound::Message {
             header: hdr(3),
             version: MavlinkVersion::V2,
-            msg: MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(status.base.clone()),
+            msg: MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(status),
         }]
     );
 }
@@ -336,8 +347,7 @@ fn gimbal_status_carries_its_extension_fields() {
 fn gimbal_status_truncates_trailing_zeros_across_the_extensions() {
     let mut zero = gimbal_status(0.0, 0);
     zero.delta_yaw_velocity = 0.0;
-    let mut frame = Vec::new();
-    encode_gimbal_device_attitude_status(hdr(0), &zero, &mut frame);
+    let frame = gimbal_frame(0, &zero);
     // The last non-zero base byte is the flags' low byte (offset 36).
     assert_eq!(frame[1], 37);
     let mut d = FrameDecoder::new();
@@ -346,56 +356,51 @@ fn gimbal_status_truncates_trailing_zeros_across_the_extensions() {
     assert!(bad.is_empty(), "{bad:?}");
     assert_eq!(
         msgs(&ok),
-        vec![MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(zero.base)]
+        vec![MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(zero)]
     );
 }
 
 #[test]
 fn servo_output_raw_carries_servos_9_to_16() {
     type D = SERVO_OUTPUT_RAW_DATA;
-    let servos = ServoOutputRaw {
-        base: SERVO_OUTPUT_RAW_DATA {
-            time_usec: 5_000_000,
-            servo1_raw: 1000,
-            servo5_raw: 1900,
-            ..D::DEFAULT
-        },
-        servo9_16: [1100, 0, 0, 0, 0, 0, 0, 2000],
+    let base_len = D::ENCODED_LEN - SERVO_OUTPUT_EXTENSION_LEN;
+    let servos = SERVO_OUTPUT_RAW_DATA {
+        time_usec: 5_000_000,
+        servo1_raw: 1000,
+        servo5_raw: 1900,
+        servo9_raw: 1100,
+        servo16_raw: 2000,
+        ..D::DEFAULT
     };
-    let mut frame = Vec::new();
-    encode_servo_output_raw(hdr(7), &servos, &mut frame);
+    let frame = v2(7, &MavMessage::SERVO_OUTPUT_RAW(servos.clone()));
     assert_eq!(
         usize::from(frame[1]),
-        D::ENCODED_LEN + SERVO_OUTPUT_EXTENSION_LEN,
+        D::ENCODED_LEN,
         "servo 16 is set: nothing truncated"
     );
-    let ext = &frame[HEADER_V2 + D::ENCODED_LEN..];
+    let ext = &frame[HEADER_V2 + base_len..];
     assert_eq!(ext[0..2], 1100u16.to_le_bytes());
     assert_eq!(ext[14..16], 2000u16.to_le_bytes());
-    // A decoder without the extensions reads the base fields and the checksum.
     let mut d = FrameDecoder::new();
     d.push(&frame);
     let (ok, bad) = drain(&mut d);
     assert!(bad.is_empty(), "{bad:?}");
     assert_eq!(
         msgs(&ok),
-        vec![MavMessage::SERVO_OUTPUT_RAW(servos.base.clone())]
+        vec![MavMessage::SERVO_OUTPUT_RAW(servos.clone())]
     );
 
     // Nothing above servo 8: the extensions are truncated away entirely.
-    let base_only = ServoOutputRaw {
-        servo9_16: [0; 8],
+    let base_only = SERVO_OUTPUT_RAW_DATA {
+        servo9_raw: 0,
+        servo16_raw: 0,
         ..servos
     };
-    frame.clear();
-    encode_servo_output_raw(hdr(8), &base_only, &mut frame);
+    let frame = v2(8, &MavMessage::SERVO_OUTPUT_RAW(base_only.clone()));
     // The last non-zero byte is servo5's high byte (offset 13).
     assert_eq!(frame[1], 14);
     d.push(&frame);
     let (ok, bad) = drain(&mut d);
     assert!(bad.is_empty(), "{bad:?}");
-    assert_eq!(
-        msgs(&ok),
-        vec![MavMessage::SERVO_OUTPUT_RAW(base_only.base)]
-    );
+    assert_eq!(msgs(&ok), vec![MavMessage::SERVO_OUTPUT_RAW(base_only)]);
 }
