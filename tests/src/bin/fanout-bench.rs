@@ -180,23 +180,21 @@ fn driver(scale: usize) -> Result<()> {
                     s.rx_cpu / 1e3,
                 );
             }
-            for (label, s) in [("u÷i", &iox)] {
-                println!(
-                    "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.2} {:>8.2} {:>8.2} | {:>8.2} {:>8.2} | {:>7.2} {:>7.2}",
-                    rate.label(),
-                    subs,
-                    n,
-                    label,
-                    "",
-                    udp.all[0] / s.all[0],
-                    udp.all[1] / s.all[1],
-                    udp.all[2] / s.all[2],
-                    udp.last[0] / s.last[0],
-                    udp.last[1] / s.last[1],
-                    udp.tx_cpu / s.tx_cpu,
-                    udp.rx_cpu / s.rx_cpu,
-                );
-            }
+            println!(
+                "{:>6} {:>2} {:>5} | {:>4} {:>11} {:>8.2} {:>8.2} {:>8.2} | {:>8.2} {:>8.2} | {:>7.2} {:>7.2}",
+                rate.label(),
+                subs,
+                n,
+                "u÷i",
+                "",
+                udp.all[0] / iox.all[0],
+                udp.all[1] / iox.all[1],
+                udp.all[2] / iox.all[2],
+                udp.last[0] / iox.last[0],
+                udp.last[1] / iox.last[1],
+                udp.tx_cpu / iox.tx_cpu,
+                udp.rx_cpu / iox.rx_cpu,
+            );
         }
     }
     let left = domain.0.leftover_files();
