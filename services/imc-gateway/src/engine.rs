@@ -294,6 +294,15 @@ impl Engine {
                         "QueryPowerChannelState: no HardwareState from the hardware service yet",
                     )
                 })?;
+                if state.channels().is_empty() {
+                    // IMC has no empty answer: without this the query would vanish
+                    // uncounted.
+                    return Err(Dropped::new(
+                        "no_power_channels",
+                        from,
+                        "QueryPowerChannelState: the hardware service has no power channels",
+                    ));
+                }
                 for ch in state.channels() {
                     out.sends.push(Send {
                         to: reply_to,

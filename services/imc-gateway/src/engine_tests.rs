@@ -430,6 +430,14 @@ fn power_channels_are_controlled_and_queried() {
 
     let out = feed(&mut engine, &Message::QueryPowerChannelState, t0);
     assert_eq!(reasons(&out), vec!["no_hardware_state"]);
+    engine.on_hardware_state(state_with_channels(&[]));
+    let out = feed(&mut engine, &Message::QueryPowerChannelState, t0);
+    assert_eq!(
+        reasons(&out),
+        vec!["no_power_channels"],
+        "counted, not silent"
+    );
+    assert!(out.sends.is_empty());
     engine.on_hardware_state(state_with_channels(&[("payload", true), ("radio", false)]));
     let out = feed(&mut engine, &Message::QueryPowerChannelState, t0);
     assert!(
