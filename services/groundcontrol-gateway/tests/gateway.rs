@@ -97,6 +97,25 @@ async fn a_non_privileged_client_is_limited_to_ext_commands() {
         .await
         .expect("send");
     gw.wait_refused("not_privileged", 2.0).await;
+    // A refused geofence command is answered ACK_CMD_TIMEOUT (issue 43): the client
+    // must not believe a fence is in force.
+    guest
+        .send(&Record::floats(
+            NetCmdType::CmdSetGeofence,
+            2,
+            0,
+            0,
+            [5.0, 5.0, 5.0, 0.0],
+        ))
+        .await
+        .expect("send");
+    let ack = guest.recv(PATIENCE).await.expect("open").expect("an ack");
+    assert_eq!(ack.net_type(), Some(NetCmdType::AckCmdTimeout));
+    assert_eq!(
+        (ack.context, ack.int1),
+        (2, NetCmdType::CmdSetGeofence.id())
+    );
+    gw.wait_refused("not_privileged", 3.0).await;
     // Still connected, and CMD_EXT_* goes through (without the privileged flag).
     guest
         .send(&waypoint(2, [1.0, 1.0, 1.0], 1.0, 0))
@@ -118,7 +137,7 @@ async fn a_non_privileged_client_is_limited_to_ext_commands() {
     assert_ne!(c.client, 0);
     assert_eq!(
         gw.metric("skymesh_gc_refused_total", "reason=not_privileged"),
-        Some(2.0)
+        Some(3.0)
     );
     gw.stop().await;
 }
