@@ -223,6 +223,21 @@ async fn a_geofence_whose_coord_and_subcoord_differ_in_length_is_answered_invali
         app.recv(PATIENCE).await,
         Some(SoloMessage::ShotManagerError(_))
     ));
+    // So is a GEOFENCE_CLEAR with a value (it has none).
+    app.send_raw(&frame(ids::GEOFENCE_CLEAR, &[1]))
+        .await
+        .expect("send");
+    assert_eq!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false
+        })
+    );
+    assert!(matches!(
+        app.recv(PATIENCE).await,
+        Some(SoloMessage::ShotManagerError(_))
+    ));
     // Nothing of them went on the bus; the connection works on.
     app.send(&SoloMessage::SetCurrentShot(1))
         .await
