@@ -9,7 +9,6 @@
 //!
 //! | writer | kinds |
 //! |---|---|
-//! | `digiview-gateway` | [`VisionControlKind::DigiViewSet`] (a DigiView SET's parameter type and 64 payload bytes, FACTS.md layout, already range-checked) |
 //! | `autopilot-link` (gimbal protocol v2 for the virtual cameras) | `GimbalAttitude`, `RoiLocation`, `RoiNone`, `Zoom` |
 //! | `autopilot-link` (camera commands of other gateways accepted by the arbiter) | `Zoom`, `GimbalAttitude`, `ImageCapture`, `RecordStart`, `RecordStop` |
 //!
@@ -18,6 +17,10 @@
 //! otherwise. A virtual camera's orientation quaternion is camera → NED with the
 //! camera frame of `vision_pipeline::geometry` (x along the optical axis, y right,
 //! z down), `[w, x, y, z]`.
+//!
+//! Protocol gateways (the DigiView gateway) change the views, detector and tracker
+//! with [`crate::view::ViewControl`] instead; the pipeline answers a `DigiViewSet`
+//! Invalid.
 //!
 //! Topics: [`crate::topics::vision_state`], [`crate::topics::vision_control`],
 //! [`crate::topics::vision_reply`]; rendered output frames on
@@ -336,8 +339,8 @@ impl VisionState {
 wire_enum! {
     /// What a [`VisionControl`] asks for.
     pub enum VisionControlKind: u8 {
-        /// A DigiView SET: `param` is the parameter type, `data` its 64 payload bytes
-        /// (FACTS.md layout), already decoded and range-checked by the sender.
+        /// Refused (Invalid): settings come as a [`crate::view::ViewControl`]. The
+        /// value and the `param`/`data` fields stay so the layout is unchanged.
         DigiViewSet = 1 => "digiview_set",
         /// Aim virtual camera `cam`: `yaw_rad`/`pitch_rad` (NaN = leave that axis),
         /// and/or `yaw_rate_rps`/`pitch_rate_rps` (NaN = none; a rate turns the aim
