@@ -34,6 +34,9 @@ pub struct Settings {
     /// Follow-stream datagrams per second (and burst) from the app's address; the
     /// excess is dropped and counted (`follow_rate_limited`).
     pub follow_max_per_s: u32,
+    /// How long a request the shot engine answers waits for a shot engine to read
+    /// the bus before the gateway answers it with the protocol's error.
+    pub backend_wait: Duration,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -48,6 +51,7 @@ pub struct RawConfig {
     pub max_messages_per_s: i64,
     pub message_burst: i64,
     pub follow_max_per_s: i64,
+    pub backend_wait_ms: i64,
 }
 
 impl Default for RawConfig {
@@ -61,6 +65,7 @@ impl Default for RawConfig {
             max_messages_per_s: 200,
             message_burst: 400,
             follow_max_per_s: 50,
+            backend_wait_ms: 2000,
         }
     }
 }
@@ -93,6 +98,12 @@ impl ServiceConfig for RawConfig {
             message_burst: in_range("message_burst", self.message_burst, 1, 100_000)? as u32,
             follow_max_per_s: in_range("follow_max_per_s", self.follow_max_per_s, 1, 10_000)?
                 as u32,
+            backend_wait: Duration::from_millis(in_range(
+                "backend_wait_ms",
+                self.backend_wait_ms,
+                0,
+                10_000,
+            )? as u64),
         })
     }
 }
@@ -110,6 +121,7 @@ impl Default for Settings {
             max_messages_per_s: raw.max_messages_per_s as u32,
             message_burst: raw.message_burst as u32,
             follow_max_per_s: raw.follow_max_per_s as u32,
+            backend_wait: Duration::from_millis(raw.backend_wait_ms as u64),
         }
     }
 }
@@ -155,6 +167,8 @@ mod tests {
             ("max_messages_per_s = 0", "max_messages_per_s"),
             ("message_burst = 1000000", "message_burst"),
             ("follow_max_per_s = -5", "follow_max_per_s"),
+            ("backend_wait_ms = -1", "backend_wait_ms"),
+            ("backend_wait_ms = 10001", "backend_wait_ms"),
         ] {
             let e = parse::<RawConfig>(text, "t").unwrap_err();
             assert!(e.to_string().contains(field), "{text}: {e}");
@@ -164,12 +178,13 @@ mod tests {
     #[test]
     fn values_are_converted() {
         let s = parse::<RawConfig>(
-            "listen = \"0.0.0.0:6000\"\nframe_timeout_s = 0.25\nsession_publish_ms = 200",
+            "listen = \"0.0.0.0:6000\"\nframe_timeout_s = 0.25\nsession_publish_ms = 200\nbackend_wait_ms = 0",
             "t",
         )
         .unwrap();
         assert_eq!(s.listen, SocketAddr::from(([0, 0, 0, 0], 6000)));
         assert_eq!(s.frame_timeout, Duration::from_millis(250));
         assert_eq!(s.session_publish, Duration::from_millis(200));
+        assert_eq!(s.backend_wait, Duration::ZERO);
     }
 }

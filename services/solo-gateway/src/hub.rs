@@ -205,6 +205,7 @@ impl Hub {
             session,
             peer,
             frame_timeout: self.settings.frame_timeout,
+            backend_wait: self.settings.backend_wait,
             from_app: self.ports.from_app.clone(),
             drops: self.drops.clone(),
             replies: tx.clone(),

@@ -219,6 +219,64 @@ pub fn magnitudes(m: &SoloMessage) -> Result<(), String> {
     }
 }
 
+/// The app's requests the shot engine answers (the setting, the GoPro state, the
+/// point with its status, the current shot, GEOFENCE_SET_ACK). Every other message
+/// the app sends has no reply in the protocol.
+pub fn expects_reply(msg_type: u32) -> bool {
+    use solo_proto::ids;
+    is_geofence_request(msg_type)
+        || matches!(
+            msg_type,
+            ids::GET_BUTTON_SETTING
+                | ids::GOPRO_REQUEST_STATE
+                | ids::SPLINE_POINT
+                | ids::SET_CURRENT_SHOT
+        )
+}
+
+/// The gateway's answer to a request the shot engine answers ([`expects_reply`]),
+/// when no shot engine read the bus within `waited`: the protocol's error instead
+/// of silence. A geofence request gets GEOFENCE_SET_ACK {0, false}, a SPLINE_POINT
+/// the app's point with status −4 (`message` is the decoded request), every one a
+/// SHOTMANAGER_ERROR saying why. `None` for a message without reply: it is
+/// forwarded as usual.
+pub fn backend_missing(
+    msg_type: u32,
+    message: Option<&SoloMessage>,
+    waited: std::time::Duration,
+) -> Option<Verdict> {
+    if !expects_reply(msg_type) {
+        return None;
+    }
+    let name = solo_proto::message_name(msg_type).unwrap_or("request");
+    let reason = format!(
+        "{name} (type {msg_type}): no shot engine reads the bus after waiting {} ms; answered by the gateway",
+        waited.as_millis()
+    );
+    let mut replies = Vec::with_capacity(2);
+    if is_geofence_request(msg_type) {
+        replies.push(SoloMessage::GeofenceSetAck {
+            count: 0,
+            valid: false,
+        });
+    }
+    if let Some(SoloMessage::SplinePoint(p)) = message {
+        replies.push(SoloMessage::SplinePoint(solo_proto::SplinePoint {
+            status: SPLINE_POINT_FAILED,
+            ..*p
+        }));
+    }
+    replies.push(SoloMessage::ShotManagerError(format!(
+        "skymesh: {name} not served: the shot engine is not running. Nothing was changed; retry when it is back."
+    )));
+    Some(Verdict::Answer {
+        msg_type,
+        kind: Malformed::BackendMissing,
+        reason,
+        replies,
+    })
+}
+
 /// The app's geofence requests, each answered with a GEOFENCE_SET_ACK (the spec:
 /// after GEOFENCE_SET_DATA, GEOFENCE_UPDATE_POLY or GEOFENCE_CLEAR).
 fn is_geofence_request(msg_type: u32) -> bool {
@@ -323,6 +381,77 @@ mod tests {
         match v {
             Verdict::Drop { kind, .. } => kind,
             other => panic!("expected a drop, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn without_an_engine_requests_get_the_protocol_error_and_the_rest_is_forwarded() {
+        let waited = std::time::Duration::from_millis(2000);
+        let error = |r: &SoloMessage| matches!(r, SoloMessage::ShotManagerError(t) if t.contains("shot engine is not running"));
+        for t in [
+            ids::GEOFENCE_SET_DATA,
+            ids::GEOFENCE_UPDATE_POLY,
+            ids::GEOFENCE_CLEAR,
+        ] {
+            let Some(Verdict::Answer { kind, replies, .. }) = backend_missing(t, None, waited)
+            else {
+                panic!("type {t} must be answered");
+            };
+            assert_eq!(kind, Malformed::BackendMissing);
+            assert_eq!(
+                replies[0],
+                SoloMessage::GeofenceSetAck {
+                    count: 0,
+                    valid: false
+                }
+            );
+            assert!(error(&replies[1]), "{replies:?}");
+        }
+        let point = solo_proto::SplinePoint {
+            version: 0,
+            abs_alt_ref_m: 10.0,
+            index: 3,
+            lat_deg: 37.0,
+            lon_deg: -122.0,
+            alt_m: 20.0,
+            pitch_deg: -10.0,
+            yaw_deg: 90.0,
+            u_position: 0.0,
+            status: 0,
+        };
+        let m = SoloMessage::SplinePoint(point);
+        let Some(Verdict::Answer { replies, .. }) =
+            backend_missing(ids::SPLINE_POINT, Some(&m), waited)
+        else {
+            panic!("SPLINE_POINT must be answered");
+        };
+        assert_eq!(
+            replies[0],
+            SoloMessage::SplinePoint(solo_proto::SplinePoint {
+                status: SPLINE_POINT_FAILED,
+                ..point
+            })
+        );
+        assert!(error(&replies[1]));
+        for t in [
+            ids::GET_BUTTON_SETTING,
+            ids::GOPRO_REQUEST_STATE,
+            ids::SET_CURRENT_SHOT,
+        ] {
+            let Some(Verdict::Answer { replies, .. }) = backend_missing(t, None, waited) else {
+                panic!("type {t} must be answered");
+            };
+            assert_eq!(replies.len(), 1);
+            assert!(error(&replies[0]));
+        }
+        // No reply in the protocol: no invented one, forwarded as always.
+        for t in [
+            ids::LOCATION,
+            ids::SET_BUTTON_SETTING,
+            ids::PAUSE,
+            ids::GOPRO_RECORD,
+        ] {
+            assert_eq!(backend_missing(t, None, waited), None, "type {t}");
         }
     }
 

@@ -58,6 +58,24 @@ impl FromApp {
         Ok(())
     }
 
+    /// Whether a shot engine reads the topic a message goes to (`geofence`: the
+    /// `app_geofence` topic of GEOFENCE_SET_DATA, else `from_app`): a subscriber
+    /// there is the only one that answers the app's requests.
+    pub fn engine_reads(&self, geofence: bool) -> bool {
+        let subscribers = if geofence {
+            self.geofence
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .subscribers()
+        } else {
+            self.messages
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .subscribers()
+        };
+        subscribers > 0
+    }
+
     /// Publishes the app's geofence polygons (GEOFENCE_SET_DATA) of `session`.
     pub fn publish_geofence(&self, session: u32, fence: &AppGeofence) -> Result<(), IpcError> {
         let sample = AppGeofence { session, ..*fence };

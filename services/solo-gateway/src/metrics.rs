@@ -36,10 +36,13 @@ pub enum Malformed {
     RateLimited,
     /// A follow-stream datagram beyond `follow_max_per_s`: dropped.
     FollowRateLimited,
+    /// A request the shot engine answers, while no shot engine read the bus for
+    /// `backend_wait_ms`: answered by the gateway with the protocol's error.
+    BackendMissing,
 }
 
 impl Malformed {
-    pub const ALL: [Malformed; 13] = [
+    pub const ALL: [Malformed; 14] = [
         Malformed::TooLong,
         Malformed::WrongLength,
         Malformed::UnknownType,
@@ -53,6 +56,7 @@ impl Malformed {
         Malformed::NoApp,
         Malformed::RateLimited,
         Malformed::FollowRateLimited,
+        Malformed::BackendMissing,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -70,6 +74,7 @@ impl Malformed {
             Malformed::NoApp => "no_app",
             Malformed::RateLimited => "rate_limited",
             Malformed::FollowRateLimited => "follow_rate_limited",
+            Malformed::BackendMissing => "backend_missing",
         }
     }
 

@@ -77,6 +77,59 @@ pub struct SessionCtx {
     pub replies: mpsc::Sender<Outgoing>,
     /// `max_messages_per_s` and `message_burst`.
     pub rate: (u32, u32),
+    /// How long a request the shot engine answers waits for one to read the bus.
+    pub backend_wait: Duration,
+}
+
+/// While no shot engine reads the bus, how often a waiting request looks again.
+const BACKEND_POLL: Duration = Duration::from_millis(10);
+
+/// Whether the shot engine is there to answer the app's requests.
+#[derive(Debug, Default)]
+struct Backend {
+    /// A wait ran out and no engine appeared since: the next request is answered
+    /// at once instead of waiting again (a burst of requests would otherwise each
+    /// hold the connection for `backend_wait`).
+    gone: bool,
+}
+
+impl Backend {
+    /// `verdict` unchanged, or, for a request the engine answers while no engine
+    /// reads its topic within `backend_wait`, the gateway's own answer.
+    async fn check(&mut self, verdict: Verdict, msg_type: u32, ctx: &SessionCtx) -> Verdict {
+        let geofence = match &verdict {
+            Verdict::Forward(_) => false,
+            Verdict::Geofence(_) => true,
+            _ => return verdict,
+        };
+        if !inbound::expects_reply(msg_type) || self.present(geofence, ctx).await {
+            return verdict;
+        }
+        let message = match &verdict {
+            Verdict::Forward(m) => Some(m),
+            _ => None,
+        };
+        inbound::backend_missing(msg_type, message, ctx.backend_wait).unwrap_or(verdict)
+    }
+
+    async fn present(&mut self, geofence: bool, ctx: &SessionCtx) -> bool {
+        if ctx.from_app.engine_reads(geofence) {
+            self.gone = false;
+            return true;
+        }
+        if self.gone {
+            return false;
+        }
+        let deadline = Instant::now() + ctx.backend_wait;
+        while Instant::now() < deadline {
+            tokio::time::sleep(BACKEND_POLL.min(deadline - Instant::now())).await;
+            if ctx.from_app.engine_reads(geofence) {
+                return true;
+            }
+        }
+        self.gone = true;
+        false
+    }
 }
 
 /// Serves one connection until the app leaves, its input forces a close, or `cancel`.
@@ -99,6 +152,7 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
     let metrics = ctx.drops.metrics();
     let (per_s, burst) = ctx.rate;
     let mut rate = TokenBucket::new(per_s, burst, Instant::now().into_std());
+    let mut backend = Backend::default();
     loop {
         let frame = match reader.next_frame().await {
             Ok(Some(frame)) => frame,
@@ -125,6 +179,7 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
                 ),
             )
         };
+        let verdict = backend.check(verdict, frame.msg_type, ctx).await;
         match verdict {
             Verdict::Forward(_) => {
                 metrics.message(Direction::In, frame.msg_type);
@@ -148,7 +203,7 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
                 reason,
                 replies,
             } => {
-                if kind == Malformed::TooLargeForBus {
+                if matches!(kind, Malformed::TooLargeForBus | Malformed::BackendMissing) {
                     metrics.message(Direction::In, msg_type);
                 }
                 ctx.drops.record(kind, ctx.peer, &reason);

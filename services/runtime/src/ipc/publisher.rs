@@ -1,6 +1,7 @@
 //! Typed publishers: stamp, send, wake the subscribers.
 
 use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::PortFactory as _;
 use skymesh_ipc_types::{Sample, Topic};
 
 use super::{ipc_err, Bus, IpcError, Svc};
@@ -35,6 +36,7 @@ impl Bus {
         let origin = self.origin();
         Ok(Publisher {
             port,
+            pubsub,
             notifier,
             seq: 0,
             service: origin.service,
@@ -49,6 +51,8 @@ impl Bus {
 /// Sends samples of one type on one topic.
 pub struct Publisher<T: Sample> {
     port: iceoryx2::port::publisher::Publisher<Svc, T, ()>,
+    /// The topic's service, for its port table ([`Publisher::subscribers`]).
+    pubsub: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>,
     notifier: Notifier<Svc>,
     seq: u64,
     service: u16,
@@ -137,5 +141,12 @@ impl<T: Sample> Publisher<T> {
 
     pub fn topic(&self) -> &str {
         &self.topic
+    }
+
+    /// How many subscribers the topic has now (every process's, this one's
+    /// included): a gateway's way to tell whether the service that answers its
+    /// requests is there.
+    pub fn subscribers(&self) -> usize {
+        self.pubsub.dynamic_config().number_of_subscribers()
     }
 }
