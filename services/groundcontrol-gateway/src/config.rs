@@ -56,6 +56,9 @@ pub struct Settings {
     pub liveness: Liveness,
     /// No `SwarmState` for this long: the broadcast pauses until the next one.
     pub state_timeout: Duration,
+    /// How long a command waits for the swarm queue to read the bus before the
+    /// gateway answers it ACK_CMD_TIMEOUT itself.
+    pub backend_wait: Duration,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -74,6 +77,7 @@ pub struct RawConfig {
     pub broadcast_hz: f64,
     pub liveness: String,
     pub state_timeout_s: f64,
+    pub backend_wait_ms: i64,
 }
 
 impl Default for RawConfig {
@@ -91,6 +95,7 @@ impl Default for RawConfig {
             broadcast_hz: 30.0,
             liveness: "simulated".to_string(),
             state_timeout_s: 2.0,
+            backend_wait_ms: 2000,
         }
     }
 }
@@ -178,6 +183,12 @@ impl ServiceConfig for RawConfig {
             broadcast_period: Duration::from_secs_f64(1.0 / hz),
             liveness,
             state_timeout: Duration::from_secs_f64(state_timeout),
+            backend_wait: Duration::from_millis(in_range(
+                "backend_wait_ms",
+                self.backend_wait_ms,
+                0,
+                10_000,
+            )? as u64),
         })
     }
 }
@@ -264,6 +275,8 @@ mod tests {
             ("broadcast_hz = nan", "broadcast_hz"),
             ("liveness = \"maybe\"", "liveness"),
             ("state_timeout_s = 0.0", "state_timeout_s"),
+            ("backend_wait_ms = -1", "backend_wait_ms"),
+            ("backend_wait_ms = 10001", "backend_wait_ms"),
             ("max_records_per_s = 0", "max_records_per_s"),
             ("max_records_per_s = 1000000", "max_records_per_s"),
             ("record_burst = -1", "record_burst"),
@@ -280,7 +293,7 @@ mod tests {
         let s = parse::<RawConfig>(
             "listen = \"0.0.0.0:8000\"\nprivileged = [\"192.168.0.0/24\", \"10.1.2.3\"]\n\
              broadcast_destinations = [\"192.168.0.255:6666\", \"10.1.2.3:7000\"]\n\
-             broadcast_hz = 10\nliveness = \"live\"",
+             broadcast_hz = 10\nliveness = \"live\"\nbackend_wait_ms = 250",
             "t",
         )
         .unwrap();
@@ -292,5 +305,6 @@ mod tests {
         assert_eq!(s.broadcast_destinations.len(), 2);
         assert_eq!(s.broadcast_period, Duration::from_millis(100));
         assert_eq!(s.liveness, Liveness::Live);
+        assert_eq!(s.backend_wait, Duration::from_millis(250));
     }
 }

@@ -26,6 +26,16 @@ pub struct Commands {
 }
 
 impl Commands {
+    /// Whether a swarm queue reads the command topic: the only one that answers
+    /// a command.
+    pub fn queue_reads(&self) -> bool {
+        self.publisher
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .subscribers()
+            > 0
+    }
+
     /// Numbers `cmd` (request ids are unique per gateway run, never 0) and publishes
     /// it. Returns the request id.
     pub fn publish(&self, mut cmd: SwarmCommand) -> Result<u32, IpcError> {

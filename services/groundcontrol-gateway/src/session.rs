@@ -110,6 +110,43 @@ pub struct Limits {
     pub max_records_per_s: u32,
     pub record_burst: u32,
     pub partial_record_timeout: Duration,
+    /// How long a command waits for the swarm queue to read the bus.
+    pub backend_wait: Duration,
+}
+
+/// While no swarm queue reads the bus, how often a waiting command looks again.
+const BACKEND_POLL: Duration = Duration::from_millis(10);
+
+/// Whether the swarm queue is there to answer commands.
+#[derive(Debug, Default)]
+struct Backend {
+    /// A wait ran out and no queue appeared since: the next command is answered
+    /// at once instead of waiting again (a burst of commands would otherwise each
+    /// hold the connection for `backend_wait`).
+    gone: bool,
+}
+
+impl Backend {
+    /// Whether a swarm queue reads the commands, waiting up to `backend_wait` for
+    /// one unless an earlier wait already ran out.
+    async fn present(&mut self, ctx: &SessionCtx) -> bool {
+        if ctx.commands.queue_reads() {
+            self.gone = false;
+            return true;
+        }
+        if self.gone {
+            return false;
+        }
+        let deadline = Instant::now() + ctx.limits.backend_wait;
+        while Instant::now() < deadline {
+            tokio::time::sleep(BACKEND_POLL.min(deadline - Instant::now())).await;
+            if ctx.commands.queue_reads() {
+                return true;
+            }
+        }
+        self.gone = true;
+        false
+    }
 }
 
 impl Limits {
@@ -118,6 +155,7 @@ impl Limits {
             max_records_per_s: settings.max_records_per_s,
             record_burst: settings.record_burst,
             partial_record_timeout: settings.partial_record_timeout,
+            backend_wait: settings.backend_wait,
         }
     }
 }
@@ -150,6 +188,7 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
     );
     // When the first byte of the incomplete record in `buf` arrived.
     let mut partial_since: Option<Instant> = None;
+    let mut backend = Backend::default();
     loop {
         let mut consumed = false;
         loop {
@@ -175,7 +214,7 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
                 }
                 continue;
             }
-            if let Some(end) = handle(&mut inbound, &record, ctx) {
+            if let Some(end) = handle(&mut inbound, &mut backend, &record, ctx).await {
                 return end;
             }
         }
@@ -209,11 +248,32 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
 }
 
 /// Acts on one record; `Some` ends the session.
-fn handle(inbound: &mut Inbound, record: &Record, ctx: &SessionCtx) -> Option<End> {
+///
+/// A command sent while no swarm queue reads the bus (after `backend_wait`) is
+/// answered ACK_CMD_TIMEOUT for its drone and type, as the queue answers one it
+/// could not deliver: the client is never left without an answer.
+async fn handle(
+    inbound: &mut Inbound,
+    backend: &mut Backend,
+    record: &Record,
+    ctx: &SessionCtx,
+) -> Option<End> {
     let metrics = ctx.drops.metrics();
     metrics.record_in(record.kind);
     match inbound.on_record(record) {
         Verdict::Reply(record) => reply(ctx, record),
+        Verdict::Publish(_) if !backend.present(ctx).await => {
+            ctx.drops.refused(
+                RefuseReason::BackendMissing,
+                ctx.client,
+                ctx.peer,
+                &format_args!(
+                    "no swarm queue reads the bus after waiting {} ms; answered ACK_CMD_TIMEOUT",
+                    ctx.limits.backend_wait.as_millis()
+                ),
+            );
+            reply(ctx, Record::ack(false, record.context, record.kind))
+        }
         Verdict::Publish(cmd) => match ctx.commands.publish(*cmd) {
             Ok(request_id) => {
                 metrics.commands_published.inc();

@@ -75,10 +75,13 @@ pub enum RefuseReason {
     /// Beyond the client's `max_records_per_s`/`record_burst` (decided by the
     /// session, before this module sees the record).
     RateLimited,
+    /// A command while no swarm queue read the bus for `backend_wait_ms`
+    /// (decided by the session, which answers ACK_CMD_TIMEOUT).
+    BackendMissing,
 }
 
 impl RefuseReason {
-    pub const ALL: [RefuseReason; 9] = [
+    pub const ALL: [RefuseReason; 10] = [
         RefuseReason::NotPrivileged,
         RefuseReason::UnknownType,
         RefuseReason::InvalidValue,
@@ -88,6 +91,7 @@ impl RefuseReason {
         RefuseReason::Unsupported,
         RefuseReason::TooManyPending,
         RefuseReason::RateLimited,
+        RefuseReason::BackendMissing,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -101,6 +105,7 @@ impl RefuseReason {
             RefuseReason::Unsupported => "unsupported",
             RefuseReason::TooManyPending => "too_many_pending",
             RefuseReason::RateLimited => "rate_limited",
+            RefuseReason::BackendMissing => "backend_missing",
         }
     }
 }
