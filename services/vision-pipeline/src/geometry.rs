@@ -1302,8 +1302,8 @@ mod tests {
     #[test]
     fn camera_truth_and_geolocation_agree() {
         use skymesh_camera::synthetic::Synthetic;
-        use skymesh_runtime::ServiceConfig;
         use skymesh_ipc_types::VehicleState;
+        use skymesh_runtime::ServiceConfig;
 
         let text = skymesh_camera::RawConfig::DEFAULT_TOML
             .replace("pitch_deg = -90.0", "pitch_deg = -35.0");

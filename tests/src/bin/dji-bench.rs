@@ -37,9 +37,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use mavlink::dialects::ardupilotmega::MavMessage;
+use mavlink_frame::FrameParser;
 use rumqttc::{AsyncClient, Event, EventLoop, MqttOptions, Packet, QoS};
 use serde_json::{json, Value};
-use mavlink_frame::FrameParser;
 use skymesh_e2e::bench::{arg, bench_thread_realtime, percentile, start_tapped_mesh, ControlPath};
 use skymesh_e2e::{Mesh, MeshOptions};
 use skymesh_ipc_types::{topics, Command, ServiceId, VehicleCommand};
