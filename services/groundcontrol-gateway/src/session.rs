@@ -18,6 +18,7 @@ use std::time::Duration;
 
 use bytes::BytesMut;
 use gc_proto::{Record, RecordCodec, RECORD_LEN};
+use skymesh_runtime::backend::BackendWait;
 use skymesh_runtime::{IpcError, TokenBucket};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
@@ -114,41 +115,6 @@ pub struct Limits {
     pub backend_wait: Duration,
 }
 
-/// While no swarm queue reads the bus, how often a waiting command looks again.
-const BACKEND_POLL: Duration = Duration::from_millis(10);
-
-/// Whether the swarm queue is there to answer commands.
-#[derive(Debug, Default)]
-struct Backend {
-    /// A wait ran out and no queue appeared since: the next command is answered
-    /// at once instead of waiting again (a burst of commands would otherwise each
-    /// hold the connection for `backend_wait`).
-    gone: bool,
-}
-
-impl Backend {
-    /// Whether a swarm queue reads the commands, waiting up to `backend_wait` for
-    /// one unless an earlier wait already ran out.
-    async fn present(&mut self, ctx: &SessionCtx) -> bool {
-        if ctx.commands.queue_reads() {
-            self.gone = false;
-            return true;
-        }
-        if self.gone {
-            return false;
-        }
-        let deadline = Instant::now() + ctx.limits.backend_wait;
-        while Instant::now() < deadline {
-            tokio::time::sleep(BACKEND_POLL.min(deadline - Instant::now())).await;
-            if ctx.commands.queue_reads() {
-                return true;
-            }
-        }
-        self.gone = true;
-        false
-    }
-}
-
 impl Limits {
     pub fn of(settings: &crate::Settings) -> Limits {
         Limits {
@@ -188,7 +154,7 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
     );
     // When the first byte of the incomplete record in `buf` arrived.
     let mut partial_since: Option<Instant> = None;
-    let mut backend = Backend::default();
+    let mut backend = BackendWait::default();
     loop {
         let mut consumed = false;
         loop {
@@ -254,7 +220,7 @@ async fn read_loop(mut read: OwnedReadHalf, ctx: &SessionCtx) -> End {
 /// could not deliver: the client is never left without an answer.
 async fn handle(
     inbound: &mut Inbound,
-    backend: &mut Backend,
+    backend: &mut BackendWait,
     record: &Record,
     ctx: &SessionCtx,
 ) -> Option<End> {
@@ -262,7 +228,11 @@ async fn handle(
     metrics.record_in(record.kind);
     match inbound.on_record(record) {
         Verdict::Reply(record) => reply(ctx, record),
-        Verdict::Publish(_) if !backend.present(ctx).await => {
+        Verdict::Publish(_)
+            if !backend
+                .present(ctx.limits.backend_wait, || ctx.commands.queue_reads())
+                .await =>
+        {
             ctx.drops.refused(
                 RefuseReason::BackendMissing,
                 ctx.client,

@@ -17,6 +17,7 @@
 
 pub mod addresses;
 pub mod angle;
+pub mod backend;
 pub mod backoff;
 pub mod clock;
 pub mod config;

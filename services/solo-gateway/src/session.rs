@@ -11,6 +11,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use bytes::{Bytes, BytesMut};
+use skymesh_runtime::backend::BackendWait;
 use skymesh_runtime::TokenBucket;
 use solo_proto::{FrameError, TlvCodec};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -81,16 +82,10 @@ pub struct SessionCtx {
     pub backend_wait: Duration,
 }
 
-/// While no shot engine reads the bus, how often a waiting request looks again.
-const BACKEND_POLL: Duration = Duration::from_millis(10);
-
 /// Whether the shot engine is there to answer the app's requests.
 #[derive(Debug, Default)]
 struct Backend {
-    /// A wait ran out and no engine appeared since: the next request is answered
-    /// at once instead of waiting again (a burst of requests would otherwise each
-    /// hold the connection for `backend_wait`).
-    gone: bool,
+    wait: BackendWait,
 }
 
 impl Backend {
@@ -113,22 +108,9 @@ impl Backend {
     }
 
     async fn present(&mut self, geofence: bool, ctx: &SessionCtx) -> bool {
-        if ctx.from_app.engine_reads(geofence) {
-            self.gone = false;
-            return true;
-        }
-        if self.gone {
-            return false;
-        }
-        let deadline = Instant::now() + ctx.backend_wait;
-        while Instant::now() < deadline {
-            tokio::time::sleep(BACKEND_POLL.min(deadline - Instant::now())).await;
-            if ctx.from_app.engine_reads(geofence) {
-                return true;
-            }
-        }
-        self.gone = true;
-        false
+        self.wait
+            .present(ctx.backend_wait, || ctx.from_app.engine_reads(geofence))
+            .await
     }
 }
 
