@@ -108,8 +108,9 @@ fn a_dropped_brake_is_retried_and_the_ack_waits_for_the_autopilot() {
             }
             false
         });
-        let stop = g.send(CommandSource::DjiDrc, &Command::EmergencyStop);
+        // Taken before the send: the link may forward the BRAKE before `send` returns.
         let sent = Instant::now();
+        let stop = g.send(CommandSource::DjiDrc, &Command::EmergencyStop);
         // The operator keeps pushing (10 Hz) while the stop waits for its answer.
         let deadline = sent + STOP_CONFIRM + Duration::from_secs(2);
         let mut pushed = sent;
