@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use skymesh_runtime::config::{read_regular_file, FileReadError};
+use tokio_rustls::rustls::pki_types::pem::{self, PemObject};
+use tokio_rustls::rustls::pki_types::CertificateDer;
 use tokio_rustls::rustls::{self, ClientConfig, RootCertStore};
 
 /// Why a CA bundle cannot be used.
@@ -14,11 +16,8 @@ pub enum TlsError {
     /// Missing, unreadable, not a regular file, or larger than [`MAX_CA_FILE_BYTES`].
     #[error("CA bundle: {0}")]
     File(#[from] FileReadError),
-    #[error("{path}: not a PEM file: {source}")]
-    Pem {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    #[error("{path}: not valid PEM: {reason}")]
+    Pem { path: PathBuf, reason: String },
     #[error("{0}: no certificate in the file (expected PEM `BEGIN CERTIFICATE` blocks)")]
     NoCertificate(PathBuf),
     #[error("{path}: no usable CA certificate ({rejected} rejected)")]
@@ -30,14 +29,31 @@ pub enum TlsError {
 /// The largest CA bundle read (the system bundle is about 200 KiB).
 pub const MAX_CA_FILE_BYTES: u64 = 1 << 20;
 
+/// What is wrong with a PEM file, in words: `pem::Error`'s own text prints the
+/// section label and the bad line as lists of byte values.
+fn pem_reason(e: &pem::Error) -> String {
+    match e {
+        pem::Error::MissingSectionEnd { end_marker } => format!(
+            "the `-----END {}-----` line is missing",
+            String::from_utf8_lossy(end_marker)
+        ),
+        pem::Error::IllegalSectionStart { line } => format!(
+            "malformed line `{}` (expected `-----BEGIN <LABEL>-----`)",
+            String::from_utf8_lossy(line).trim_end()
+        ),
+        pem::Error::Base64Decode(_) => "a section's body is not valid base64".to_owned(),
+        other => other.to_string(),
+    }
+}
+
 /// The trust anchors of a PEM bundle.
 pub fn load_roots(path: &Path) -> Result<RootCertStore, TlsError> {
     let text = read_regular_file(path, MAX_CA_FILE_BYTES)?;
-    let certs = rustls_pemfile::certs(&mut std::io::Cursor::new(text))
+    let certs = CertificateDer::pem_slice_iter(&text)
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|source| TlsError::Pem {
+        .map_err(|e| TlsError::Pem {
             path: path.to_path_buf(),
-            source,
+            reason: pem_reason(&e),
         })?;
     if certs.is_empty() {
         return Err(TlsError::NoCertificate(path.to_path_buf()));
@@ -124,6 +140,33 @@ mod tests {
             load_roots(&garbage),
             Err(TlsError::NoUsableCertificate { rejected: 1, .. })
         ));
+        // Broken PEM says what is wrong in words.
+        let cut = dir.path().join("cut.pem");
+        let end = TEST_CA_PEM.find("-----END").unwrap();
+        std::fs::write(&cut, &TEST_CA_PEM[..end]).unwrap();
+        let e = load_roots(&cut).unwrap_err();
+        assert!(matches!(e, TlsError::Pem { .. }), "{e}");
+        assert!(
+            e.to_string()
+                .ends_with("not valid PEM: the `-----END CERTIFICATE-----` line is missing"),
+            "{e}"
+        );
+        let header = dir.path().join("header.pem");
+        std::fs::write(
+            &header,
+            TEST_CA_PEM.replacen("-----BEGIN CERTIFICATE-----", "-----BEGIN CERTIFICATE", 1),
+        )
+        .unwrap();
+        let e = load_roots(&header).unwrap_err().to_string();
+        assert!(e.contains("malformed line `-----BEGIN CERTIFICATE`"), "{e}");
+        let base64 = dir.path().join("base64.pem");
+        std::fs::write(
+            &base64,
+            "-----BEGIN CERTIFICATE-----\n!!!!\n-----END CERTIFICATE-----\n",
+        )
+        .unwrap();
+        let e = load_roots(&base64).unwrap_err().to_string();
+        assert!(e.contains("not valid base64"), "{e}");
     }
 
     /// Found by the config_files fuzz target: `ca_file = "/dev/zero"` read until memory

@@ -12,7 +12,6 @@
 //! `skymesh_mqtt_tls_refused_total{reason}`, and the rustls 0.23 / `ring` stack is
 //! the one the DJI gateway already uses.
 
-use std::io::{BufRead, Cursor};
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -22,6 +21,7 @@ use skymesh_runtime::config::{read_regular_file, FileReadError};
 use skymesh_runtime::{CancellationToken, Counter, CounterFamily, Gauge, Stats, WarnLimiter};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Semaphore;
+use tokio_rustls::rustls::pki_types::pem::{self, PemObject};
 use tokio_rustls::rustls::{
     self, crypto::CryptoProvider, pki_types::CertificateDer, pki_types::PrivateKeyDer,
     server::WebPkiClientVerifier, RootCertStore, ServerConfig,
@@ -50,11 +50,11 @@ pub enum TlsError {
         key: &'static str,
         source: FileReadError,
     },
-    #[error("{path}: not valid PEM: {source}")]
+    #[error("{path}: not valid PEM: {reason}")]
     Pem {
         key: &'static str,
         path: PathBuf,
-        source: std::io::Error,
+        reason: String,
     },
     #[error("{path}: no certificate in the file (expected PEM `BEGIN CERTIFICATE` blocks)")]
     NoCertificate { key: &'static str, path: PathBuf },
@@ -92,14 +92,31 @@ fn read_pem(key: &'static str, path: &Path) -> Result<Vec<u8>, TlsError> {
     read_regular_file(path, MAX_PEM_BYTES).map_err(|source| TlsError::File { key, source })
 }
 
+/// What is wrong with a PEM file, in words: `pem::Error`'s own text prints the
+/// section label and the bad line as lists of byte values.
+fn pem_reason(e: &pem::Error) -> String {
+    match e {
+        pem::Error::MissingSectionEnd { end_marker } => format!(
+            "the `-----END {}-----` line is missing",
+            String::from_utf8_lossy(end_marker)
+        ),
+        pem::Error::IllegalSectionStart { line } => format!(
+            "malformed line `{}` (expected `-----BEGIN <LABEL>-----`)",
+            String::from_utf8_lossy(line).trim_end()
+        ),
+        pem::Error::Base64Decode(_) => "a section's body is not valid base64".to_owned(),
+        other => other.to_string(),
+    }
+}
+
 fn certificates(key: &'static str, path: &Path) -> Result<Vec<CertificateDer<'static>>, TlsError> {
     let text = read_pem(key, path)?;
-    let certs = rustls_pemfile::certs(&mut Cursor::new(text))
+    let certs = CertificateDer::pem_slice_iter(&text)
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|source| TlsError::Pem {
+        .map_err(|e| TlsError::Pem {
             key,
             path: path.to_path_buf(),
-            source,
+            reason: pem_reason(&e),
         })?;
     if certs.is_empty() {
         return Err(TlsError::NoCertificate {
@@ -113,17 +130,17 @@ fn certificates(key: &'static str, path: &Path) -> Result<Vec<CertificateDer<'st
 fn private_key(path: &Path) -> Result<PrivateKeyDer<'static>, TlsError> {
     const KEY: &str = "tls.key_file";
     let text = read_pem(KEY, path)?;
-    let mut reader: &mut dyn BufRead = &mut Cursor::new(text);
-    rustls_pemfile::private_key(&mut reader)
-        .map_err(|source| TlsError::Pem {
+    PrivateKeyDer::from_pem_slice(&text).map_err(|e| match e {
+        pem::Error::NoItemsFound => TlsError::NoKey {
             key: KEY,
             path: path.to_path_buf(),
-            source,
-        })?
-        .ok_or_else(|| TlsError::NoKey {
+        },
+        e => TlsError::Pem {
             key: KEY,
             path: path.to_path_buf(),
-        })
+            reason: pem_reason(&e),
+        },
+    })
 }
 
 /// The rustls server configuration of `s` (ring provider, TLS 1.2 and 1.3): reads

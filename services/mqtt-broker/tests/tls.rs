@@ -16,6 +16,7 @@ use rumqttc::{
 };
 use skymesh_test_support::{config_file, text, ServiceCli};
 use tokio::io::AsyncWriteExt as _;
+use tokio_rustls::rustls::pki_types::{pem::PemObject, PrivateKeyDer};
 use tokio_rustls::rustls::{self, pki_types::CertificateDer, ClientConfig, RootCertStore};
 
 fn fixture(name: &str) -> PathBuf {
@@ -26,7 +27,7 @@ fn fixture(name: &str) -> PathBuf {
 
 fn certs(name: &str) -> Vec<CertificateDer<'static>> {
     let pem = std::fs::read(fixture(name)).expect("fixture");
-    rustls_pemfile::certs(&mut pem.as_slice())
+    CertificateDer::pem_slice_iter(&pem)
         .collect::<Result<Vec<_>, _>>()
         .expect("fixture PEM")
 }
@@ -45,9 +46,7 @@ fn client_tls(ca: &str, with_cert: bool) -> Transport {
         .with_root_certificates(roots);
     let config = if with_cert {
         let key = std::fs::read(fixture("client.key")).expect("client key");
-        let key = rustls_pemfile::private_key(&mut key.as_slice())
-            .expect("PEM")
-            .expect("a key");
+        let key = PrivateKeyDer::from_pem_slice(&key).expect("a PEM key");
         builder
             .with_client_auth_cert(certs("client.pem"), key)
             .expect("client cert")
@@ -379,4 +378,62 @@ async fn check_config_reads_and_matches_the_tls_files() {
             "tls.cert_file",
         )
         .await;
+}
+
+/// Broken PEM (a cut-off file, a mangled header line, a body that is not base64)
+/// is a configuration error (exit 64) that names the key and says what is wrong in
+/// words.
+#[tokio::test]
+async fn broken_pem_files_are_refused_with_the_reason() {
+    let fixture_text = |n: &str| std::fs::read_to_string(fixture(n)).expect("fixture");
+    let (cert_pem, key_pem) = (fixture_text("server.pem"), fixture_text("server.key"));
+    let cut = |pem: &str| pem[..pem.find("-----END").expect("END line")].to_owned();
+    let (cert, key) = (
+        fixture("server.pem").display().to_string(),
+        fixture("server.key").display().to_string(),
+    );
+    let tls =
+        |cert: &str, key: &str| format!("[tls]\ncert_file = \"{cert}\"\nkey_file = \"{key}\"\n");
+    let cases = [
+        // (file text, is it the key file, words the error must contain)
+        (
+            cut(&cert_pem),
+            false,
+            "`-----END CERTIFICATE-----` line is missing",
+        ),
+        (cut(&key_pem), true, "-----END"),
+        (
+            cert_pem.replacen(
+                "-----BEGIN CERTIFICATE-----",
+                "-----BEGIN CERTIFICATE---",
+                1,
+            ),
+            false,
+            "malformed line `-----BEGIN CERTIFICATE---`",
+        ),
+        (
+            "-----BEGIN PRIVATE KEY-----\n!!!!\n-----END PRIVATE KEY-----\n".to_owned(),
+            true,
+            "not valid base64",
+        ),
+        // A key file holding only a certificate.
+        (cert_pem.clone(), true, "no private key in the file"),
+    ];
+    for (pem, is_key, words) in cases {
+        let file = config_file(&pem);
+        let path = file.path().display().to_string();
+        let (toml, field) = if is_key {
+            (tls(&cert, &path), "tls.key_file")
+        } else {
+            (tls(&path, &key), "tls.cert_file")
+        };
+        let out = broker_cli().run_toml(&toml, &["--check-config"]).await;
+        assert_eq!(out.status.code(), Some(64), "{toml:?}\n{}", text(&out));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains(field) && stderr.contains(words),
+            "{pem:?} should name {field} and say {words:?}\n{}",
+            text(&out)
+        );
+    }
 }
