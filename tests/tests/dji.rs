@@ -44,9 +44,12 @@ struct Ctx {
     cloud: Cloud,
     drc: DrcCloud,
     v: Vehicle,
-    /// Home (lat, lon) and its altitude MSL (= ellipsoid: geoid undulation 0).
+    /// Home (lat, lon), its altitude MSL and the geoid's height above the ellipsoid
+    /// there as the autopilot reports it (vehicle-sim: 19.6 m); the gateway is
+    /// configured with a wrong undulation (0) so only the autopilot's converts right.
     home: (f64, f64),
     home_msl: f64,
+    undulation: f64,
 }
 
 impl Ctx {
@@ -137,7 +140,7 @@ impl Ctx {
 
     /// Ellipsoid height (what DJI sends) of `alt_rel` metres above home.
     fn height(&self, alt_rel: f64) -> f64 {
-        self.home_msl + alt_rel
+        self.home_msl + self.undulation + alt_rel
     }
 
     /// A gateway series (`labels` like `kind="not_json",`), 0 when absent.
@@ -220,6 +223,7 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
         dji: true,
         attitude_hz: 25.0,
         dji_gateway_extra: format!(
+            // Wrong on purpose: the autopilot's undulation must be the one used.
             "[flight]\ngeoid_undulation_m = 0.0\n\
              [payload]\npayload_index = \"{PAYLOAD}\"\n\
              [drc]\nheartbeat_timeout_s = {HEARTBEAT_TIMEOUT_S}\n"
@@ -244,6 +248,12 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
         let s = v.now().await;
         let home = pos(&s);
         let home_msl = f64::from(s.alt_msl_m - s.alt_rel_m);
+        assert_eq!(s.alt_ellipsoid_valid, 1, "no alt_ellipsoid: {s:?}");
+        let undulation = f64::from(s.geoid_undulation_m);
+        assert!(
+            undulation.abs() > 5.0,
+            "a geoid undulation the heights test can see: {undulation}"
+        );
         let cloud = Cloud::connect(mesh.mqtt_addr, &mesh.gateway_sn)
             .await
             .unwrap();
@@ -257,6 +267,7 @@ fn dji_cloud_api_flies_the_vehicle_through_the_gateway() {
             v,
             home,
             home_msl,
+            undulation,
         };
         wait_gateway_online(&x).await;
         let mut phase = Instant::now();

@@ -76,7 +76,8 @@ pub struct CommandSettings {
 pub struct FlightSettings {
     /// A target counts as reached within this 3-D distance, metres.
     pub arrival_radius_m: f64,
-    /// Ellipsoid height − MSL height here, metres (DJI heights are ellipsoidal).
+    /// Ellipsoid height − MSL height here, metres (DJI heights are ellipsoidal):
+    /// used only while the autopilot reports no `alt_ellipsoid` of its own.
     pub geoid_undulation_m: f64,
     /// Progress events while a task runs.
     pub progress_interval: Duration,

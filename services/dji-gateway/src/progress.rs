@@ -5,8 +5,11 @@
 //! Heights: DJI sends ellipsoid heights (WGS-84); MAVLink `GoTo` takes metres above
 //! home. `rel = ellipsoid − geoid_undulation − home_msl`, where `home_msl` is the
 //! vehicle's home altitude above mean sea level (`VehicleStatus`, else derived from
-//! `VehicleState`: `alt_msl − alt_rel`).
+//! `VehicleState`: `alt_msl − alt_rel`) and `geoid_undulation` the vehicle's own
+//! (GPS_RAW_INT `alt_ellipsoid − alt`, `VehicleState::geoid_undulation_m`); the
+//! configured `[flight] geoid_undulation_m` only while the autopilot reports none.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use dji_proto::{codes, PathPoint};
@@ -37,9 +40,30 @@ pub struct Heights {
     pub undulation_m: f64,
 }
 
+/// Ellipsoid − MSL where the vehicle is: the autopilot's (`alt_ellipsoid_valid`),
+/// else `fallback_m` (the configured value; logged once per process).
+pub fn undulation(s: &Snapshot, fallback_m: f64) -> f64 {
+    static FALLBACK_LOGGED: AtomicBool = AtomicBool::new(false);
+    match s.state {
+        Some(v) if v.alt_ellipsoid_valid != 0 && v.geoid_undulation_m.is_finite() => {
+            f64::from(v.geoid_undulation_m)
+        }
+        _ => {
+            if !FALLBACK_LOGGED.swap(true, Ordering::Relaxed) {
+                tracing::warn!(
+                    geoid_undulation_m = fallback_m,
+                    "the autopilot reports no ellipsoid altitude: DJI heights use the configured geoid undulation"
+                );
+            }
+            fallback_m
+        }
+    }
+}
+
 impl Heights {
-    /// From the latest samples; `None` without a home or a position.
-    pub fn from_snapshot(s: &Snapshot, undulation_m: f64) -> Option<Heights> {
+    /// From the latest samples; `None` without a home or a position. The undulation
+    /// is the vehicle's, else `fallback_undulation_m` (see [`undulation`]).
+    pub fn from_snapshot(s: &Snapshot, fallback_undulation_m: f64) -> Option<Heights> {
         let home = match (s.status, s.state) {
             (Some(st), _) if st.home_valid != 0 && st.home_alt_msl_m.is_finite() => {
                 f64::from(st.home_alt_msl_m)
@@ -49,9 +73,9 @@ impl Heights {
             }
             _ => return None,
         };
-        home.is_finite().then_some(Heights {
+        home.is_finite().then(|| Heights {
             home_msl_m: home,
-            undulation_m,
+            undulation_m: undulation(s, fallback_undulation_m),
         })
     }
 
@@ -315,6 +339,16 @@ mod tests {
         st.home_alt_msl_m = 600.0;
         assert_eq!(Heights::from_snapshot(&s, 0.0).unwrap().home_msl_m, 600.0);
         assert_eq!(Heights::from_snapshot(&Snapshot::default(), 0.0), None);
+        // The autopilot's undulation wins over the configured one.
+        let v = s.state.as_mut().unwrap();
+        v.alt_ellipsoid_valid = 1;
+        v.geoid_undulation_m = 19.5;
+        let h = Heights::from_snapshot(&s, 20.0).unwrap();
+        assert_eq!(h.undulation_m, 19.5);
+        assert_eq!(h.rel_from_ellipsoid(669.5), 50.0);
+        // A flag without a value falls back.
+        s.state.as_mut().unwrap().geoid_undulation_m = f32::NAN;
+        assert_eq!(Heights::from_snapshot(&s, 20.0).unwrap().undulation_m, 20.0);
     }
 
     #[test]

@@ -3,9 +3,9 @@
 //!
 //! osd_info_push: `attitude_head` is the vehicle's yaw (degrees, −180..180, the
 //! heading over ground when no attitude has arrived); `latitude`/`longitude` WGS84;
-//! `height` is the altitude above mean sea level as the autopilot reports it (DJI
-//! documents an ellipsoid height; skymesh does not correct by the geoid here, so a
-//! cloud comparing with ellipsoid heights sees the local undulation, tens of metres);
+//! `height` is the ellipsoid height DJI documents: the autopilot's altitude above
+//! mean sea level plus its geoid undulation (`VehicleState::geoid_undulation_m`);
+//! the MSL altitude alone while the autopilot reports no `alt_ellipsoid`;
 //! `speed_x` north, `speed_y` east, `speed_z` UP (m/s); `gimbal_pitch`/`gimbal_roll`
 //! the camera's (degrees, pitch down negative) and `gimbal_yaw` its heading over the
 //! earth (vehicle yaw + the gimbal's yaw relative to the nose, −180..180), all 0 when
@@ -58,7 +58,11 @@ pub fn osd(snap: &Snapshot) -> Option<OsdInfoPush> {
         attitude_head: head,
         latitude: s.lat_deg,
         longitude: s.lon_deg,
-        height: f64::from(s.alt_msl_m),
+        height: if s.alt_ellipsoid_valid != 0 && s.geoid_undulation_m.is_finite() {
+            f64::from(s.alt_msl_m) + f64::from(s.geoid_undulation_m)
+        } else {
+            f64::from(s.alt_msl_m)
+        },
         speed_x: n,
         speed_y: e,
         speed_z: -d,
@@ -170,6 +174,10 @@ mod tests {
         s.payload = None;
         let o = osd(&s).unwrap();
         assert!(near(o.attitude_head, 10.0), "heading over ground");
+        let v = s.state.as_mut().unwrap();
+        v.alt_ellipsoid_valid = 1;
+        v.geoid_undulation_m = 19.5;
+        assert_eq!(osd(&s).unwrap().height, 531.5, "ellipsoid height");
         assert_eq!((o.gimbal_pitch, o.gimbal_yaw), (0.0, 0.0), "no gimbal");
         s.state.as_mut().unwrap().position_valid = 0;
         assert!(osd(&s).is_none());
