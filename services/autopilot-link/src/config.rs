@@ -129,7 +129,10 @@ impl fmt::Display for Endpoint {
 /// Telemetry rates requested from the autopilot, Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StreamRates {
+    /// ATTITUDE while the vehicle is armed (and before its armed state is known).
     pub attitude_hz: f32,
+    /// ATTITUDE while the vehicle is disarmed; `None` = [`Self::attitude_hz`].
+    pub ground_attitude_hz: Option<f32>,
     pub global_position_hz: f32,
     pub local_position_hz: f32,
     pub sys_status_hz: f32,
@@ -206,6 +209,8 @@ pub struct RawConfig {
     pub request_data_streams: bool,
     /// Requested telemetry rates, Hz.
     pub attitude_hz: f64,
+    /// 0 = `attitude_hz` on the ground too.
+    pub ground_attitude_hz: f64,
     pub global_position_hz: f64,
     pub local_position_hz: f64,
     pub sys_status_hz: f64,
@@ -243,6 +248,7 @@ impl Default for RawConfig {
             silence_reconnect_s: 10.0,
             request_data_streams: true,
             attitude_hz: 50.0,
+            ground_attitude_hz: 10.0,
             global_position_hz: 10.0,
             local_position_hz: 5.0,
             sys_status_hz: 2.0,
@@ -401,6 +407,11 @@ impl ServiceConfig for RawConfig {
             silence_reconnect,
             rates: StreamRates {
                 attitude_hz: rate("attitude_hz", self.attitude_hz)?,
+                ground_attitude_hz: if self.ground_attitude_hz == 0.0 {
+                    None
+                } else {
+                    Some(rate("ground_attitude_hz", self.ground_attitude_hz)?)
+                },
                 global_position_hz: rate("global_position_hz", self.global_position_hz)?,
                 local_position_hz: rate("local_position_hz", self.local_position_hz)?,
                 sys_status_hz: rate("sys_status_hz", self.sys_status_hz)?,
@@ -759,6 +770,7 @@ mod tests {
         assert_eq!(shipped.command_timeout, Duration::from_millis(1500));
         assert_eq!(shipped.stop_confirm_timeout, Duration::from_secs(5));
         assert_eq!(shipped.rates.attitude_hz, 50.0);
+        assert_eq!(shipped.rates.ground_attitude_hz, Some(10.0));
         assert_eq!(shipped.rates.gimbal_attitude_hz, Some(10.0));
         assert_eq!(shipped.rates.heartbeat_hz, Some(5.0));
     }
@@ -974,6 +986,8 @@ mod tests {
             ),
             ("silence_reconnect_s = 0.5", "silence_reconnect_s"),
             ("attitude_hz = 500.0", "attitude_hz"),
+            ("ground_attitude_hz = 500.0", "ground_attitude_hz"),
+            ("ground_attitude_hz = -1", "ground_attitude_hz"),
             ("ekf_status_hz = 0.01", "ekf_status_hz"),
             ("gps_raw_hz = inf", "gps_raw_hz"),
             ("gimbal_attitude_hz = 0.05", "gimbal_attitude_hz"),

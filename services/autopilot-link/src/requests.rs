@@ -60,7 +60,25 @@ pub fn request_home(t: Target) -> MavMessage {
 /// heartbeat is how the mesh learns the flight mode: a pilot's switch to LOITER or RTL
 /// would stay unknown to the shot engine, the gateways and the swarm queue for up
 /// to a second. The interval applies to the link it was asked on only.
-pub fn stream_requests(rates: &StreamRates, t: Target, legacy: bool) -> Vec<MavMessage> {
+///
+/// ATTITUDE (and with it `VehicleState`) goes at the ground rate while the vehicle
+/// is `armed == false`: a vehicle standing on the ground needs no 50 Hz attitude, and
+/// every ATTITUDE wakes the autopilot-link (and a simulator) on an otherwise idle
+/// companion computer. Arming asks for the flight rate again.
+pub fn stream_requests(
+    rates: &StreamRates,
+    t: Target,
+    legacy: bool,
+    armed: bool,
+) -> Vec<MavMessage> {
+    let rates = &StreamRates {
+        attitude_hz: if armed {
+            rates.attitude_hz
+        } else {
+            rates.ground_attitude_hz.unwrap_or(rates.attitude_hz)
+        },
+        ..*rates
+    };
     let mut out = Vec::with_capacity(13);
     if legacy {
         out.extend(legacy_stream_requests(rates, t));
@@ -145,6 +163,7 @@ mod tests {
     fn rates() -> StreamRates {
         StreamRates {
             attitude_hz: 50.0,
+            ground_attitude_hz: Some(10.0),
             global_position_hz: 10.0,
             local_position_hz: 5.0,
             sys_status_hz: 2.0,
@@ -158,7 +177,7 @@ mod tests {
 
     #[test]
     fn every_stream_gets_a_message_interval() {
-        let msgs = stream_requests(&rates(), T, false);
+        let msgs = stream_requests(&rates(), T, false, true);
         assert_eq!(msgs.len(), 9);
         let intervals: Vec<(f32, f32)> = msgs
             .iter()
@@ -198,13 +217,61 @@ mod tests {
             heartbeat_hz: None,
             ..rates()
         };
-        assert_eq!(stream_requests(&none, T, false).len(), 7, "0 = not asked");
+        assert_eq!(
+            stream_requests(&none, T, false, true).len(),
+            7,
+            "0 = not asked"
+        );
+    }
+
+    fn attitude_interval_us(msgs: &[MavMessage]) -> f32 {
+        msgs.iter()
+            .find_map(|m| match m {
+                MavMessage::COMMAND_LONG(c) if c.param1 == ATTITUDE_DATA::ID as f32 => {
+                    Some(c.param2)
+                }
+                _ => None,
+            })
+            .expect("an ATTITUDE interval")
+    }
+
+    #[test]
+    fn attitude_goes_at_the_ground_rate_while_disarmed() {
+        let ground = stream_requests(&rates(), T, true, false);
+        assert_eq!(
+            attitude_interval_us(&ground),
+            100_000.0,
+            "10 Hz on the ground"
+        );
+        let MavMessage::REQUEST_DATA_STREAM(extra1) = &ground[0] else {
+            panic!("{:?}", ground[0])
+        };
+        assert_eq!(
+            extra1.req_message_rate, 10,
+            "legacy EXTRA1 at the ground rate"
+        );
+        let flying = stream_requests(&rates(), T, false, true);
+        assert_eq!(attitude_interval_us(&flying), 20_000.0, "50 Hz armed");
+        // Every other stream is the same on the ground and in flight.
+        assert_eq!(ground[4..].len(), flying.len());
+        for (g, f) in ground[4..].iter().zip(&flying).skip(1) {
+            assert_eq!(g, f);
+        }
+        let no_ground_rate = StreamRates {
+            ground_attitude_hz: None,
+            ..rates()
+        };
+        assert_eq!(
+            attitude_interval_us(&stream_requests(&no_ground_rate, T, false, false)),
+            20_000.0,
+            "0 = the flight rate on the ground too"
+        );
     }
 
     #[test]
     #[allow(deprecated)]
     fn legacy_requests_come_first_in_whole_hz() {
-        let msgs = stream_requests(&rates(), T, true);
+        let msgs = stream_requests(&rates(), T, true, true);
         assert_eq!(msgs.len(), 13);
         let legacy: Vec<(u8, u16)> = msgs[..4]
             .iter()

@@ -511,11 +511,11 @@ impl<L: Lifecycle> Service<L> {
                     if let Some(change) = self.link.heartbeat(now) {
                         self.link_changed(change, now, "heartbeat")?;
                     }
-                    if self.streams_due && self.writer.is_some() {
+                    // The ATTITUDE rate follows the armed state (flight rate armed,
+                    // ground rate disarmed), and the home is asked for again at
+                    // arming (ArduPilot sets it then).
+                    if (self.streams_due || u.armed_changed) && self.writer.is_some() {
                         self.request_streams(now);
-                    }
-                    if u.armed_changed {
-                        self.write(requests::request_home(self.target()));
                     }
                 }
                 if let Some((severity, text)) = u.status_text {
@@ -626,6 +626,7 @@ impl<L: Lifecycle> Service<L> {
             &self.settings.rates,
             self.target(),
             self.settings.request_data_streams,
+            self.telemetry.is_armed(),
         ) {
             self.write(msg);
         }
