@@ -20,6 +20,7 @@ pub mod header;
 pub mod payload;
 pub mod service;
 pub mod shot;
+pub mod shot_api;
 pub mod shot_fence;
 pub mod swarm;
 pub mod topics;
@@ -52,6 +53,9 @@ pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind
 pub use shot::{
     AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus,
     APP_VALUE_CAPACITY,
+};
+pub use shot_api::{
+    ShotDecodeError, ShotEvent, ShotEventSample, ShotRequest, ShotRequestSample, SHOT_BODY_CAPACITY,
 };
 pub use shot_fence::{AppFencePolygon, AppGeofence};
 pub use swarm::{

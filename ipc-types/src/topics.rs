@@ -190,6 +190,18 @@ pub fn shot_to_app() -> Topic {
     Topic::new("skymesh/shot/to_app".into(), TopicQos::EVENTS)
 }
 
+/// [`crate::ShotRequestSample`]s: what apps ask of the shot engine, translated by
+/// their gateways (gateway → shot engine).
+pub fn shot_requests() -> Topic {
+    Topic::new("skymesh/shot/requests".into(), TopicQos::EVENTS)
+}
+
+/// [`crate::ShotEventSample`]s: what the shot engine tells the apps (shot engine →
+/// gateways).
+pub fn shot_events() -> Topic {
+    Topic::new("skymesh/shot/events".into(), TopicQos::EVENTS)
+}
+
 /// [`crate::AppGeofence`]s: the Solo app's geofence polygons (gateway → shot engine).
 /// 8 KiB a sample: [`TopicQos::BULK_EVENTS`] (with `EVENTS` each publisher would
 /// reserve about 17 MB of shared memory).
