@@ -1,7 +1,7 @@
 //! Geofence geometry: polygons in a local tangent plane, inside tests, distances
 //! perpendicular to the boundary (clearance of points and segments), the distance
 //! along a ray to the first boundary crossing. Pure. The velocity envelope built on
-//! them is in [`super::fence_stack`].
+//! them is in [`super::fence_stopping`].
 //!
 //! **Clearance** of a point inside the fence is a lower bound of its distance to the
 //! nearest point outside: the smallest distance to any keep-out's boundary, and to

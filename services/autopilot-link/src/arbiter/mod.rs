@@ -43,6 +43,11 @@ pub mod audit;
 pub mod authority;
 mod envelope;
 pub mod fence_stack;
+#[cfg(test)]
+mod fence_stack_tests;
+mod fence_stopping;
+#[cfg(test)]
+mod fence_stopping_tests;
 pub mod freshness;
 pub mod geofence;
 #[cfg(test)]
