@@ -12,6 +12,7 @@
 
 pub mod arbiter;
 pub mod camera;
+pub mod camera_demand;
 pub mod command;
 pub mod fixed;
 pub mod frame;
@@ -33,6 +34,7 @@ pub use arbiter::{
     FencePolygon, GeofenceSet, NO_HOLDER,
 };
 pub use camera::{SceneTruth, TargetTruth, SCENE_MAX_TARGETS};
+pub use camera_demand::{CameraDemand, CAMERA_DEMAND_LEASE_NS};
 pub use command::{
     AckResult, AuthorityDomain, CameraModeKind, Command, CommandAck, CommandError, CommandKind,
     CommandSource, FocusMode, RefusalReason, VehicleCommand, ZoomMode,

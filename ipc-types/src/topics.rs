@@ -266,6 +266,15 @@ pub fn camera_frames(stream: &str) -> Topic {
     Topic::new(format!("skymesh/camera/{stream}/frames"), TopicQos::FRAMES)
 }
 
+/// [`crate::CameraDemand`] of camera stream `stream`: its readers' word that they read
+/// its frames now (latest value per publisher).
+pub fn camera_demand(stream: &str) -> Topic {
+    Topic::new(
+        format!("skymesh/camera/{stream}/demand"),
+        TopicQos::SHARED_STATE,
+    )
+}
+
 /// [`crate::SceneTruth`] of camera stream `stream`'s synthetic scene: the true target
 /// positions, one per rendered frame.
 pub fn camera_truth(stream: &str) -> Topic {

@@ -26,12 +26,13 @@ use skymesh_ipc_types::{CapturePose, PixelFormat};
 use skymesh_runtime::{Context, WarnLimiter};
 
 use crate::config::{check_y4m_size, Settings, Y4mSettings};
+use crate::demand::Pace;
 use crate::ipc::Ports;
 use crate::metrics::{Metrics, Skip};
 use crate::pose::PoseTracker;
+use crate::stamp_now;
 use crate::y4m::{Chroma, Y4mReader};
 use crate::yuv::Converter;
-use crate::{stamp_now, Demand, Ticker};
 
 /// What the next tick gets from the file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -135,17 +136,18 @@ pub(crate) async fn run(
     let intrinsics = settings.intrinsics.to_wire();
     let mut raw = vec![0u8; header.frame_len()];
     let mut tracker = PoseTracker::new(settings.mount);
-    let mut ticker = Ticker::new(settings.fps)?;
+    let mut pace = Pace::new(settings.fps, settings.always_on)?;
     let mut warn = WarnLimiter::default();
     let mut finished = false;
     let mut frame_seq = 0u64;
-    let mut demand = Demand::new(settings.always_on);
     ctx.ready();
-    while ticker.tick(&ctx, &metrics).await?.is_some() {
-        // Idle, neither the pose nor the file is read: playback pauses while nobody
-        // watches.
-        if finished || !demand.wanted(&ports, &metrics) {
-            continue;
+    // Idle, neither the pose nor the file is read: playback pauses while nobody
+    // watches.
+    while pace.next(&ctx, &mut ports, &metrics).await?.is_some() {
+        if finished {
+            // Nothing more to publish: up and healthy until shut down.
+            ctx.shutdown.cancelled().await;
+            break;
         }
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {

@@ -4,11 +4,14 @@
 //! |---|---|---|
 //! | `skymesh/vehicle/{id}/state` | subscribe | `VehicleState` (the pose frames are rendered from) |
 //! | `skymesh/vehicle/{id}/payload` | subscribe | `PayloadState` (the gimbal's attitude) |
+//! | `skymesh/camera/{stream}/demand` | subscribe | `CameraDemand` (readers' word that they read the frames; wakes the idle camera) |
 //! | `skymesh/camera/{stream}/frames` | publish | frames: `FrameHeader` + pixels, written in place |
 //! | `skymesh/camera/{stream}/truth` | publish | `SceneTruth` (one per synthetic frame; not opened for a file source, which has no truth) |
 
 use anyhow::Context as _;
-use skymesh_ipc_types::{topics, FrameHeader, PayloadState, SceneTruth, VehicleState};
+use skymesh_ipc_types::{
+    topics, CameraDemand, FrameHeader, PayloadState, SceneTruth, VehicleState,
+};
 use skymesh_runtime::{Bus, FrameError, FramePublisher, IpcError, Publisher, Subscriber};
 
 use crate::config::{Settings, Source};
@@ -17,6 +20,8 @@ use crate::config::{Settings, Source};
 pub(crate) struct Ports {
     vehicle: Subscriber<VehicleState>,
     payload: Subscriber<PayloadState>,
+    /// Readers' demand words, awaited while idle.
+    pub demand: Subscriber<CameraDemand>,
     frames: FramePublisher,
     truth: Option<Publisher<SceneTruth>>,
 }
@@ -30,6 +35,9 @@ impl Ports {
             payload: bus
                 .subscriber(&topics::vehicle_payload(s.vehicle_id))
                 .context("opening the payload state topic")?,
+            demand: bus
+                .subscriber(&topics::camera_demand(&s.stream))
+                .context("opening the camera demand topic")?,
             frames: bus
                 .frame_publisher(&topics::camera_frames(&s.stream), s.frame_len())
                 .context("opening the camera frame topic")?,
@@ -44,7 +52,7 @@ impl Ports {
     }
 
     /// How many subscribers the frame topic has now (the vision pipeline only while
-    /// it has a consumer of its own; tools, tests).
+    /// its output is used, which also sends a word; tools, tests).
     pub fn readers(&self) -> usize {
         self.frames.subscribers()
     }

@@ -15,11 +15,12 @@
 //! When a frame takes longer than a frame period the missed ticks are skipped and
 //! counted (`skymesh_camera_frames_skipped_total{reason="late"}`).
 //!
-//! **On demand.** Frames are made only while the frame topic has a subscriber (the
-//! vision pipeline subscribes only while its own output is used; tools and tests),
-//! or always with `always_on` ([`Demand`]). Idle, each tick only reads the topic's
-//! subscriber count (shared memory, no system call), so a new reader gets its first
-//! frame within a frame period.
+//! **On demand.** Frames are made only while a reader wants them ([`demand`]): its
+//! `CameraDemand` word on `skymesh/camera/{stream}/demand` (the vision pipeline's
+//! while its own output is used), a subscriber of the frame topic (tools and tests,
+//! which send no word), or always with `always_on`. Idle, the camera sleeps until a
+//! word arrives (its first frame is made at once) and looks for word-less
+//! subscribers once a second; no frame clock runs.
 //!
 //! The frame header's `pose.attitude_q` is the **camera mount → NED** quaternion
 //! (x along the optical axis, y image right, z image down), not the vehicle's
@@ -28,6 +29,7 @@
 #![deny(unsafe_code)]
 
 pub mod config;
+mod demand;
 pub mod file;
 mod ipc;
 pub mod metrics;
@@ -38,16 +40,15 @@ pub mod synthetic;
 pub mod y4m;
 pub mod yuv;
 
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
-use anyhow::Context as _;
 use skymesh_runtime::clock::monotonic_ns;
-use skymesh_runtime::timer;
 use skymesh_runtime::{Context, WarnLimiter};
 use tokio::time::Instant;
 
 pub use config::{RawConfig, Settings, Source};
 
+use crate::demand::Pace;
 use crate::ipc::Ports;
 use crate::metrics::{Metrics, Skip};
 use crate::synthetic::{FrameStamp, Synthetic};
@@ -60,82 +61,6 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
     match settings.source.clone() {
         Source::Synthetic => run_synthetic(settings, ctx, ports, metrics).await,
         Source::Y4m(y4m) => file::run(settings, y4m, ctx, ports, metrics).await,
-    }
-}
-
-/// The frame clock: ticks at `fps`, skipping (and counting) missed ticks. On a
-/// timerfd ([`skymesh_runtime::timer`]): tokio's wheel would add ~16 wake-ups a
-/// second to a 30 fps tick.
-#[derive(Debug)]
-pub(crate) struct Ticker {
-    interval: timer::Ticker,
-    period: Duration,
-    prev: Option<Instant>,
-}
-
-impl Ticker {
-    pub fn new(fps: u32) -> anyhow::Result<Self> {
-        let period = Duration::from_secs_f64(1.0 / f64::from(fps));
-        let interval = timer::Ticker::new(period).context("creating the frame timer")?;
-        Ok(Ticker {
-            interval,
-            period,
-            prev: None,
-        })
-    }
-
-    /// The next tick, or `None` once `ctx.shutdown` is cancelled.
-    pub async fn tick(
-        &mut self,
-        ctx: &Context,
-        metrics: &Metrics,
-    ) -> anyhow::Result<Option<Instant>> {
-        let tick = tokio::select! {
-            _ = ctx.shutdown.cancelled() => return Ok(None),
-            t = self.interval.tick() => t.context("the frame timer failed")?,
-        };
-        if let Some(prev) = self.prev {
-            let periods = (tick - prev).as_secs_f64() / self.period.as_secs_f64();
-            let missed = periods.round() as u64;
-            if missed > 1 {
-                metrics.skipped(Skip::Late, missed - 1);
-            }
-        }
-        self.prev = Some(tick);
-        Ok(Some(tick))
-    }
-}
-
-/// Whether frames are made now: while the frame topic has a reader, or always with
-/// `always_on`. Changes are logged and exported (`skymesh_camera_active`).
-#[derive(Debug)]
-pub(crate) struct Demand {
-    always_on: bool,
-    active: Option<bool>,
-}
-
-impl Demand {
-    pub fn new(always_on: bool) -> Self {
-        Demand {
-            always_on,
-            active: None,
-        }
-    }
-
-    /// Whether to make a frame at this tick.
-    pub fn wanted(&mut self, ports: &Ports, metrics: &Metrics) -> bool {
-        let readers = ports.readers();
-        let now = self.always_on || readers > 0;
-        if self.active != Some(now) {
-            metrics.active.set(if now { 1.0 } else { 0.0 });
-            if now {
-                tracing::info!(readers, always_on = self.always_on, "making frames");
-            } else {
-                tracing::info!("no reader of the frames: idle until one subscribes");
-            }
-            self.active = Some(now);
-        }
-        now
     }
 }
 
@@ -170,19 +95,15 @@ async fn run_synthetic(
         settings.stream,
     );
     let len = settings.frame_len();
-    let mut ticker = Ticker::new(settings.fps)?;
+    let mut pace = Pace::new(settings.fps, settings.always_on)?;
     let mut source = Synthetic::new(settings);
     let start = Instant::now();
     let mut frame_seq = 0u64;
     let mut warn = WarnLimiter::default();
-    let mut demand = Demand::new(source.settings().always_on);
     ctx.ready();
-    while let Some(tick) = ticker.tick(&ctx, &metrics).await? {
-        // Idle, the pose is not even read: the topics keep their newest samples,
-        // which the first tick with a reader takes.
-        if !demand.wanted(&ports, &metrics) {
-            continue;
-        }
+    // Idle, the pose is not even read: the topics keep their newest samples, which
+    // the first tick with a reader takes.
+    while let Some(tick) = pace.next(&ctx, &mut ports, &metrics).await? {
         let (vehicle, payload) = ports.inputs()?;
         if let Some(v) = vehicle {
             source.update_vehicle(&v);

@@ -7,7 +7,7 @@
 //! | `skymesh_camera_render_seconds` | | time to render (synthetic) or convert (file) and publish one frame |
 //! | `skymesh_camera_file_errors_total` | | Y4M file read errors (truncated or corrupt frame, I/O): handled as the end of the file |
 //! | `skymesh_camera_file_rewinds_total` | | times a Y4M file source started again from its first frame (`loop = true`) |
-//! | `skymesh_camera_active` | | 1 while frames are made (the frame topic has a subscriber, or `always_on`), 0 while the camera idles |
+//! | `skymesh_camera_active` | | 1 while frames are made (a reader's demand word holds, the frame topic has a subscriber, or `always_on`), 0 while the camera idles |
 
 use skymesh_runtime::stats::LATENCY_BOUNDS_S;
 use skymesh_runtime::{Counter, Gauge, Histogram, Stats};

@@ -1,13 +1,14 @@
 //! The camera service in-process on the real bus (its own iceoryx2 domain): frames
 //! reach a `FrameSubscriber` with a consistent header, and the truth matches them;
-//! frames are made only while the frame topic has a subscriber (or `always_on`).
+//! frames are made only on demand (a reader's word, a subscriber, or `always_on`).
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
 use skymesh_camera::{run, RawConfig};
 use skymesh_ipc_types::{
-    topics, FrameHeader, LensModel, PixelFormat, SceneTruth, ServiceId, VehicleState,
+    topics, CameraDemand, FrameHeader, LensModel, PixelFormat, SceneTruth, ServiceId, VehicleState,
+    CAMERA_DEMAND_LEASE_NS,
 };
 use skymesh_runtime::ipc::DomainGuard;
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, ServiceConfig, Stats};
@@ -231,11 +232,22 @@ async fn without_a_vehicle_the_camera_waits_unless_an_origin_is_set() {
     assert!(frames.try_recv_with(|_, _| ()).expect("receive").is_none());
 }
 
-/// Frames are made only while somebody subscribes: none before, the first within
-/// two frame periods of a subscription, none after it is dropped; `always_on`
-/// makes them without a subscriber.
+/// Waits (up to `PATIENCE`) until `f` holds.
+async fn until(what: &str, mut f: impl FnMut() -> bool) {
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while !f() {
+        assert!(tokio::time::Instant::now() < deadline, "never: {what}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// Frames are made only on demand: none while nobody wants them; a reader's demand
+/// word makes them without any subscriber, until it is withdrawn or lapses; a
+/// subscriber that sends no word gets them too; `always_on` makes them regardless.
+/// Each step waits for the event the contract names (the `skymesh_camera_active`
+/// gauge, the frame counter, a frame), never for a time.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn frames_are_made_only_for_a_subscriber() {
+async fn frames_are_made_only_on_demand() {
     for always_on in [false, true] {
         // A configured origin: frames need no vehicle.
         let settings = settings(&[
@@ -248,6 +260,13 @@ async fn frames_are_made_only_for_a_subscriber() {
         let bus = Bus::open(&domain, "camera", ServiceId::Camera, 0, stats.clone()).expect("bus");
         let tool =
             Bus::open(&domain, "viewer", ServiceId::Tool, 0, Stats::new()).expect("tool bus");
+        let mut words = tool
+            .publisher::<CameraDemand>(&topics::camera_demand("main"))
+            .expect("demand publisher");
+        let word = |wanted| CameraDemand {
+            wanted,
+            ..CameraDemand::default()
+        };
         let shutdown = CancellationToken::new();
         let ctx = Context::new(bus, shutdown.clone(), stats.clone(), "camera");
         let task = tokio::spawn(run(settings, ctx));
@@ -256,40 +275,74 @@ async fn frames_are_made_only_for_a_subscriber() {
                 .value("skymesh_camera_frames_published_total", "")
                 .unwrap_or(0.0)
         };
+        let active = || stats.value("skymesh_camera_active", "");
 
-        tokio::time::sleep(period * 10).await;
-        let active = stats.value("skymesh_camera_active", "");
         if always_on {
-            assert!(published() >= 5.0, "always_on: {} frames", published());
-            assert_eq!(active, Some(1.0));
-        } else {
-            assert_eq!(published(), 0.0, "frames without a subscriber");
-            assert_eq!(active, Some(0.0));
-
-            let mut frames = tool
-                .frame_subscriber(&topics::camera_frames("main"))
-                .expect("frame subscriber");
-            let t = std::time::Instant::now();
-            let got = tokio::time::timeout(PATIENCE, frames.recv_with(|h, _| h.frame_seq))
-                .await
-                .expect("no frame for the subscriber")
-                .expect("frame");
-            let first = t.elapsed();
-            eprintln!("camera: first frame {first:?} after the subscription (period {period:?})");
-            assert_eq!(got, 1);
-            assert!(
-                first < period * 2 + Duration::from_millis(100),
-                "first frame after {first:?}"
-            );
-            assert_eq!(stats.value("skymesh_camera_active", ""), Some(1.0));
-
-            drop(frames);
-            tokio::time::sleep(period * 3).await;
-            let stopped = published();
-            tokio::time::sleep(period * 10).await;
-            assert_eq!(published(), stopped, "frames after the subscriber left");
-            assert_eq!(stats.value("skymesh_camera_active", ""), Some(0.0));
+            until("frames without a reader (always_on)", || published() >= 5.0).await;
+            assert_eq!(active(), Some(1.0));
+            shutdown.cancel();
+            task.await.expect("join").expect("clean stop");
+            continue;
         }
+
+        // 1. Nobody wants frames: idle from the first look, and no frame is made
+        // however long it stays so (ten frame periods here).
+        until("idle", || active() == Some(0.0)).await;
+        tokio::time::sleep(period * 10).await;
+        assert_eq!(published(), 0.0, "frames without a reader");
+        assert_eq!(active(), Some(0.0));
+
+        // 2. A demand word: frames, with no subscriber at all.
+        words.publish(word(1)).expect("demand word");
+        until("frames after the demand word", || published() >= 3.0).await;
+        assert_eq!(active(), Some(1.0));
+
+        // 3. The word withdrawn: idle again, and no frame after that.
+        words.publish(word(0)).expect("demand word");
+        until("idle after the word was withdrawn", || {
+            active() == Some(0.0)
+        })
+        .await;
+        let stopped = published();
+        tokio::time::sleep(period * 10).await;
+        assert_eq!(published(), stopped, "frames after the word was withdrawn");
+
+        // 4. A word never renewed (its reader died) lapses, not before its lease.
+        let sent = std::time::Instant::now();
+        words.publish(word(1)).expect("demand word");
+        until("frames after the second word", || published() > stopped).await;
+        until("the word lapsed", || active() == Some(0.0)).await;
+        let lapsed = sent.elapsed();
+        assert!(
+            lapsed >= Duration::from_nanos(CAMERA_DEMAND_LEASE_NS),
+            "lapsed after {lapsed:?}"
+        );
+        let stopped = published();
+
+        // 5. A subscriber that sends no word is found by the idle look: it gets the
+        // next frame; once it leaves, the camera idles.
+        let mut frames = tool
+            .frame_subscriber(&topics::camera_frames("main"))
+            .expect("frame subscriber");
+        let got = tokio::time::timeout(PATIENCE, async {
+            loop {
+                let seq = frames.recv_with(|h, _| h.frame_seq).await.expect("frame");
+                // The topic's history may hold the last frame made for the word.
+                if seq as f64 > stopped {
+                    break seq;
+                }
+            }
+        })
+        .await
+        .expect("no frame for the subscriber");
+        assert_eq!(got as f64, stopped + 1.0, "the next frame");
+        assert_eq!(active(), Some(1.0));
+        drop(frames);
+        until("idle after the subscriber left", || active() == Some(0.0)).await;
+        let stopped = published();
+        tokio::time::sleep(period * 10).await;
+        assert_eq!(published(), stopped, "frames after the subscriber left");
+
         shutdown.cancel();
         task.await.expect("join").expect("clean stop");
     }

@@ -3,6 +3,7 @@
 //! | topic | direction | type |
 //! |---|---|---|
 //! | `skymesh/camera/{stream}/frames` | subscribe, only while the output is used | frames: `FrameHeader` + pixels, read in place |
+//! | `skymesh/camera/{stream}/demand` | publish | `CameraDemand`: `wanted` when the frames are opened (renewed every second while read), not when closed |
 //! | `skymesh/vision/demand` | subscribe | `VisionDemand` (consumers' word that they use the output) |
 //! | `skymesh/vehicle/{id}/state` | subscribe | `VehicleState` (body attitude, height above home) |
 //! | `skymesh/vision/control` | subscribe | `VisionControl` |
@@ -14,8 +15,8 @@
 
 use anyhow::Context as _;
 use skymesh_ipc_types::{
-    topics, view, VehicleState, ViewControl, ViewReply, VisionControl, VisionDemand, VisionReply,
-    VisionState, MAX_FRAME_LEN,
+    topics, view, CameraDemand, VehicleState, ViewControl, ViewReply, VisionControl, VisionDemand,
+    VisionReply, VisionState, MAX_FRAME_LEN,
 };
 use skymesh_runtime::{Bus, FramePublisher, FrameSubscriber, IpcError, Publisher, Subscriber};
 
@@ -26,9 +27,24 @@ use crate::config::Settings;
 pub struct StreamPorts {
     name: String,
     /// Open only while the pipeline's output is used: the camera renders only while
-    /// its frame topic has a subscriber.
+    /// a reader wants its frames.
     pub frames: Option<FrameSubscriber>,
+    /// The word to the camera that the frames are read (it sleeps without one).
+    camera_demand: Publisher<CameraDemand>,
     pub output: FramePublisher,
+}
+
+impl StreamPorts {
+    /// Tells the camera whether its frames are read now.
+    fn camera_word(&mut self, wanted: bool) -> anyhow::Result<()> {
+        self.camera_demand
+            .publish(CameraDemand {
+                wanted: u8::from(wanted),
+                ..CameraDemand::default()
+            })
+            .with_context(|| format!("telling the camera of `{}` its demand", self.name))?;
+        Ok(())
+    }
 }
 
 #[derive(Debug)]
@@ -58,6 +74,9 @@ impl Ports {
             streams.push(StreamPorts {
                 name: st.name.clone(),
                 frames: None,
+                camera_demand: bus
+                    .publisher(&topics::camera_demand(&st.name))
+                    .with_context(|| format!("opening the camera demand of `{}`", st.name))?,
                 // Sized for the largest output VIDEO_OUTPUT may ask for, so a SET
                 // never needs a new publisher.
                 output: bus
@@ -96,7 +115,9 @@ impl Ports {
 }
 
 impl Ports {
-    /// Opens (`on`) or closes every stream's frame subscriber; true if any changed.
+    /// Opens (`on`) or closes every stream's frame subscriber and tells the camera
+    /// (after opening, so its first frame finds the subscriber; after closing, so it
+    /// finds none left); true if any changed.
     pub fn set_reading(&mut self, on: bool) -> anyhow::Result<bool> {
         let mut changed = false;
         for st in &mut self.streams {
@@ -109,16 +130,27 @@ impl Ports {
                                 format!("opening the camera frames of `{}`", st.name)
                             })?,
                     );
+                    st.camera_word(true)?;
                     changed = true;
                 }
                 (false, true) => {
                     st.frames = None;
+                    st.camera_word(false)?;
                     changed = true;
                 }
                 _ => {}
             }
         }
         Ok(changed)
+    }
+
+    /// Renews the camera's word of every stream that is read (its lease is a few
+    /// seconds: a pipeline that died stops counting).
+    pub fn renew_camera_demand(&mut self) -> anyhow::Result<()> {
+        for st in self.streams.iter_mut().filter(|s| s.frames.is_some()) {
+            st.camera_word(true)?;
+        }
+        Ok(())
     }
 
     /// Subscribers of any stream's output frames (a video consumer).

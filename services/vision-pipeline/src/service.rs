@@ -5,7 +5,7 @@
 //! One task does everything, one thing at a time: a control, a frame of stream 0 or
 //! a frame of stream 1 (whichever is ready; two streams are processed one after the
 //! other, not in parallel: the box has two cores and the renderer and detector are the
-//! work), or the 1 Hz idle state.
+//! work), a demand word, or a timer (the 1 Hz state, a lapse of the demand).
 //!
 //! **Newest frame wins, nothing copied.** The frame topic queues up to two frames;
 //! `FrameSubscriber::try_latest_with` takes every pending one, releases the older
@@ -16,10 +16,18 @@
 //! **On demand.** Frames are read only while the output is used ([`Demand`]): a
 //! consumer's `VisionDemand` word (the DigiView gateway while a client is connected),
 //! a subscriber of an output frame topic, a capture or recording, a control within
-//! `control_hold`, or `always_on`. Idle, the frame subscribers are closed (so the
-//! camera, which renders only for subscribers, idles too); controls are still answered
-//! and the state published every second (SYSTEM_STATUS 0, idle). A demand word or a
-//! control reopens them at once; the camera's next tick renders for them.
+//! `control_hold`, or `always_on`. Idle, the frame subscribers are closed and the
+//! camera is told so (`CameraDemand`, `wanted = 0`), so it idles too; controls are
+//! still answered and the state published every second (SYSTEM_STATUS 0, idle). A
+//! demand word or a control reopens them at once and tells the camera, whose next
+//! frame is made when its word arrives; while reading, the camera's word is renewed
+//! every second.
+//!
+//! **No polling.** Idle, the pipeline wakes only for a control, a view control, a
+//! demand word, the 1 s state (on the machine-wide grid, with the heartbeats) and
+//! a one-shot timer at the next instant the demand lapses by itself (a word's lease,
+//! the end of a control's hold). Output-frame subscribers send no word: they are
+//! looked for at each of those wake-ups, so at least once a second.
 //!
 //! **Read your writes.** Every control's effect is in a published state before its
 //! reply: the controls of one wake-up are applied, the state published, then the
@@ -32,6 +40,7 @@
 
 use std::time::{Duration, Instant};
 
+use anyhow::Context as _;
 use nalgebra::{Point2, UnitQuaternion};
 use skymesh_ipc_types::{
     CameraIntrinsics, FixedStr, FrameHeader, LensModel, PixelFormat, SttState, VehicleState,
@@ -40,6 +49,7 @@ use skymesh_ipc_types::{
     VISION_MAX_CAMS, VISION_MAX_DETECTIONS, VISION_MAX_MODELS,
 };
 use skymesh_runtime::clock::monotonic_ns;
+use skymesh_runtime::timer;
 use skymesh_runtime::{Context, FrameError, FramePublisher, WarnLimiter};
 
 use crate::capture::{CaptureError, Capturer};
@@ -61,11 +71,6 @@ const FRESH: Duration = Duration::from_secs(1);
 /// The state is published at least this often.
 const IDLE_PERIOD: Duration = Duration::from_secs(1);
 
-/// Idle, how often the pipeline looks whether its output is used by what sends no
-/// word (an output-frame subscriber, a lapsed demand, the end of a control's hold);
-/// a demand word or a control resumes it at once.
-const DEMAND_POLL: Duration = Duration::from_millis(50);
-
 /// Why the pipeline reads frames now.
 #[derive(Debug, Default)]
 struct Demand {
@@ -84,6 +89,27 @@ impl Demand {
             self.words
                 .push((key, now_ns.saturating_add(VISION_DEMAND_LEASE_NS)));
         }
+    }
+
+    /// The next instant at which the demand may lapse by itself: a word's lease or
+    /// the end of a control's hold (none if nothing would change without an event).
+    fn next_deadline(&self, control_hold: Duration) -> Option<tokio::time::Instant> {
+        let now = Instant::now();
+        let now_ns = monotonic_ns();
+        let lease = self
+            .words
+            .iter()
+            .map(|&(_, until)| now + Duration::from_nanos(until.saturating_sub(now_ns)))
+            .min();
+        let hold = self
+            .last_control
+            .map(|t| t + control_hold)
+            .filter(|&end| end > now);
+        lease
+            .into_iter()
+            .chain(hold)
+            .min()
+            .map(tokio::time::Instant::from_std)
     }
 
     /// Whether any word wants the output at `now_ns` (lapsed words are forgotten).
@@ -131,20 +157,25 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         always_on = pipeline.settings.always_on,
         "vision pipeline reading skymesh/camera/{{stream}}/frames while its output is used, publishing skymesh/vision/state and skymesh/vision/{{stream}}/output"
     );
-    let mut tick = tokio::time::interval(DEMAND_POLL);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    // The 1 s state publish on the machine-wide grid (with the heartbeats), and a
+    // one-shot timer for the next lapse of the demand: idle, nothing else wakes the
+    // pipeline but a control, a view control or a demand word.
+    let mut state_tick = timer::Ticker::new(IDLE_PERIOD).context("creating the state timer")?;
+    let mut deadline = timer::Timer::new().context("creating the demand timer")?;
     let mut demand = Demand::default();
     pipeline.metrics.active.set(0.0);
     pipeline.publish_state(&mut ports.sinks)?;
     ctx.ready();
     loop {
+        let lapse = demand.next_deadline(pipeline.settings.control_hold);
         let event = tokio::select! {
             _ = ctx.shutdown.cancelled() => break,
             c = ports.control.recv_with(|c| *c) => Event::Control(c?),
             c = ports.view.recv_with(|c| *c) => Event::View(c?),
             d = ports.demand.recv() => Event::Demand(d?),
             (i, r) = next_frame(&mut ports.streams) => { r?; Event::Frame(i) }
-            _ = tick.tick() => Event::Tick,
+            t = state_tick.tick() => { t.context("the state timer failed")?; Event::Tick }
+            t = sleep_until(&mut deadline, lapse) => { t.context("the demand timer failed")?; Event::Lapse }
         };
         let mut replies = Vec::new();
         let mut view_replies = Vec::new();
@@ -190,10 +221,15 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
                 }
             }
             Event::Tick => {
-                if pipeline.last_state.elapsed() >= IDLE_PERIOD {
+                // The 1 Hz state (unless a frame has just published it; reading, a
+                // frame does at every frame). The camera's word is renewed.
+                if pipeline.last_state.elapsed() >= IDLE_PERIOD / 10 {
                     pipeline.publish_state(&mut ports.sinks)?;
                 }
+                ports.renew_camera_demand()?;
             }
+            // The demand below forgets what lapsed.
+            Event::Lapse => {}
         }
         // Controls that arrived meanwhile are answered before the next frame.
         while let Some(c) = ports.control.try_recv()? {
@@ -229,6 +265,10 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
             }
         }
     }
+    // The camera need not wait for the word's lease to stop rendering.
+    if let Err(e) = ports.set_reading(false) {
+        tracing::warn!(error = %e, "could not withdraw the camera demand");
+    }
     for s in &mut pipeline.streams {
         if let Some(c) = s.capturer.as_mut() {
             if c.recording() {
@@ -248,6 +288,18 @@ enum Event {
     Demand(VisionDemand),
     Frame(usize),
     Tick,
+    Lapse,
+}
+
+/// Waits on `timer` until `at`; forever without a deadline.
+async fn sleep_until(
+    timer: &mut timer::Timer,
+    at: Option<tokio::time::Instant>,
+) -> std::io::Result<()> {
+    match at {
+        Some(at) => timer.sleep_until(at).await,
+        None => std::future::pending().await,
+    }
 }
 
 /// Waits until a frame of any stream that is read is pending (it is then read in
