@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # Installs what CI's later steps use and a fresh machine lacks, each only if missing:
-# promtool and mosquitto (apt-get, one call), pymavlink and paho-mqtt 2 (pip), and
-# for the fuzz step the nightly toolchain and cargo-fuzz. .ci/run starts it in the
-# background during the test build: the downloads then overlap the compile instead of
-# holding it up (they ran before it, mostly waiting on the network). The scripts
-# that use a tool still install it themselves when run alone.
+# promtool and mosquitto (apt-get, one call), pymavlink and paho-mqtt 2 (pip),
+# cargo-deny, and for the fuzz step the nightly toolchain and cargo-fuzz. .ci/run
+# starts it in the background during the test build: the downloads then overlap the
+# compile instead of holding it up (they ran before it, mostly waiting on the
+# network). The scripts that use a tool still install it themselves when run alone.
 # cargo-fuzz is built unoptimised (`--debug`): it only drives cargo, and that halves
-# its install (32 s against 59 s wall here).
+# its install (32 s against 59 s wall here). So is cargo-deny (the supply-chain
+# step): half the CPU of an optimised install (3.4 against 6.9 CPU-minutes), for a
+# check that takes ~9 s instead of ~3. It is pinned: a new release may change what
+# deny.toml means.
 set -uo pipefail
 status=0
 
@@ -33,5 +36,8 @@ if ! rustup toolchain list | grep -q '^nightly'; then
 fi
 if ! command -v cargo-fuzz >/dev/null 2>&1; then
   cargo install cargo-fuzz --debug --locked --quiet || true
+fi
+if ! command -v cargo-deny >/dev/null 2>&1; then
+  cargo install cargo-deny@0.20.2 --debug --locked --quiet || status=1
 fi
 exit "$status"
