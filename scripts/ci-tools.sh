@@ -14,7 +14,10 @@ set -uo pipefail
 status=0
 
 packages=()
-command -v promtool >/dev/null 2>&1 || packages+=(prometheus)
+# Debian's prometheus package brings promtool and the server (check-dashboard.sh).
+if ! command -v promtool >/dev/null 2>&1 || ! command -v prometheus >/dev/null 2>&1; then
+  packages+=(prometheus)
+fi
 if ! command -v mosquitto >/dev/null 2>&1 && [ ! -x /usr/sbin/mosquitto ]; then
   packages+=(mosquitto)
 fi
