@@ -81,19 +81,14 @@ echo "mesh up, metrics on $(cat "$work/addr")"
 # shipped alert rules.
 prom_port=$(free SOCK_STREAM)
 prom="http://127.0.0.1:$prom_port"
-cat > "$work/prometheus.yml" <<YAML
-global:
-  scrape_interval: 1s
-  evaluation_interval: 1s
-rule_files:
-  - $PWD/$rules
-scrape_configs:
-  - job_name: skymesh
-    static_configs:
-      - targets: ["$(cat "$work/addr")"]
-        labels:
-          vehicle: "1"
-YAML
+# The shipped scrape config, pointed at this mesh.
+sed -e "s#127.0.0.1:9464#$(cat "$work/addr")#" \
+  -e "s#^\(  *\)\(scrape\|evaluation\)_interval: .*#\1\2_interval: 1s#" \
+  -e "s#^\(  *\)- alerts.yml\$#\1- $PWD/$rules#" \
+  deploy/prometheus/prometheus.yml > "$work/prometheus.yml"
+grep -q "$(cat "$work/addr")" "$work/prometheus.yml" && grep -q "$PWD/$rules" "$work/prometheus.yml" &&
+  ! grep -q 'interval: 5s' "$work/prometheus.yml" ||
+  { echo "deploy/prometheus/prometheus.yml changed shape: adapt this script"; exit 1; }
 promtool check config "$work/prometheus.yml" >/dev/null
 prometheus --config.file="$work/prometheus.yml" --storage.tsdb.path="$work/tsdb" \
   --web.listen-address="127.0.0.1:$prom_port" > "$work/prometheus.log" 2>&1 &
@@ -153,6 +148,9 @@ for p in panels(dashboard["panels"]):
             failed.append(f"{p['title']}: no data for {expr}")
         elif all(r["value"][1] == "NaN" for r in result):
             failed.append(f"{p['title']}: only NaN for {expr}")
+        elif any(k.startswith("exported_") for r in result for k in r["metric"]):
+            failed.append(f"{p['title']}: a target label of prometheus.yml renamed a "
+                          f"label of the mesh's own (exported_*) in {expr}")
         else:
             print(f"ok  {len(result):3} series  {p['title']}: {expr}")
 for f in failed:
