@@ -19,8 +19,7 @@
 //! z down), `[w, x, y, z]`.
 //!
 //! Protocol gateways (the DigiView gateway) change the views, detector and tracker
-//! with [`crate::view::ViewControl`] instead; the pipeline answers a `DigiViewSet`
-//! Invalid.
+//! with [`crate::view::ViewControl`] instead.
 //!
 //! Topics: [`crate::topics::vision_state`], [`crate::topics::vision_control`],
 //! [`crate::topics::vision_reply`]; rendered output frames on
@@ -339,9 +338,6 @@ impl VisionState {
 wire_enum! {
     /// What a [`VisionControl`] asks for.
     pub enum VisionControlKind: u8 {
-        /// Refused (Invalid): settings come as a [`crate::view::ViewControl`]. The
-        /// value and the `param`/`data` fields stay so the layout is unchanged.
-        DigiViewSet = 1 => "digiview_set",
         /// Aim virtual camera `cam`: `yaw_rad`/`pitch_rad` (NaN = leave that axis),
         /// and/or `yaw_rate_rps`/`pitch_rate_rps` (NaN = none; a rate turns the aim
         /// until the next command). `gimbal_flags` are MAVLink GIMBAL_MANAGER_FLAGS:
@@ -379,7 +375,7 @@ wire_enum! {
 
 /// A request to the vision pipeline; answered by one [`VisionReply`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.VisionControl.v1")]
+#[type_name("skymesh.VisionControl.v2")]
 #[repr(C)]
 pub struct VisionControl {
     pub header: SampleHeader,
@@ -389,15 +385,13 @@ pub struct VisionControl {
     pub kind: u8,
     /// [`VisionOrigin`] as stored on the wire.
     pub origin: u8,
-    /// Stream index (ignored by `DigiViewSet`, whose payload names the stream).
+    /// Stream index.
     pub stream: u8,
     /// Virtual camera 0–3, 255 = every camera of the stream (where the kind allows).
     pub cam: u8,
-    /// DigiView parameter type (`DigiViewSet`).
-    pub param: u8,
     /// MAVLink CAMERA_ZOOM_TYPE (`Zoom`).
     pub zoom_mode: u8,
-    pub reserved: [u8; 2],
+    pub reserved: [u8; 3],
     /// MAVLink GIMBAL_MANAGER_FLAGS (`GimbalAttitude`).
     pub gimbal_flags: u32,
     pub yaw_rad: f32,
@@ -410,12 +404,10 @@ pub struct VisionControl {
     pub reserved2: u32,
     pub lat_deg: f64,
     pub lon_deg: f64,
-    /// DigiView payload (`DigiViewSet`).
-    pub data: [u8; 64],
 }
 crate::assert_layout!(
     VisionControl,
-    size = 24 + 8 + 8 + 4 + 24 + 4 + 16 + 64,
+    size = 24 + 8 + 8 + 4 + 24 + 4 + 16,
     align = 8
 );
 
@@ -430,9 +422,8 @@ impl Default for VisionControl {
             origin: 0,
             stream: 0,
             cam: 0,
-            param: 0,
             zoom_mode: 0,
-            reserved: [0; 2],
+            reserved: [0; 3],
             gimbal_flags: 0,
             yaw_rad: f32::NAN,
             pitch_rad: f32::NAN,
@@ -443,7 +434,6 @@ impl Default for VisionControl {
             reserved2: 0,
             lat_deg: 0.0,
             lon_deg: 0.0,
-            data: [0; 64],
         }
     }
 }

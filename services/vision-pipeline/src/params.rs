@@ -252,9 +252,6 @@ impl Params {
         let kind = VisionControlKind::try_from(c.kind)
             .map_err(|_| Refusal::invalid(format!("unknown control kind {}", c.kind)))?;
         match kind {
-            VisionControlKind::DigiViewSet => Err(Refusal::invalid(
-                "settings come as a ViewControl, not as protocol payloads",
-            )),
             VisionControlKind::GimbalAttitude => {
                 let stream = self.stream_at(c.stream)?;
                 let cam = Self::cam(c.cam)?;

@@ -394,7 +394,8 @@ fn unknown_kinds_and_protocol_payloads_are_invalid() {
     }
     let e = p
         .apply(&VisionControl {
-            kind: VisionControlKind::DigiViewSet.to_wire(),
+            // Once protocol payloads; settings come as a ViewControl.
+            kind: 1,
             ..VisionControl::default()
         })
         .unwrap_err();
