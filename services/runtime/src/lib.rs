@@ -6,7 +6,7 @@
 //!
 //! - the command line (`--config`, `--check-config`, `--print-default-config`, `--name`),
 //! - config loading (TOML → validated settings; exit 64 when bad),
-//! - structured logs (`tracing`, text or JSON),
+//! - structured logs (`tracing`: journald under systemd, text, or JSON; [`logging`]),
 //! - the iceoryx2 node, created from one explicitly loaded config file with the
 //!   domain from `SKYMESH_DOMAIN` (all iceoryx2 calls live in [`ipc`]),
 //! - typed publishers and subscribers that wake through events (no spinning),
@@ -25,6 +25,7 @@ pub mod exit;
 pub mod frames;
 pub mod health;
 pub mod ipc;
+pub mod logging;
 pub mod net;
 pub mod rate;
 pub mod realtime;

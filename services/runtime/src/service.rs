@@ -13,6 +13,7 @@ use crate::config::{self, ConfigError, ServiceConfig};
 use crate::exit;
 use crate::health::{self, HealthState};
 use crate::ipc::{self, Bus, Domain};
+use crate::logging::{self, LOG_FORMATS};
 use crate::stats::Stats;
 use crate::{realtime, signals, systemd};
 
@@ -70,8 +71,9 @@ pub struct CommonArgs {
     /// iceoryx2 config file; default `$SKYMESH_IPC_CONFIG`, else the embedded deploy/iceoryx2.toml.
     #[arg(long)]
     pub ipc_config: Option<PathBuf>,
-    /// Log format.
-    #[arg(long, env = "SKYMESH_LOG_FORMAT", default_value = "text", value_parser = ["text", "json"])]
+    /// Log format: `auto` is journald when systemd connected stderr to the journal
+    /// (`JOURNAL_STREAM`), else text.
+    #[arg(long, env = "SKYMESH_LOG_FORMAT", default_value = "auto", value_parser = LOG_FORMATS)]
     pub log_format: String,
 }
 
@@ -126,16 +128,8 @@ impl Context {
 }
 
 fn init_tracing(format: &str) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if format == "json" {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
+    // clap already refused anything but `LOG_FORMATS`.
+    logging::init(format.parse().unwrap_or_default(), None);
 }
 
 /// Refuses to start (`Err(exit code)`) when `/dev/shm` has less than `need` bytes

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
+use skymesh_runtime::logging::{self, LogFormat, LOG_FORMATS};
 use skymesh_runtime::{exit, signals, ConfigError, Domain};
 use skymesh_supervisor::child::Output;
 use skymesh_supervisor::config::{self, Settings};
@@ -22,8 +23,8 @@ use tokio_util::sync::CancellationToken;
     arg_required_else_help = true
 )]
 struct Cli {
-    /// Log format (default: $SKYMESH_LOG_FORMAT, else text). Given explicitly, it is passed on to the services.
-    #[arg(long, global = true, value_parser = ["text", "json"])]
+    /// Log format (default: $SKYMESH_LOG_FORMAT, else auto: journald when systemd connected stderr to the journal, else text). Given explicitly, it is passed on to the services.
+    #[arg(long, global = true, value_parser = LOG_FORMATS)]
     log_format: Option<String>,
     /// Print the commented default deploy/skymesh.toml and exit.
     #[arg(long)]
@@ -78,24 +79,8 @@ struct StatusArgs {
 }
 
 fn init_tracing(format: &str, file: Option<std::fs::File>) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt().with_env_filter(filter);
-    let _ = match (format == "json", file) {
-        (true, Some(f)) => builder
-            .json()
-            .with_writer(std::sync::Mutex::new(f))
-            .try_init(),
-        (false, Some(f)) => builder
-            .with_ansi(false)
-            .with_writer(std::sync::Mutex::new(f))
-            .try_init(),
-        (true, None) => builder.json().with_writer(std::io::stderr).try_init(),
-        (false, None) => builder
-            .with_ansi(std::io::stderr().is_terminal())
-            .with_writer(std::io::stderr)
-            .try_init(),
-    };
+    // clap and `main` let only `LOG_FORMATS` through.
+    logging::init(format.parse().unwrap_or_default(), file);
 }
 
 fn config_error(e: &ConfigError) -> ExitCode {
@@ -274,9 +259,9 @@ fn main() -> ExitCode {
         .or_else(|| {
             std::env::var("SKYMESH_LOG_FORMAT")
                 .ok()
-                .filter(|f| f == "json" || f == "text")
+                .filter(|f| LOG_FORMATS.contains(&f.as_str()))
         })
-        .unwrap_or_else(|| "text".to_string());
+        .unwrap_or_else(|| LogFormat::Auto.to_string());
     if cli.print_default_config {
         print!("{}", config::DEFAULT_TOML);
         return ExitCode::from(exit::OK);
