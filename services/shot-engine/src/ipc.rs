@@ -1,20 +1,18 @@
-//! The shot engine's bus ports, and the one conversion the engine's outputs need
-//! (a `SoloMessage` into an `AppMessage`). All iceoryx2 calls stay in the runtime.
+//! The shot engine's bus ports. All iceoryx2 calls stay in the runtime.
 
 use anyhow::Context as _;
-use bytes::BytesMut;
-use skymesh_ipc_types::shot::ValueTooLong;
 use skymesh_ipc_types::{
-    topics, AppGeofence, AppMessage, AppSession, ArbiterEvent, AuthorityState, ButtonEvent,
-    CommandAck, GeofenceSet, PayloadState, ShotStatus, VehicleCommand, VehicleState, VehicleStatus,
+    topics, AppGeofence, AppSession, ArbiterEvent, AuthorityState, ButtonEvent, CommandAck,
+    GeofenceSet, PayloadState, ShotEventSample, ShotRequestSample, ShotStatus, VehicleCommand,
+    VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Bus, Publisher, Subscriber};
-use solo_proto::SoloMessage;
 
 /// Every topic the engine reads or writes.
 pub struct Ports {
-    /// Decoded, validated app messages from solo-gateway (TCP and follow stream).
-    pub from_app: Subscriber<AppMessage>,
+    /// Protocol-neutral requests from the app gateways (solo-gateway: its TCP
+    /// connection and follow stream).
+    pub from_app: Subscriber<ShotRequestSample>,
     /// The app's geofence (GEOFENCE_SET_DATA), translated by solo-gateway.
     pub app_geofence: Subscriber<AppGeofence>,
     /// Whether an app is connected (solo-gateway, on change and every second).
@@ -33,8 +31,8 @@ pub struct Ports {
     pub commands: Publisher<VehicleCommand>,
     /// The app's geofence for autopilot-link's arbiter (source `ShotEngine`).
     pub geofence: Publisher<GeofenceSet>,
-    /// To solo-gateway, which writes them to the app.
-    pub to_app: Publisher<AppMessage>,
+    /// Events for the app gateways, which translate them for their apps.
+    pub to_app: Publisher<ShotEventSample>,
     /// What the engine is doing (latest value).
     pub shot_status: Publisher<ShotStatus>,
 }
@@ -50,8 +48,8 @@ impl Ports {
     pub fn open(bus: &Bus, id: u8) -> anyhow::Result<Ports> {
         let mut ports = Ports {
             from_app: bus
-                .subscriber(&topics::shot_from_app())
-                .context("opening the from-app topic")?,
+                .subscriber(&topics::shot_requests())
+                .context("opening the shot requests topic")?,
             app_geofence: bus
                 .subscriber(&topics::shot_app_geofence())
                 .context("opening the app geofence topic")?,
@@ -86,8 +84,8 @@ impl Ports {
                 .publisher(&topics::vehicle_geofence(id))
                 .context("opening the vehicle geofence topic")?,
             to_app: bus
-                .publisher(&topics::shot_to_app())
-                .context("opening the to-app topic")?,
+                .publisher(&topics::shot_events())
+                .context("opening the shot events topic")?,
             shot_status: bus
                 .publisher(&topics::shot_status())
                 .context("opening the shot status topic")?,
@@ -100,32 +98,16 @@ impl Ports {
     }
 }
 
-/// `msg` as a bus sample for whichever app is connected (session 0).
-pub fn app_message(msg: &SoloMessage) -> Result<AppMessage, ValueTooLong> {
-    let mut value = BytesMut::new();
-    msg.encode_value(&mut value);
-    AppMessage::new(0, msg.msg_type(), &value)
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use skymesh_ipc_types::ShotEvent;
 
-    #[test]
-    fn app_messages_carry_the_type_and_value() {
-        let m = app_message(&SoloMessage::GetCurrentShot(-1)).unwrap();
-        assert_eq!(m.session, 0);
-        assert_eq!(m.msg_type, solo_proto::ids::GET_CURRENT_SHOT);
-        assert_eq!(m.value(), (-1i32).to_le_bytes());
-        assert_eq!(
-            SoloMessage::decode(m.msg_type, m.value()).unwrap(),
-            SoloMessage::GetCurrentShot(-1)
-        );
-    }
+    use super::*;
 
     #[test]
     fn the_longest_error_text_fits_the_bus() {
         let text = "x".repeat(crate::engine::MAX_ERROR_TEXT);
-        assert!(app_message(&SoloMessage::ShotManagerError(text)).is_ok());
+        let s = ShotEventSample::new(0, &ShotEvent::Error(text.clone()));
+        assert_eq!(s.event(), Ok(ShotEvent::Error(text)));
     }
 }

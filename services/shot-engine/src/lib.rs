@@ -1,7 +1,8 @@
-//! skymesh shot-engine: the Solo app's ShotManager.
+//! skymesh shot-engine: the smart shots an app asks for (the Solo app's ShotManager).
 //!
-//! The `solo-gateway` owns the app's sockets and hands every decoded app message to
-//! this engine as an `AppMessage`; the engine answers with `AppMessage`s, reads the
+//! App gateways (`solo-gateway`) own the app's sockets and hand every request to this
+//! engine as a protocol-neutral `ShotRequest`; the engine answers with `ShotEvent`s
+//! (the gateway translates both ways, the engine knows no wire format), reads the
 //! vehicle from `autopilot-link`, and flies the smart shots (selfie, orbit, follow,
 //! cable cam, multipoint spline cable cam, zipline, pano, rewind, site scan) only
 //! through `VehicleCommand`s from source `ShotEngine`, which the arbiter admits or

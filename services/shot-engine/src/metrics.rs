@@ -1,9 +1,10 @@
 //! The metrics of the shot engine (`skymesh_shot_*`), exported through the runtime's
 //! stats sample.
 //!
-//! Label sets are bounded: shot names come from `solo_proto::shots::name`, message
-//! names from `SoloMessage::name`, command kinds and refusal reasons from the
-//! ipc-types enums, exit reasons and entry errors from fixed lists in `engine`.
+//! Label sets are bounded: shot names come from `shot_api::shots::name`, message
+//! names from `ShotRequest::name` and `ShotEvent::name`, command kinds and refusal
+//! reasons from the ipc-types enums, exit reasons and entry errors from fixed lists
+//! in `engine`.
 //! Labelled series are registered on first use so an idle engine does not spend the
 //! stats sample's fixed number of entries on series that stay zero.
 

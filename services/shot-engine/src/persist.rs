@@ -32,7 +32,8 @@ impl Mapping {
     pub const NONE: Mapping = Mapping { shot: -1, mode: -1 };
 
     fn is_sane(&self) -> bool {
-        (solo_proto::shots::MIN..=solo_proto::shots::MAX).contains(&self.shot)
+        (skymesh_ipc_types::shot_api::shots::MIN..=skymesh_ipc_types::shot_api::shots::MAX)
+            .contains(&self.shot)
             && (-1..=255).contains(&self.mode)
     }
 }
@@ -49,11 +50,11 @@ impl Default for ButtonMap {
     fn default() -> Self {
         ButtonMap {
             a: Mapping {
-                shot: solo_proto::shots::CABLECAM,
+                shot: skymesh_ipc_types::shot_api::shots::CABLECAM,
                 mode: -1,
             },
             b: Mapping {
-                shot: solo_proto::shots::ORBIT,
+                shot: skymesh_ipc_types::shot_api::shots::ORBIT,
                 mode: -1,
             },
         }
@@ -117,7 +118,9 @@ fn parse(text: &str) -> Result<Persisted, String> {
         return Err(format!("button mapping out of range: {:?}", p.buttons));
     }
     if let Some(s) = p.active_shot {
-        if !(solo_proto::shots::MIN..=solo_proto::shots::MAX).contains(&s) {
+        if !(skymesh_ipc_types::shot_api::shots::MIN..=skymesh_ipc_types::shot_api::shots::MAX)
+            .contains(&s)
+        {
             return Err(format!("active shot {s} out of range"));
         }
     }
@@ -178,8 +181,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (store, loaded) = Store::open(dir.path().join("s.json"));
         assert_eq!(loaded, Loaded::Fresh);
-        assert_eq!(store.state().buttons.a.shot, solo_proto::shots::CABLECAM);
-        assert_eq!(store.state().buttons.b.shot, solo_proto::shots::ORBIT);
+        assert_eq!(
+            store.state().buttons.a.shot,
+            skymesh_ipc_types::shot_api::shots::CABLECAM
+        );
+        assert_eq!(
+            store.state().buttons.b.shot,
+            skymesh_ipc_types::shot_api::shots::ORBIT
+        );
         assert!(store.state().gopro_enabled);
         assert_eq!(store.state().active_shot, None);
     }

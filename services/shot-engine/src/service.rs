@@ -34,16 +34,17 @@ use skymesh_runtime::{Counter, IpcError};
 use tokio_util::sync::CancellationToken;
 
 use skymesh_ipc_types::{
-    AppGeofence, AppMessage, ArbiterEvent, AuthorityState, CommandAck, VehicleStatus,
+    AppGeofence, ArbiterEvent, AuthorityState, CommandAck, ShotEventSample, ShotRequestSample,
+    VehicleStatus,
 };
 
 use crate::engine::{Engine, Outputs};
-use crate::ipc::{app_message, Ports};
+use crate::ipc::Ports;
 
 /// What woke the loop.
 enum Wake {
     Tick,
-    App(Result<skymesh_ipc_types::AppMessage, IpcError>),
+    App(Result<ShotRequestSample, IpcError>),
     Fence(Result<Box<AppGeofence>, IpcError>),
     Session(Result<skymesh_ipc_types::AppSession, IpcError>),
     Button(Result<skymesh_ipc_types::ButtonEvent, IpcError>),
@@ -242,7 +243,7 @@ fn drain_vehicle_with(
 
 /// An app request from either app topic.
 enum Inbound {
-    Message(Box<AppMessage>),
+    Message(Box<ShotRequestSample>),
     Fence(Box<AppGeofence>),
 }
 
@@ -285,14 +286,7 @@ fn publish(ports: &mut Ports, out: Outputs) -> Result<(), IpcError> {
         ports.commands.publish(c)?;
     }
     for m in &out.to_app {
-        match app_message(m) {
-            Ok(sample) => {
-                ports.to_app.publish(sample)?;
-            }
-            Err(e) => {
-                tracing::warn!(msg = m.name(), error = %e, "app message too long for the bus; not sent")
-            }
-        }
+        ports.to_app.publish(ShotEventSample::new(0, m))?;
     }
     if let Some(s) = out.status {
         ports.shot_status.publish(s)?;

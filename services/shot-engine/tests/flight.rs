@@ -8,13 +8,13 @@ use std::time::{Duration, Instant};
 
 use skymesh_autopilot_link::config::Endpoint;
 use skymesh_autopilot_link::Detached;
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{
-    topics, AckResult, AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, Command,
-    CommandAck, CommandSource, FlightMode, ServiceId, ShotStatus, VehicleCommand, VehicleState,
-    VehicleStatus,
+    topics, AckResult, AppSession, Button, ButtonEvent, ButtonEventKind, Command, CommandAck,
+    CommandSource, FlightMode, ServiceId, ShotStatus, VehicleCommand, VehicleState, VehicleStatus,
 };
+use skymesh_ipc_types::{ShotEventSample, ShotRequestSample};
 use skymesh_runtime::{Bus, CancellationToken, Publisher, Stats, Subscriber};
-use solo_proto::{Location, SoloMessage};
 
 use common::{app_msg, settings, unique_domain, Engine, PATIENCE, VEHICLE};
 
@@ -26,10 +26,10 @@ struct Tool {
     acks: Subscriber<CommandAck>,
     state: Subscriber<VehicleState>,
     status: Subscriber<VehicleStatus>,
-    from_app: Publisher<AppMessage>,
+    from_app: Publisher<ShotRequestSample>,
     session: Publisher<AppSession>,
     buttons: Publisher<ButtonEvent>,
-    to_app: Subscriber<AppMessage>,
+    to_app: Subscriber<ShotEventSample>,
     shot_status: Subscriber<ShotStatus>,
     next_id: u32,
 }
@@ -43,10 +43,10 @@ impl Tool {
                 .unwrap(),
             state: bus.subscriber(&topics::vehicle_state(VEHICLE)).unwrap(),
             status: bus.subscriber(&topics::vehicle_status(VEHICLE)).unwrap(),
-            from_app: bus.publisher(&topics::shot_from_app()).unwrap(),
+            from_app: bus.publisher(&topics::shot_requests()).unwrap(),
             session: bus.publisher(&topics::shot_app_session()).unwrap(),
             buttons: bus.publisher(&topics::input_buttons()).unwrap(),
-            to_app: bus.subscriber(&topics::shot_to_app()).unwrap(),
+            to_app: bus.subscriber(&topics::shot_events()).unwrap(),
             shot_status: bus.subscriber(&topics::shot_status()).unwrap(),
             next_id: 1,
         }
@@ -133,21 +133,19 @@ impl Tool {
         }
     }
 
-    async fn expect_app(&mut self, want: &SoloMessage) {
+    async fn expect_app(&mut self, want: &ShotEvent) {
         let deadline = Instant::now() + PATIENCE;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
             match self.to_app.recv_timeout(left).await.unwrap() {
-                Some(m) if SoloMessage::decode(m.msg_type, m.value()).as_ref() == Ok(want) => {
-                    return
-                }
+                Some(m) if m.event().as_ref() == Ok(want) => return,
                 Some(_) => {}
                 None => panic!("no {want:?} for the app"),
             }
         }
     }
 
-    fn app(&mut self, msg: SoloMessage) {
+    fn app(&mut self, msg: ShotRequest) {
         self.from_app.publish(app_msg(&msg)).unwrap();
     }
 }
@@ -228,17 +226,17 @@ async fn an_orbit_flies_the_simulated_vehicle_around_its_roi_and_fly_hands_it_ba
             ..AppSession::default()
         })
         .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
-    tool.app(SoloMessage::SetCurrentShot(1));
-    tool.expect_app(&SoloMessage::GetCurrentShot(1)).await;
+    tool.expect_app(&ShotEvent::CurrentShot(-1)).await;
+    tool.app(ShotRequest::StartShot(1));
+    tool.expect_app(&ShotEvent::CurrentShot(1)).await;
     let roi = Location {
         lat_deg: start.lat_deg + 20.0 * M_LAT,
         lon_deg: start.lon_deg,
         alt_m: 0.0,
     };
-    tool.app(SoloMessage::Location(roi));
-    tool.expect_app(&SoloMessage::Location(roi)).await;
-    tool.app(SoloMessage::ShotOptions { cruise_speed: 3.0 });
+    tool.app(ShotRequest::Location(roi));
+    tool.expect_app(&ShotEvent::Location(roi)).await;
+    tool.app(ShotRequest::ShotOptions { cruise_speed: 3.0 });
 
     // It orbits: moving, at about the radius it started at.
     let moving = tool
@@ -268,7 +266,7 @@ async fn an_orbit_flies_the_simulated_vehicle_around_its_roi_and_fly_hands_it_ba
             ButtonEventKind::Press,
         ))
         .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    tool.expect_app(&ShotEvent::CurrentShot(-1)).await;
     tool.wait_status("LOITER", |s| s.flight_mode() == FlightMode::Loiter)
         .await;
     tool.wait_state("stopped", |s| {

@@ -6,12 +6,13 @@
 
 mod common;
 
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest};
 use skymesh_ipc_types::{
-    topics, AppGeofence, AppMessage, AppSession, ArbiterEvent, ArbiterEventKind, CommandSource,
-    FenceKind, GeofenceSet, ServiceId,
+    topics, AppGeofence, AppSession, ArbiterEvent, ArbiterEventKind, CommandSource, FenceKind,
+    GeofenceSet, ServiceId,
 };
+use skymesh_ipc_types::{ShotEventSample, ShotRequestSample};
 use skymesh_runtime::{Bus, Publisher, Stats, Subscriber};
-use solo_proto::SoloMessage;
 
 use common::{app_msg, settings, unique_domain, Engine, PATIENCE, VEHICLE};
 
@@ -23,14 +24,11 @@ async fn next<T: skymesh_ipc_types::Sample>(sub: &mut Subscriber<T>, what: &str)
 }
 
 /// The next geofence answer or error for the app (skipping what it gets on connect).
-async fn next_answer(to_app: &mut Subscriber<AppMessage>) -> SoloMessage {
+async fn next_answer(to_app: &mut Subscriber<ShotEventSample>) -> ShotEvent {
     loop {
         let m = next(to_app, "app message").await;
-        let msg = SoloMessage::decode(m.msg_type, m.value()).unwrap();
-        if matches!(
-            msg,
-            SoloMessage::GeofenceSetAck { .. } | SoloMessage::ShotManagerError(_)
-        ) {
+        let msg = m.event().unwrap();
+        if matches!(msg, ShotEvent::GeofenceSetAck { .. } | ShotEvent::Error(_)) {
             return msg;
         }
     }
@@ -58,13 +56,13 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
         .publisher::<AppGeofence>(&topics::shot_app_geofence())
         .unwrap();
     let mut from_app = bus
-        .publisher::<AppMessage>(&topics::shot_from_app())
+        .publisher::<ShotRequestSample>(&topics::shot_requests())
         .unwrap();
     let mut session = bus
         .publisher::<AppSession>(&topics::shot_app_session())
         .unwrap();
     let mut to_app = bus
-        .subscriber::<AppMessage>(&topics::shot_to_app())
+        .subscriber::<ShotEventSample>(&topics::shot_events())
         .unwrap();
     let mut arbiter = bus
         .subscriber::<GeofenceSet>(&topics::vehicle_geofence(VEHICLE))
@@ -97,7 +95,7 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
     // Back to back: both are pending when the engine wakes (or arrive in order).
     fences.publish(fence).unwrap();
     from_app
-        .publish(app_msg(&SoloMessage::GeofenceClear))
+        .publish(app_msg(&ShotRequest::GeofenceClear))
         .unwrap();
 
     // The arbiter's topic holds the latest fence: when both requests were handled
@@ -121,14 +119,14 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
     );
     assert_eq!(
         next_answer(&mut to_app).await,
-        SoloMessage::GeofenceSetAck {
+        ShotEvent::GeofenceSetAck {
             count: 1,
             valid: true
         }
     );
     assert_eq!(
         next_answer(&mut to_app).await,
-        SoloMessage::GeofenceSetAck {
+        ShotEvent::GeofenceSetAck {
             count: 0,
             valid: true
         }
@@ -142,21 +140,21 @@ async fn a_fence_then_a_clear_reach_the_arbiter_in_the_order_the_app_sent_them()
     decide(&mut events, &set, ArbiterEventKind::GeofenceInvalid);
     assert_eq!(
         next_answer(&mut to_app).await,
-        SoloMessage::GeofenceSetAck {
+        ShotEvent::GeofenceSetAck {
             count: 0,
             valid: false
         }
     );
     assert!(matches!(
         next_answer(&mut to_app).await,
-        SoloMessage::ShotManagerError(_)
+        ShotEvent::Error(_)
     ));
     fences.publish(fence).unwrap();
     let set = next(&mut arbiter, "GeofenceSet").await;
     decide(&mut events, &set, ArbiterEventKind::GeofenceUpdated);
     assert_eq!(
         next_answer(&mut to_app).await,
-        SoloMessage::GeofenceSetAck {
+        ShotEvent::GeofenceSetAck {
             count: 1,
             valid: true
         }

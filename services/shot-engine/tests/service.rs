@@ -4,21 +4,22 @@
 
 mod common;
 
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{
-    topics, AppMessage, AppSession, Command, CommandKind, FlightMode, ServiceId, ShotStatus,
-    VehicleCommand, VehicleState, VehicleStatus,
+    topics, AppSession, Command, CommandKind, FlightMode, ServiceId, ShotStatus, VehicleCommand,
+    VehicleState, VehicleStatus,
 };
+use skymesh_ipc_types::{ShotEventSample, ShotRequestSample};
 use skymesh_runtime::{Bus, Publisher, Stats, Subscriber};
-use solo_proto::{Location, SoloMessage};
 
 use common::{app_msg, settings, unique_domain, Engine, PATIENCE, VEHICLE};
 
 struct Tool {
-    from_app: Publisher<AppMessage>,
+    from_app: Publisher<ShotRequestSample>,
     session: Publisher<AppSession>,
     state: Publisher<VehicleState>,
     status: Publisher<VehicleStatus>,
-    to_app: Subscriber<AppMessage>,
+    to_app: Subscriber<ShotEventSample>,
     commands: Subscriber<VehicleCommand>,
     shot_status: Subscriber<ShotStatus>,
 }
@@ -26,11 +27,11 @@ struct Tool {
 impl Tool {
     fn open(bus: &Bus) -> Tool {
         Tool {
-            from_app: bus.publisher(&topics::shot_from_app()).unwrap(),
+            from_app: bus.publisher(&topics::shot_requests()).unwrap(),
             session: bus.publisher(&topics::shot_app_session()).unwrap(),
             state: bus.publisher(&topics::vehicle_state(VEHICLE)).unwrap(),
             status: bus.publisher(&topics::vehicle_status(VEHICLE)).unwrap(),
-            to_app: bus.subscriber(&topics::shot_to_app()).unwrap(),
+            to_app: bus.subscriber(&topics::shot_events()).unwrap(),
             commands: bus.subscriber(&topics::vehicle_command(VEHICLE)).unwrap(),
             shot_status: bus.subscriber(&topics::shot_status()).unwrap(),
         }
@@ -73,15 +74,15 @@ impl Tool {
                 ..AppSession::default()
             })
             .unwrap();
-        self.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+        self.expect_app(&ShotEvent::CurrentShot(-1)).await;
     }
 
-    async fn expect_app(&mut self, want: &SoloMessage) {
+    async fn expect_app(&mut self, want: &ShotEvent) {
         let wait = async {
             loop {
                 let m = self.to_app.recv().await.unwrap();
                 assert_eq!(m.session, 0, "to the current app");
-                if SoloMessage::decode(m.msg_type, m.value()).as_ref() == Ok(want) {
+                if m.event().as_ref() == Ok(want) {
                     return;
                 }
             }
@@ -118,9 +119,9 @@ async fn an_orbit_over_the_bus_from_entry_to_exit() {
     tool.connect_app().await;
 
     tool.from_app
-        .publish(app_msg(&SoloMessage::SetCurrentShot(1)))
+        .publish(app_msg(&ShotRequest::StartShot(1)))
         .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(1)).await;
+    tool.expect_app(&ShotEvent::CurrentShot(1)).await;
 
     let roi = Location {
         lat_deg: -35.363,
@@ -128,9 +129,9 @@ async fn an_orbit_over_the_bus_from_entry_to_exit() {
         alt_m: 0.0,
     };
     tool.from_app
-        .publish(app_msg(&SoloMessage::Location(roi)))
+        .publish(app_msg(&ShotRequest::Location(roi)))
         .unwrap();
-    tool.expect_app(&SoloMessage::Location(roi)).await;
+    tool.expect_app(&ShotEvent::Location(roi)).await;
     assert_eq!(
         tool.expect_command(CommandKind::SetMode).await,
         Command::SetMode(FlightMode::Guided)
@@ -153,9 +154,9 @@ async fn an_orbit_over_the_bus_from_entry_to_exit() {
     assert_eq!(st.shot, 1);
 
     tool.from_app
-        .publish(app_msg(&SoloMessage::SetCurrentShot(-1)))
+        .publish(app_msg(&ShotRequest::StartShot(-1)))
         .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(-1)).await;
+    tool.expect_app(&ShotEvent::CurrentShot(-1)).await;
     assert_eq!(
         tool.expect_command(CommandKind::SetMode).await,
         Command::SetMode(FlightMode::Loiter)
@@ -184,9 +185,9 @@ async fn guidance_changes_send_a_setpoint_without_waiting_for_the_loop() {
 
     tool.connect_app().await;
     tool.from_app
-        .publish(app_msg(&SoloMessage::SetCurrentShot(1)))
+        .publish(app_msg(&ShotRequest::StartShot(1)))
         .unwrap();
-    tool.expect_app(&SoloMessage::GetCurrentShot(1)).await;
+    tool.expect_app(&ShotEvent::CurrentShot(1)).await;
 
     let roi = Location {
         lat_deg: -35.363,
@@ -194,13 +195,13 @@ async fn guidance_changes_send_a_setpoint_without_waiting_for_the_loop() {
         alt_m: 0.0,
     };
     tool.from_app
-        .publish(app_msg(&SoloMessage::Location(roi)))
+        .publish(app_msg(&ShotRequest::Location(roi)))
         .unwrap();
     tool.expect_command(CommandKind::VelocityNed).await;
 
     tool.vehicle(FlightMode::Guided);
     tool.from_app
-        .publish(app_msg(&SoloMessage::ShotOptions { cruise_speed: 3.0 }))
+        .publish(app_msg(&ShotRequest::ShotOptions { cruise_speed: 3.0 }))
         .unwrap();
     let Command::VelocityNed { vel_ned_mps, .. } =
         tool.expect_command(CommandKind::VelocityNed).await

@@ -6,7 +6,7 @@
 use std::net::{IpAddr, SocketAddr};
 
 use skymesh_runtime::TokenBucket;
-use solo_proto::{ids, SoloMessage};
+use solo_proto::SoloMessage;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
@@ -88,12 +88,14 @@ pub(crate) async fn run(
                 );
             }
             Ok(session) => {
-                from_app.publish(
-                    session,
-                    ids::LOCATION,
-                    &datagram[solo_proto::HEADER_LEN..],
-                    true,
-                )?;
+                // `check` accepted a LOCATION: it decodes, and has a request.
+                if let Some(request) = solo_proto::decode_datagram(datagram)
+                    .ok()
+                    .as_ref()
+                    .and_then(crate::translate::request)
+                {
+                    from_app.publish(session, &request, true)?;
+                }
                 drops.metrics().follow_datagram(true);
             }
             Err((kind, reason)) => {

@@ -9,9 +9,8 @@ use std::net::{IpAddr, SocketAddr};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use skymesh_ipc_types::AppMessage;
+use skymesh_ipc_types::ShotEventSample;
 use skymesh_runtime::timer::Ticker;
-use solo_proto::SoloMessage;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
@@ -19,7 +18,6 @@ use tokio_util::task::TaskTracker;
 
 use crate::config::Settings;
 use crate::drops::Drops;
-use crate::inbound::frame_bytes;
 use crate::ipc::Ports;
 use crate::metrics::{ConnectionResult, Malformed, ToAppDrop};
 use crate::session::{self, End, Outgoing, SessionCtx};
@@ -261,12 +259,12 @@ impl Hub {
         Ok(())
     }
 
-    fn on_to_app(&mut self, m: &AppMessage) -> anyhow::Result<()> {
+    fn on_to_app(&mut self, m: &ShotEventSample) -> anyhow::Result<()> {
         let metrics = self.drops.metrics();
         let Some(app) = &self.app else {
             metrics.to_app_dropped(ToAppDrop::NoApp);
             tracing::debug!(
-                msg_type = m.msg_type,
+                kind = m.kind,
                 "message for the app dropped: no app connected"
             );
             return Ok(());
@@ -274,25 +272,37 @@ impl Hub {
         if m.session != 0 && m.session != app.session {
             metrics.to_app_dropped(ToAppDrop::StaleSession);
             tracing::debug!(
-                msg_type = m.msg_type,
+                kind = m.kind,
                 to = m.session,
                 connected = app.session,
                 "message for an earlier app session dropped"
             );
             return Ok(());
         }
-        if let Err(e) = SoloMessage::decode(m.msg_type, m.value()) {
-            metrics.to_app_dropped(ToAppDrop::Invalid);
-            if !std::mem::replace(&mut self.warned_invalid, true) {
-                tracing::warn!(error = %e, "the shot engine sent a message that does not decode; dropped (further ones at debug)");
-            } else {
-                tracing::debug!(error = %e, "undecodable message for the app dropped");
+        // The event as the Solo message that tells it, checked the way the app
+        // will read it.
+        let msg = match m.event() {
+            Ok(event) => {
+                let msg = crate::translate::event(&event);
+                msg.validate().map(|()| msg).map_err(|e| e.to_string())
             }
-            return Ok(());
-        }
+            Err(e) => Err(e.to_string()),
+        };
+        let msg = match msg {
+            Ok(msg) => msg,
+            Err(e) => {
+                metrics.to_app_dropped(ToAppDrop::Invalid);
+                if !std::mem::replace(&mut self.warned_invalid, true) {
+                    tracing::warn!(error = %e, "the shot engine sent an event that does not translate; dropped (further ones at debug)");
+                } else {
+                    tracing::debug!(error = %e, "untranslatable event for the app dropped");
+                }
+                return Ok(());
+            }
+        };
         let out = Outgoing {
-            msg_type: m.msg_type,
-            frame: frame_bytes(m.msg_type, m.value()),
+            msg_type: msg.msg_type(),
+            frame: msg.to_bytes(),
         };
         match app.tx.try_send(out) {
             Ok(()) => Ok(()),

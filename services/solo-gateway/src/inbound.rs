@@ -1,11 +1,11 @@
 //! What to do with one frame from the app (pure).
 //!
-//! A frame goes on the bus only if its value decodes cleanly as its type, the type
-//! is one the app may send, and the value fits in an `AppMessage`. Everything else is
-//! dropped with a [`Malformed`] kind, except a valid value too long for the bus,
-//! which the gateway answers itself.
+//! A frame goes on the bus only if its value decodes cleanly as its type and the
+//! type is one the app may send; it goes as the engine's `ShotRequest`
+//! ([`crate::translate`]), each of which fits a sample. Everything else is dropped
+//! with a [`Malformed`] kind.
 //!
-//! GEOFENCE_SET_DATA (JSON, up to 64 KiB) never fits an `AppMessage`: its polygons
+//! GEOFENCE_SET_DATA (JSON, up to 64 KiB) is no `ShotRequest`: its polygons
 //! are translated into one `AppGeofence` sample, whatever its length. What that
 //! sample cannot carry (more than 8 polygons, or more than 32 vertices in a polygon
 //! or sub-polygon) is answered here with GEOFENCE_SET_ACK {0, false} and a
@@ -28,7 +28,7 @@
 //! way.
 
 use bytes::{Bytes, BytesMut};
-use skymesh_ipc_types::{AppGeofence, APP_VALUE_CAPACITY};
+use skymesh_ipc_types::AppGeofence;
 use solo_proto::{Direction, GeofenceData, RawFrame, SoloMessage};
 
 use crate::metrics::Malformed;
@@ -36,7 +36,7 @@ use crate::metrics::Malformed;
 /// The decision about one frame from the app.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Verdict {
-    /// Publish the frame's value as received.
+    /// Publish the message as the engine's request.
     Forward(SoloMessage),
     /// GEOFENCE_SET_DATA: publish its polygons (the session is filled in by the
     /// publisher).
@@ -99,9 +99,6 @@ pub fn check(frame: &RawFrame) -> Verdict {
     }
     if let SoloMessage::GeofenceSetData(data) = &message {
         return geofence(data, &message);
-    }
-    if frame.value.len() > APP_VALUE_CAPACITY {
-        return too_large(message, frame.value.len());
     }
     Verdict::Forward(message)
 }
@@ -332,24 +329,6 @@ fn geofence(data: &GeofenceData, message: &SoloMessage) -> Verdict {
     }
 }
 
-fn too_large(message: SoloMessage, len: usize) -> Verdict {
-    let reason = format!(
-        "{} (type {}) value of {len} bytes exceeds the bus capacity of {APP_VALUE_CAPACITY}",
-        message.name(),
-        message.msg_type()
-    );
-    let replies = vec![SoloMessage::ShotManagerError(format!(
-        "skymesh: {} message of {len} bytes is larger than skymesh carries ({APP_VALUE_CAPACITY}); ignored.",
-        message.name()
-    ))];
-    Verdict::Answer {
-        msg_type: message.msg_type(),
-        kind: Malformed::TooLargeForBus,
-        reason,
-        replies,
-    }
-}
-
 /// `header + value` of a message: one TLV frame.
 pub fn frame_bytes(msg_type: u32, value: &[u8]) -> Bytes {
     let mut b = BytesMut::with_capacity(solo_proto::HEADER_LEN + value.len());
@@ -514,10 +493,10 @@ mod tests {
 
     #[test]
     fn a_geofence_of_any_length_is_translated_for_the_engine() {
-        // Longer than an AppMessage, eight polygons of 32 vertices: carried whole.
+        // Longer than a request sample, eight polygons of 32 vertices: carried whole.
         let frame = fence_frame(vec![square(32); 8], vec![0, 1, 1, 1, 1, 1, 1, 1]);
         assert!(
-            frame.value.len() > APP_VALUE_CAPACITY,
+            frame.value.len() > skymesh_ipc_types::SHOT_BODY_CAPACITY,
             "{}",
             frame.value.len()
         );

@@ -2,25 +2,24 @@
 //!
 //! | topic | direction | type |
 //! |---|---|---|
-//! | `skymesh/shot/from_app` | publish (sessions, follow stream) | `AppMessage` |
+//! | `skymesh/shot/requests` | publish (sessions, follow stream) | `ShotRequestSample` |
 //! | `skymesh/shot/app_geofence` | publish (sessions: GEOFENCE_SET_DATA) | `AppGeofence` |
 //! | `skymesh/shot/app_session` | publish (hub) | `AppSession` |
-//! | `skymesh/shot/to_app` | subscribe (hub) | `AppMessage` |
+//! | `skymesh/shot/events` | subscribe (hub) | `ShotEventSample` |
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use anyhow::Context as _;
-use skymesh_ipc_types::shot::{app_flags, ValueTooLong};
-use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, FixedStr};
+use skymesh_ipc_types::shot_api::request_flags;
+use skymesh_ipc_types::{
+    topics, AppGeofence, AppSession, FixedStr, ShotEventSample, ShotRequest, ShotRequestSample,
+};
 use skymesh_runtime::{Bus, IpcError, Publisher, Subscriber};
 
 /// Why a message could not be published.
 #[derive(Debug, thiserror::Error)]
 pub enum PublishError {
-    /// The value does not fit an `AppMessage` (checked before, so a bug if seen).
-    #[error(transparent)]
-    TooLong(#[from] ValueTooLong),
     /// The bus failed: the service cannot work on and stops (and is restarted).
     #[error(transparent)]
     Bus(#[from] IpcError),
@@ -34,22 +33,21 @@ pub enum PublishError {
 /// shared memory.
 #[derive(Debug, Clone)]
 pub struct FromApp {
-    messages: Arc<Mutex<Publisher<AppMessage>>>,
+    messages: Arc<Mutex<Publisher<ShotRequestSample>>>,
     geofence: Arc<Mutex<Publisher<AppGeofence>>>,
 }
 
 impl FromApp {
-    /// Publishes one validated app message.
+    /// Publishes one validated app message as the engine's request.
     pub fn publish(
         &self,
         session: u32,
-        msg_type: u32,
-        value: &[u8],
+        request: &ShotRequest,
         follow_stream: bool,
     ) -> Result<(), PublishError> {
-        let mut m = AppMessage::new(session, msg_type, value)?;
+        let mut m = ShotRequestSample::new(session, request);
         if follow_stream {
-            m.flags |= app_flags::FOLLOW_STREAM;
+            m.flags |= request_flags::FOLLOW_STREAM;
         }
         self.messages
             .lock()
@@ -59,7 +57,7 @@ impl FromApp {
     }
 
     /// Whether a shot engine reads the topic a message goes to (`geofence`: the
-    /// `app_geofence` topic of GEOFENCE_SET_DATA, else `from_app`): a subscriber
+    /// `app_geofence` topic of GEOFENCE_SET_DATA, else `requests`): a subscriber
     /// there is the only one that answers the app's requests.
     pub fn engine_reads(&self, geofence: bool) -> bool {
         let subscribers = if geofence {
@@ -92,8 +90,9 @@ impl FromApp {
 pub struct Ports {
     pub from_app: FromApp,
     session: Publisher<AppSession>,
-    /// Messages from the shot engine; the hub routes them to the app.
-    pub to_app: Subscriber<AppMessage>,
+    /// Events from the shot engine; the hub translates them and routes them to
+    /// the app.
+    pub to_app: Subscriber<ShotEventSample>,
 }
 
 impl Ports {
@@ -101,8 +100,8 @@ impl Ports {
         Ok(Ports {
             from_app: FromApp {
                 messages: Arc::new(Mutex::new(
-                    bus.publisher::<AppMessage>(&topics::shot_from_app())
-                        .context("opening the from_app topic")?,
+                    bus.publisher::<ShotRequestSample>(&topics::shot_requests())
+                        .context("opening the shot requests topic")?,
                 )),
                 geofence: Arc::new(Mutex::new(
                     bus.publisher::<AppGeofence>(&topics::shot_app_geofence())
@@ -113,8 +112,8 @@ impl Ports {
                 .publisher::<AppSession>(&topics::shot_app_session())
                 .context("opening the app_session topic")?,
             to_app: bus
-                .subscriber::<AppMessage>(&topics::shot_to_app())
-                .context("opening the to_app topic")?,
+                .subscriber::<ShotEventSample>(&topics::shot_events())
+                .context("opening the shot events topic")?,
         })
     }
 

@@ -4,14 +4,15 @@
 //! The gateway *translates*: it speaks the app's TLV protocol on TCP (ShotManager's
 //! port 5507) and the follow stream on UDP (14558), checks every message with the
 //! `solo-proto` codec, and forwards what is valid to the shot engine as
-//! `AppMessage` samples; the engine's answers come back the same way and are
-//! written to the app. The shot engine *decides*. One app at a time, as ShotManager.
+//! protocol-neutral `ShotRequest`s; the engine's `ShotEvent`s come back and are
+//! written to the app as Solo messages ([`translate`]). The shot engine *decides*. One app at a time, as ShotManager.
 //!
 //! | module | role |
 //! |---|---|
 //! | [`config`] | TOML → [`Settings`] |
 //! | [`framing`] | TLV frames from a byte stream, with a per-frame deadline |
 //! | [`inbound`] | what to do with one frame from the app (pure) |
+//! | [`translate`] | Solo messages ↔ the engine's `ShotRequest`/`ShotEvent` (pure) |
 //! | `session` | one connection: reader (check, publish) and writer (bounded queue) |
 //! | `hub` | the app slot: one-app rule, engine → app routing, `AppSession` |
 //! | [`follow`] | the UDP follow stream |
@@ -36,6 +37,7 @@ mod ipc;
 pub mod metrics;
 pub mod service;
 mod session;
+pub mod translate;
 
 use std::net::SocketAddr;
 

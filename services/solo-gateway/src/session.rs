@@ -26,6 +26,7 @@ use crate::framing::{FrameReader, ReadError};
 use crate::inbound::{self, Verdict};
 use crate::ipc::{FromApp, PublishError};
 use crate::metrics::{Direction, Malformed};
+use crate::translate;
 
 /// One whole TLV frame for the app.
 #[derive(Debug, Clone)]
@@ -163,15 +164,21 @@ async fn read_loop(reader: &mut FrameReader<OwnedReadHalf>, ctx: &SessionCtx) ->
         };
         let verdict = backend.check(verdict, frame.msg_type, ctx).await;
         match verdict {
-            Verdict::Forward(_) => {
-                metrics.message(Direction::In, frame.msg_type);
-                if let Err(e) =
-                    ctx.from_app
-                        .publish(ctx.session, frame.msg_type, &frame.value, false)
-                {
-                    return End::Bus(e);
+            Verdict::Forward(message) => match translate::request(&message) {
+                Some(request) => {
+                    metrics.message(Direction::In, frame.msg_type);
+                    if let Err(e) = ctx.from_app.publish(ctx.session, &request, false) {
+                        return End::Bus(e);
+                    }
                 }
-            }
+                // `inbound::check` forwards only what the app may send, each of
+                // which has a request; kept as a drop should the two ever disagree.
+                None => ctx.drops.record(
+                    Malformed::WrongDirection,
+                    ctx.peer,
+                    &format_args!("{} is no request for the shot engine", message.name()),
+                ),
+            },
             Verdict::Geofence(fence) => {
                 metrics.message(Direction::In, frame.msg_type);
                 if let Err(e) = ctx.from_app.publish_geofence(ctx.session, &fence) {

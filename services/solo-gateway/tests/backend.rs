@@ -5,11 +5,11 @@
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use skymesh_ipc_types::{topics, AppMessage, ServiceId};
+use skymesh_ipc_types::{topics, ServiceId, ShotRequest, ShotRequestSample};
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Stats};
 use skymesh_solo_gateway::client::AppClient;
 use skymesh_solo_gateway::{run, Settings, Sockets};
-use solo_proto::{ids, ButtonSetting, SoloMessage};
+use solo_proto::{ButtonSetting, SoloMessage};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
@@ -144,14 +144,14 @@ async fn a_shot_engine_that_appears_within_the_wait_gets_the_request() {
     )
     .expect("engine bus");
     let mut from_app = engine
-        .subscriber::<AppMessage>(&topics::shot_from_app())
-        .expect("from_app subscriber");
+        .subscriber::<ShotRequestSample>(&topics::shot_requests())
+        .expect("shot requests subscriber");
     let m = from_app
         .recv_timeout(PATIENCE)
         .await
         .expect("from_app")
         .expect("the request, forwarded once the engine reads");
-    assert_eq!(m.msg_type, ids::GET_BUTTON_SETTING);
+    assert!(matches!(m.request(), Ok(ShotRequest::GetButtonSetting(_))));
     assert_eq!(gw.backend_missing().unwrap_or(0.0), 0.0);
     drop(from_app);
     drop(engine);

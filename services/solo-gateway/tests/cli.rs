@@ -5,6 +5,7 @@ mod common;
 use std::process::Stdio;
 
 use common::{other_host, Gateway, PATIENCE};
+use skymesh_ipc_types::ShotEvent;
 use skymesh_ipc_types::{topics, Button, ButtonEvent, ButtonEventKind, ServiceId};
 use skymesh_runtime::{Bus, Stats};
 use skymesh_solo_gateway::client::AppClient;
@@ -56,7 +57,7 @@ async fn a_shot_command_is_sent_and_the_answer_printed() {
         SoloMessage::decode(got.msg_type, got.value()),
         Ok(SoloMessage::SetCurrentShot(1))
     );
-    gw.send_to_app(0, &SoloMessage::GetCurrentShot(1));
+    gw.send_to_app(0, &ShotEvent::CurrentShot(1));
     wait_line(&mut cli, "GET_CURRENT_SHOT shot=orbit(1)").await;
     cli.kill().await.expect("kill");
     gw.stop().await;

@@ -5,6 +5,7 @@ mod common;
 use std::time::Duration;
 
 use common::{localhost, other_host, value_of, Gateway, PATIENCE};
+use skymesh_ipc_types::ShotEvent;
 use skymesh_ipc_types::{topics, AppSession, ServiceId};
 use skymesh_runtime::{Bus, Stats};
 use skymesh_solo_gateway::client::AppClient;
@@ -116,15 +117,15 @@ async fn engine_messages_reach_the_app_by_session() {
     let mut app = AppClient::connect(gw.tcp).await.expect("connect");
     gw.wait_connected(1).await;
 
-    gw.send_to_app(0, &SoloMessage::GetCurrentShot(1));
+    gw.send_to_app(0, &ShotEvent::CurrentShot(1));
     assert_eq!(
         app.recv(PATIENCE).await,
         Some(SoloMessage::GetCurrentShot(1))
     );
 
     // Addressed to an earlier session: dropped; the next one (this session) arrives first.
-    gw.send_to_app(99, &SoloMessage::GetCurrentShot(2));
-    gw.send_to_app(1, &SoloMessage::ShotOptions { cruise_speed: 4.0 });
+    gw.send_to_app(99, &ShotEvent::CurrentShot(2));
+    gw.send_to_app(1, &ShotEvent::ShotOptions { cruise_speed: 4.0 });
     assert_eq!(
         app.recv(PATIENCE).await,
         Some(SoloMessage::ShotOptions { cruise_speed: 4.0 })
@@ -148,12 +149,12 @@ async fn engine_messages_reach_the_app_by_session() {
         s.session == 1 && s.connected == 0
     })
     .await;
-    gw.send_to_app(0, &SoloMessage::GetCurrentShot(5));
+    gw.send_to_app(0, &ShotEvent::CurrentShot(5));
     gw.wait_metric("skymesh_solo_to_app_dropped_total", "reason=no_app", 1.0)
         .await;
     let mut app = AppClient::connect(gw.tcp).await.expect("reconnect");
     gw.wait_connected(2).await;
-    gw.send_to_app(0, &SoloMessage::GetCurrentShot(-1));
+    gw.send_to_app(0, &ShotEvent::CurrentShot(-1));
     assert_eq!(
         app.recv(PATIENCE).await,
         Some(SoloMessage::GetCurrentShot(-1))
@@ -250,7 +251,7 @@ async fn a_second_phone_from_another_address_is_rejected() {
         (got.session, got.msg_type),
         (1, solo_proto::ids::SET_CURRENT_SHOT)
     );
-    gw.send_to_app(0, &SoloMessage::GetCurrentShot(2));
+    gw.send_to_app(0, &ShotEvent::CurrentShot(2));
     assert_eq!(
         first.recv(PATIENCE).await,
         Some(SoloMessage::GetCurrentShot(2))
@@ -285,7 +286,7 @@ async fn the_same_address_replaces_the_connection() {
     new.send(&SoloMessage::Pause).await.expect("send");
     let got = gw.next_from_app().await;
     assert_eq!((got.session, got.msg_type), (2, solo_proto::ids::PAUSE));
-    gw.send_to_app(2, &SoloMessage::GetCurrentShot(1));
+    gw.send_to_app(2, &ShotEvent::CurrentShot(1));
     assert_eq!(
         new.recv(PATIENCE).await,
         Some(SoloMessage::GetCurrentShot(1))
@@ -316,7 +317,7 @@ async fn an_app_that_stops_reading_is_closed_not_buffered() {
             "no overflow within {PATIENCE:?}"
         );
         for _ in 0..32 {
-            gw.send_to_app(0, &SoloMessage::ShotManagerError(text.clone()));
+            gw.send_to_app(0, &ShotEvent::Error(text.clone()));
         }
         tokio::time::sleep(Duration::from_millis(1)).await;
     }

@@ -398,7 +398,7 @@ async fn count_throttled(
     gw: &mut Gateway,
     kind: &str,
     sent: u32,
-    mut check: impl FnMut(&skymesh_ipc_types::AppMessage),
+    mut check: impl FnMut(&common::FromApp),
 ) -> u32 {
     let deadline = tokio::time::Instant::now() + PATIENCE;
     let mut forwarded = 0;
@@ -421,9 +421,9 @@ async fn count_throttled(
             .from_app
             .recv_timeout(Duration::from_millis(100))
             .await
-            .expect("from_app")
+            .expect("shot requests")
         {
-            check(&m);
+            check(&common::FromApp::new(&m));
             forwarded += 1;
         }
     }

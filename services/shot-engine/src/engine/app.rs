@@ -17,8 +17,10 @@
 //! what they are mapped to: enter a shot (follow is refused: the spec says it is not
 //! enterable from the controller), or set an ArduCopter mode.
 
-use skymesh_ipc_types::{AppMessage, Button, ButtonEvent, ButtonEventKind, Command, FlightMode};
-use solo_proto::{shots, ButtonSetting, SoloMessage};
+use skymesh_ipc_types::shot_api::{
+    shots, ButtonSetting, ShotEvent, ShotRequest, ShotRequestSample,
+};
+use skymesh_ipc_types::{Button, ButtonEvent, ButtonEventKind, Command, FlightMode};
 
 use super::shot::{Active, ShotKind};
 use super::{shot_label, shot_title, Engine, ExitReason};
@@ -32,14 +34,14 @@ pub(crate) enum Via {
 }
 
 impl Engine {
-    /// One app message from the gateway (already checked by the gateway; decoded
-    /// again here with the same codec).
-    pub fn handle_app(&mut self, msg: &AppMessage, now_ns: u64) {
-        let decoded = match SoloMessage::decode(msg.msg_type, msg.value()) {
+    /// One request from a gateway (checked there against its protocol; its body
+    /// is checked again here as it is decoded).
+    pub fn handle_app(&mut self, msg: &ShotRequestSample, now_ns: u64) {
+        let decoded = match msg.request() {
             Ok(m) => m,
             Err(e) => {
                 self.out.metrics.decode_errors.inc();
-                tracing::warn!(msg_type = msg.msg_type, error = %e, "app message does not decode; ignored");
+                tracing::warn!(kind = msg.kind, error = %e, "shot request does not decode; ignored");
                 return;
             }
         };
@@ -47,7 +49,7 @@ impl Engine {
         if msg.is_follow_stream() {
             self.app_heard_ns = now_ns;
             match &decoded {
-                SoloMessage::Location(loc) => self.follow_fix(loc, now_ns),
+                ShotRequest::Location(loc) => self.follow_fix(loc, now_ns),
                 other => {
                     tracing::debug!(msg = other.name(), "follow stream: not a location; ignored")
                 }
@@ -62,13 +64,13 @@ impl Engine {
         }
     }
 
-    fn dispatch(&mut self, msg: SoloMessage, now_ns: u64) {
-        use SoloMessage as M;
+    fn dispatch(&mut self, msg: ShotRequest, now_ns: u64) {
+        use ShotRequest as M;
         match msg {
-            M::SetCurrentShot(shot) => self.set_current_shot(shot, Via::App, now_ns),
+            M::StartShot(shot) => self.set_current_shot(shot, Via::App, now_ns),
             M::Location(loc) => self.shot_location(&loc, now_ns),
             M::RecordPosition => self.record_position(now_ns),
-            M::CableCamOptions {
+            M::CableOptions {
                 cam_interpolation,
                 yaw_direction_cw,
                 cruise_speed,
@@ -92,7 +94,6 @@ impl Engine {
             M::GoProRecord(what) => self.gopro_record(what),
             M::GoProRequestState => self.gopro_send_state(),
             M::SplinePoint(p) => self.spline_point(p),
-            M::GeofenceSetData(d) => self.geofence_set_data(&d),
             M::GeofenceUpdatePoly {
                 action,
                 polygon_index,
@@ -162,25 +163,6 @@ impl Engine {
             M::InspectMoveVehicle { vx, vy, vz } => self.inspect_move(vx, vy, vz, now_ns),
             M::ScanStart => self.scan_start(now_ns),
             M::SurveyStart => self.survey_start(now_ns),
-            // ShotManager → app only: an app has no reason to send these.
-            other @ (M::GetCurrentShot(_)
-            | M::ShotError(_)
-            | M::ShotManagerError(_)
-            | M::CableCamWaypoint { .. }
-            | M::SecondPhoneNotification
-            | M::GeofenceSetAck { .. }
-            | M::GeofenceActivated
-            | M::GoProV1State(_)
-            | M::GoProV2State(_)
-            | M::GoProPhoto { .. }
-            | M::PanoState { .. }
-            | M::SplinePlaybackStatus { .. }
-            | M::SplineDurations { .. }) => {
-                tracing::info!(
-                    msg = other.name(),
-                    "message the app should not send; ignored"
-                )
-            }
         }
     }
 
@@ -252,7 +234,7 @@ impl Engine {
             Err(r) => {
                 self.out.metrics.refused_entry(r.label);
                 tracing::info!(shot = label, code = r.code, why = %r.why, ?via, "shot refused");
-                self.out.app(SoloMessage::ShotError(r.code));
+                self.out.app(ShotEvent::Refused(r.code));
                 return;
             }
         };
@@ -298,7 +280,7 @@ impl Engine {
             .mapping(req.button)
             .filter(|_| req.event == press)
             .unwrap_or(Mapping::NONE);
-        self.out.app(SoloMessage::GetButtonSetting(ButtonSetting {
+        self.out.app(ShotEvent::ButtonSetting(ButtonSetting {
             shot: m.shot,
             mode: m.mode,
             ..req
@@ -363,14 +345,14 @@ impl Engine {
 
 /// App messages that can change what a flying shot commands (or start its flight):
 /// after one, the engine steps at once instead of on the next tick.
-fn steers_guidance(msg: &SoloMessage) -> bool {
-    use SoloMessage as M;
+fn steers_guidance(msg: &ShotRequest) -> bool {
+    use ShotRequest as M;
     matches!(
         msg,
-        M::SetCurrentShot(_)
+        M::StartShot(_)
             | M::Location(_)
             | M::RecordPosition
-            | M::CableCamOptions { .. }
+            | M::CableOptions { .. }
             | M::Pause
             | M::FollowOptions { .. }
             | M::FollowOptionsV2 { .. }

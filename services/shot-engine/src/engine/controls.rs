@@ -2,8 +2,8 @@
 //! orbit ROI, options, pause, A/B, and the follow stream (see [`super::shot`] for
 //! the table of what each shot collects).
 
+use skymesh_ipc_types::shot_api::{shots, Location, ShotEvent};
 use skymesh_ipc_types::Button;
-use solo_proto::{shots, Location, SoloMessage};
 
 use super::shot::{geo, location, Active, ShotKind};
 use super::{shot_title, Engine};
@@ -91,13 +91,13 @@ impl Engine {
                     let cmd = f.camera.roi_sent(roi, now_ns);
                     self.out.command(cmd);
                 }
-                self.out.app(SoloMessage::Location(location(&roi)));
+                self.out.app(ShotEvent::Location(location(&roi)));
             }
             None => {
                 let o = Orbit::new(roi, &v);
                 tracing::info!(radius_m = o.radius_m(), "orbit: ROI set");
                 *orbit = Some(o);
-                self.out.app(SoloMessage::Location(location(&roi)));
+                self.out.app(ShotEvent::Location(location(&roi)));
                 self.begin_flight(Some(roi), now_ns);
             }
         }
@@ -156,7 +156,7 @@ impl Engine {
             yaw_deg: v.heading_deg,
             pitch_deg: v.camera_pitch_deg,
         };
-        let waypoint = SoloMessage::CableCamWaypoint {
+        let waypoint = ShotEvent::CableCamWaypoint {
             lat_deg: p.position.lat_deg,
             lon_deg: p.position.lon_deg,
             alt_m: p.position.alt_rel_m,
@@ -269,7 +269,7 @@ impl Engine {
             "pause"
         );
         if from_controller {
-            self.out.app(SoloMessage::Pause);
+            self.out.app(ShotEvent::Pause);
         }
         self.send_options();
     }

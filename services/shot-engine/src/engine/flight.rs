@@ -278,7 +278,8 @@ impl Engine {
             was_flying = active.flight.is_some(),
             "shot ended"
         );
-        self.out.current_shot(solo_proto::shots::NONE);
+        self.out
+            .current_shot(skymesh_ipc_types::shot_api::shots::NONE);
         self.last_exit = reason.as_str();
         self.out.metrics.exited(reason.as_str());
         self.out.metrics.current_shot.set(-1.0);

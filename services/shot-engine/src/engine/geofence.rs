@@ -5,7 +5,7 @@
 //!
 //! | from the app | the engine |
 //! |---|---|
-//! | GEOFENCE_SET_DATA (an `AppGeofence` from the gateway, or an `AppMessage` if it fits) | validates every polygon (`shots::fence`: type 0/1, ≥ 3 vertices, as many sub-polygon as polygon vertices, finite coordinates, no self-intersection, non-zero area; at most 8 polygons of 32 vertices, what the arbiter takes); valid → replaces the fence and gives it to the arbiter, GEOFENCE_SET_ACK {count, true} once the arbiter took it; invalid here or at the arbiter → keeps the fence it had, GEOFENCE_SET_ACK {count it has, false} and a SHOTMANAGER_ERROR saying why. No polygon at all is a valid empty fence (cleared). |
+//! | GEOFENCE_SET_DATA (an `AppGeofence` from the gateway) | validates every polygon (`shots::fence`: type 0/1, ≥ 3 vertices, as many sub-polygon as polygon vertices, finite coordinates, no self-intersection, non-zero area; at most 8 polygons of 32 vertices, what the arbiter takes); valid → replaces the fence and gives it to the arbiter, GEOFENCE_SET_ACK {count, true} once the arbiter took it; invalid here or at the arbiter → keeps the fence it had, GEOFENCE_SET_ACK {count it has, false} and a SHOTMANAGER_ERROR saying why. No polygon at all is a valid empty fence (cleared). |
 //! | GEOFENCE_UPDATE_POLY | action 0 replaces vertex `vertexIndex` of polygon `polygonIndex` (polygon and sub-polygon), 1 inserts one before it (`vertexIndex` = the vertex count appends), 2 removes it; the edited fence is validated again; ack as above (no fence, a bad index or action → negative ack) |
 //! | GEOFENCE_CLEAR | clears, GEOFENCE_SET_ACK {0, true} (once the arbiter dropped ours, at once if it had none) |
 //!
@@ -62,11 +62,11 @@
 //! changes the mode, a shot starts flying, or the fence is cleared (then LOITER).
 
 use skymesh_ipc_types::arbiter::MAX_FENCE_POLYGONS;
+use skymesh_ipc_types::shot_api::ShotEvent;
 use skymesh_ipc_types::{
     AppGeofence, Command, CommandAck, CommandKind, CommandSource, FlightMode, GeofenceSet,
     RefusalReason, NO_HOLDER,
 };
-use solo_proto::{GeofenceData, SoloMessage};
 
 use super::flight::GUIDED_TIMEOUT_NS;
 use super::sitescan::KEEPALIVE_NS;
@@ -182,10 +182,7 @@ enum Refused {
 impl Engine {
     /// GEOFENCE_SET_DATA from the gateway's `AppGeofence`.
     pub fn handle_app_geofence(&mut self, g: &AppGeofence, now_ns: u64) {
-        self.out.metrics.app_in(
-            solo_proto::message_name(solo_proto::ids::GEOFENCE_SET_DATA)
-                .unwrap_or("geofence_set_data"),
-        );
+        self.out.metrics.app_in("geofence_set_data");
         self.app_heard(g.session, now_ns);
         let zones = g
             .polygons()
@@ -195,18 +192,8 @@ impl Engine {
         self.geofence_set(&zones);
     }
 
-    /// GEOFENCE_SET_DATA that arrived whole in an `AppMessage`.
-    pub(crate) fn geofence_set_data(&mut self, d: &GeofenceData) {
-        let zones = d
-            .kinds
-            .iter()
-            .zip(d.coord.iter().zip(&d.sub_coord))
-            .map(|(k, (c, s))| (*k, c.as_slice(), s.as_slice()))
-            .collect::<Vec<_>>();
-        self.geofence_set(&zones);
-    }
-
-    fn geofence_set(&mut self, zones: &[AppZone<'_>]) {
+    /// GEOFENCE_SET_DATA's polygons as `(type, vertices, sub-polygon vertices)`.
+    pub(crate) fn geofence_set(&mut self, zones: &[AppZone<'_>]) {
         let built = build(zones.iter().map(|(k, c, s)| {
             FenceZone::from_app(*k, c, s).map_err(|error| FenceError { zone: 0, error })
         }));
@@ -269,13 +256,13 @@ impl Engine {
     /// An app connected: tell it if the engine cleared the fence meanwhile.
     pub(crate) fn geofence_app_connected(&mut self) {
         if std::mem::take(&mut self.fence.clear_unannounced) && self.fence.fence.is_empty() {
-            self.out.app(SoloMessage::GeofenceClear);
+            self.out.app(ShotEvent::GeofenceClear);
         }
     }
 
     fn fence_ack(&mut self, valid: bool) {
         let count = u16::try_from(self.fence.fence.len()).unwrap_or(u16::MAX);
-        self.out.app(SoloMessage::GeofenceSetAck { count, valid });
+        self.out.app(ShotEvent::GeofenceSetAck { count, valid });
     }
 
     /// The arbiter's decision on our `GeofenceSet` `request_id`: answers every change
@@ -299,7 +286,7 @@ impl Engine {
         if accepted {
             tracing::debug!(request_id, detail, "the arbiter took the geofence");
             for a in answered.iter().filter(|a| a.ack) {
-                self.out.app(SoloMessage::GeofenceSetAck {
+                self.out.app(ShotEvent::GeofenceSetAck {
                     count: a.count,
                     valid: true,
                 });
@@ -517,7 +504,7 @@ impl Engine {
         if self.active.is_some() {
             self.exit_shot(ExitReason::Geofence);
         }
-        self.out.app(SoloMessage::GeofenceActivated);
+        self.out.app(ShotEvent::GeofenceActivated);
         let first_command_id = self.out.peek_id();
         self.out.command(Command::GrabFlightAuthority);
         // Asked for even when the last status says GUIDED: it may predate a LOITER

@@ -24,8 +24,8 @@
 
 use std::collections::BTreeMap;
 
+use skymesh_ipc_types::shot_api::{GoProState, ShotEvent};
 use skymesh_ipc_types::{Command, CommandAck, GoProStatus};
-use solo_proto::{GoProState, SoloMessage};
 
 use super::Engine;
 
@@ -136,8 +136,8 @@ impl Engine {
         let v2 = self.gopro_state();
         self.gopro.sent = Some(v2);
         let v1 = GoProState { version: 1, ..v2 };
-        self.out.app(SoloMessage::GoProV1State(v1));
-        self.out.app(SoloMessage::GoProV2State(v2));
+        self.out.app(ShotEvent::GoProV1State(v1));
+        self.out.app(ShotEvent::GoProV2State(v2));
     }
 
     /// Sends the state if it changed since the app last got it.

@@ -111,11 +111,11 @@ mod status;
 mod tests;
 mod zipline;
 
+use skymesh_ipc_types::shot_api::ShotEvent;
 use skymesh_ipc_types::{
     AppSession, ButtonEvent, FlightMode, PayloadState, ShotStatus, VehicleCommand, VehicleState,
     VehicleStatus,
 };
-use solo_proto::SoloMessage;
 
 use crate::config::Settings;
 use crate::metrics::Metrics;
@@ -147,7 +147,7 @@ pub struct Outputs {
     /// For `skymesh/vehicle/{id}/command`, source `ShotEngine`.
     pub commands: Vec<VehicleCommand>,
     /// For the app (session 0 = whichever app is connected).
-    pub to_app: Vec<SoloMessage>,
+    pub to_app: Vec<ShotEvent>,
     /// A `ShotStatus` when it changed or is due (5 Hz).
     pub status: Option<ShotStatus>,
     /// For `skymesh/vehicle/{id}/geofence`: the app's fence changed (`geofence.rs`).
@@ -301,7 +301,7 @@ impl Engine {
     pub fn current_shot(&self) -> i32 {
         self.active
             .as_ref()
-            .map_or(solo_proto::shots::NONE, |a| a.shot)
+            .map_or(skymesh_ipc_types::shot_api::shots::NONE, |a| a.shot)
     }
 
     /// True while a shot flies (authority asked for, setpoints every tick).
@@ -475,16 +475,16 @@ impl Engine {
 /// How a shot is named to the app's user.
 pub fn shot_title(shot: i32) -> &'static str {
     match shot {
-        solo_proto::shots::SELFIE => "selfie",
-        solo_proto::shots::ORBIT => "orbit",
-        solo_proto::shots::CABLECAM => "cable cam",
-        solo_proto::shots::ZIPLINE => "zipline",
-        solo_proto::shots::FOLLOW => "follow",
-        solo_proto::shots::MULTIPOINT => "multipoint cable cam",
-        solo_proto::shots::PANO => "pano",
-        solo_proto::shots::REWIND => "rewind",
-        solo_proto::shots::TRANSECT => "transect",
-        solo_proto::shots::RTL => "return home shot",
+        skymesh_ipc_types::shot_api::shots::SELFIE => "selfie",
+        skymesh_ipc_types::shot_api::shots::ORBIT => "orbit",
+        skymesh_ipc_types::shot_api::shots::CABLECAM => "cable cam",
+        skymesh_ipc_types::shot_api::shots::ZIPLINE => "zipline",
+        skymesh_ipc_types::shot_api::shots::FOLLOW => "follow",
+        skymesh_ipc_types::shot_api::shots::MULTIPOINT => "multipoint cable cam",
+        skymesh_ipc_types::shot_api::shots::PANO => "pano",
+        skymesh_ipc_types::shot_api::shots::REWIND => "rewind",
+        skymesh_ipc_types::shot_api::shots::TRANSECT => "transect",
+        skymesh_ipc_types::shot_api::shots::RTL => "return home shot",
         sitescan::INSPECT => "site scan inspect",
         sitescan::SCAN => "site scan scan",
         sitescan::SURVEY => "site scan survey",
@@ -498,6 +498,6 @@ pub fn shot_label(shot: i32) -> &'static str {
         sitescan::INSPECT => "inspect",
         sitescan::SCAN => "scan",
         sitescan::SURVEY => "survey",
-        _ => solo_proto::shots::name(shot).unwrap_or("unknown"),
+        _ => skymesh_ipc_types::shot_api::shots::name(shot).unwrap_or("unknown"),
     }
 }

@@ -49,8 +49,8 @@
 
 mod record;
 
+use skymesh_ipc_types::shot_api::{ShotEvent, SplinePoint};
 use skymesh_ipc_types::{Command, FlightMode};
-use solo_proto::{SoloMessage, SplinePoint};
 
 use super::shot::{Active, ShotKind};
 use super::{Engine, Out};
@@ -173,7 +173,7 @@ impl MultipointShot {
                 PlaybackEvent::Attached { index } => {
                     tracing::info!(index, "multipoint: attached to the path");
                     play.resume = None;
-                    out.app(SoloMessage::SplineAttach(index as u32));
+                    out.app(ShotEvent::SplineAttach(index as u32));
                     report = true;
                 }
                 PlaybackEvent::Started | PlaybackEvent::Stopped => report = true,
@@ -200,7 +200,7 @@ impl MultipointShot {
 impl Play {
     fn status(&mut self, now_ns: u64, out: &mut Out) {
         self.next_status_ns = now_ns.saturating_add(PLAYBACK_STATUS_PERIOD_NS);
-        out.app(SoloMessage::SplinePlaybackStatus {
+        out.app(ShotEvent::SplinePlaybackStatus {
             u_position: self.ctrl.u(),
             cruise_state: self.ctrl.cruise_state(),
         });
@@ -315,7 +315,7 @@ impl Engine {
             }
         }
         if by_button {
-            self.out.app(SoloMessage::SplinePlay);
+            self.out.app(ShotEvent::SplinePlay);
         }
         self.multipoint_send_path();
     }
@@ -332,17 +332,17 @@ impl Engine {
             return;
         };
         let path = play.ctrl.path();
-        let mut msgs: Vec<SoloMessage> = path
+        let mut msgs: Vec<ShotEvent> = path
             .keypoints()
             .iter()
             .enumerate()
             .map(|(i, k)| {
                 let u = path.keypoint_u(i).unwrap_or(1.0) as f32;
-                SoloMessage::SplinePoint(m.point(i as i32, k, u, status::OK))
+                ShotEvent::SplinePoint(m.point(i as i32, k, u, status::OK))
             })
             .collect();
         let d = play.ctrl.durations();
-        msgs.push(SoloMessage::SplineDurations {
+        msgs.push(ShotEvent::SplineDurations {
             min_time_s: d.min_time_s,
             max_time_s: d.max_time_s,
         });

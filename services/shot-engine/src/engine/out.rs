@@ -1,8 +1,8 @@
 //! The output side of the engine: command ids and validation, messages for the app
 //! (dropped while no app is connected), and their metrics.
 
+use skymesh_ipc_types::shot_api::ShotEvent;
 use skymesh_ipc_types::{Command, CommandSource, VehicleCommand};
-use solo_proto::SoloMessage;
 
 use super::MAX_ERROR_TEXT;
 use crate::metrics::Metrics;
@@ -17,7 +17,7 @@ pub(crate) struct Out {
     /// As last learned from the gateway (or an app message).
     pub app_connected: bool,
     pub commands: Vec<VehicleCommand>,
-    pub to_app: Vec<SoloMessage>,
+    pub to_app: Vec<ShotEvent>,
 }
 
 impl Out {
@@ -47,7 +47,7 @@ impl Out {
     }
 
     /// Queues a message for the app; dropped (debug log) when no app is connected.
-    pub fn app(&mut self, msg: SoloMessage) {
+    pub fn app(&mut self, msg: ShotEvent) {
         if !self.app_connected {
             tracing::debug!(msg = msg.name(), "no app connected; not sent");
             return;
@@ -58,11 +58,13 @@ impl Out {
 
     /// GET_CURRENT_SHOT; not sent for shots without a Solo index (Site Scan).
     pub fn current_shot(&mut self, shot: i32) {
-        if !(solo_proto::shots::MIN..=solo_proto::shots::MAX).contains(&shot) {
+        if !(skymesh_ipc_types::shot_api::shots::MIN..=skymesh_ipc_types::shot_api::shots::MAX)
+            .contains(&shot)
+        {
             tracing::debug!(shot, "no Solo shot index; GET_CURRENT_SHOT not sent");
             return;
         }
-        self.app(SoloMessage::GetCurrentShot(shot));
+        self.app(ShotEvent::CurrentShot(shot));
     }
 
     /// SOLO_MESSAGE_SHOTMANAGER_ERROR, cut to [`MAX_ERROR_TEXT`] bytes.
@@ -71,6 +73,6 @@ impl Out {
         while !text.is_char_boundary(end) {
             end -= 1;
         }
-        self.app(SoloMessage::ShotManagerError(text[..end].to_string()));
+        self.app(ShotEvent::Error(text[..end].to_string()));
     }
 }

@@ -24,8 +24,8 @@
 //! Where the reference differs: its A never starts a video pan (the video pans
 //! whenever its rate is not 0); here A starts and stops every type alike.
 
+use skymesh_ipc_types::shot_api::ShotEvent;
 use skymesh_ipc_types::{Button, Command};
-use solo_proto::SoloMessage;
 
 use super::shot::{Active, ShotKind};
 use super::{Engine, ExitReason};
@@ -90,9 +90,9 @@ impl PanoShot {
     }
 
     /// SOLO_PANO_OPTIONS as the engine uses them (`rate` = the cruise value).
-    pub fn options(&self, rate: f32) -> SoloMessage {
+    pub fn options(&self, rate: f32) -> ShotEvent {
         let o = self.pano.options();
-        SoloMessage::PanoOptions {
+        ShotEvent::PanoOptions {
             pano_type: self.pano.kind().to_wire(),
             run_state: match self.pano.phase() {
                 PanoPhase::Setup => 0,
@@ -196,7 +196,7 @@ impl Engine {
         let (_, total) = p.pano.station();
         tracing::info!(kind = ?p.pano.kind(), photos = total, "pano: run");
         if p.pano.kind() != PanoKind::VideoPan {
-            self.out.app(SoloMessage::PanoState { index: 0, total });
+            self.out.app(ShotEvent::PanoState { index: 0, total });
         }
     }
 
@@ -328,7 +328,7 @@ impl Engine {
             self.out.command(Command::CameraCapture);
         }
         if report {
-            self.out.app(SoloMessage::PanoState {
+            self.out.app(ShotEvent::PanoState {
                 index: taken,
                 total,
             });

@@ -27,8 +27,8 @@
 //! RTL when there are none; here an empty path ends at once the same way as a full
 //! one (hover or RTL), with a SHOTMANAGER_ERROR saying there was nothing to rewind.
 
+use skymesh_ipc_types::shot_api::{Location, ShotEvent};
 use skymesh_ipc_types::{AckResult, Command, CommandAck, VehicleStatus};
-use solo_proto::{Location, SoloMessage};
 
 use super::shot::{Active, ShotKind};
 use super::{Engine, ExitReason};
@@ -69,8 +69,8 @@ impl Default for RewindOptions {
 }
 
 impl RewindOptions {
-    fn message(&self) -> SoloMessage {
-        SoloMessage::RewindOptions {
+    fn message(&self) -> ShotEvent {
+        ShotEvent::RewindOptions {
             enabled: self.enabled.into(),
             hover: self.hover.into(),
             rewind_distance: self.distance_m,
@@ -237,7 +237,7 @@ impl Engine {
             if self.rewind.home_request.is_none() {
                 tracing::debug!("the app's home is already in effect");
                 self.rewind.home = Some(home);
-                self.out.app(SoloMessage::HomeLocation(home));
+                self.out.app(ShotEvent::HomeLocation(home));
                 return;
             }
         }
@@ -292,7 +292,7 @@ impl Engine {
     pub(crate) fn rewind_app_connected(&mut self) {
         if let Some(home) = self.inputs.status.as_ref().and_then(home_of) {
             self.rewind.home = Some(home);
-            self.out.app(SoloMessage::HomeLocation(home));
+            self.out.app(ShotEvent::HomeLocation(home));
         }
         self.out.app(self.rewind.options.message());
     }
@@ -304,7 +304,7 @@ impl Engine {
             self.rewind.home = home;
             if let Some(h) = home {
                 tracing::info!(lat = h.lat_deg, lon = h.lon_deg, alt_msl = h.alt_m, "home");
-                self.out.app(SoloMessage::HomeLocation(h));
+                self.out.app(ShotEvent::HomeLocation(h));
             }
         }
     }

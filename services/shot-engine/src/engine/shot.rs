@@ -12,7 +12,7 @@
 //! | pano | — (holds; options and A start the run) | at entry | SOLO_PANO_OPTIONS (cruise = the video pan rate, °/s) |
 //! | rewind | — (the breadcrumbs) | at entry | — (SOLO_REWIND_OPTIONS are the engine's) |
 
-use solo_proto::{shots, Location, SoloMessage};
+use skymesh_ipc_types::shot_api::{shots, Location, ShotEvent};
 
 use super::flight::Flight;
 use super::Out;
@@ -161,10 +161,10 @@ impl Active {
     }
 
     /// The options message(s) that tell the app the current settings.
-    pub fn options(&self) -> Vec<SoloMessage> {
+    pub fn options(&self) -> Vec<ShotEvent> {
         match &self.kind {
             ShotKind::Selfie { .. } | ShotKind::Orbit { .. } => {
-                vec![SoloMessage::ShotOptions {
+                vec![ShotEvent::ShotOptions {
                     cruise_speed: self.cruise,
                 }]
             }
@@ -172,17 +172,17 @@ impl Active {
                 interpolate,
                 yaw_clockwise,
                 ..
-            } => vec![SoloMessage::CableCamOptions {
+            } => vec![ShotEvent::CableOptions {
                 cam_interpolation: (*interpolate).into(),
                 yaw_direction_cw: (*yaw_clockwise).into(),
                 cruise_speed: self.cruise,
             }],
             ShotKind::Follow(f) => vec![
-                SoloMessage::FollowOptions {
+                ShotEvent::FollowOptions {
                     cruise_speed: self.cruise,
                     look_at: f.look_at.into(),
                 },
-                SoloMessage::FollowOptionsV2 {
+                ShotEvent::FollowOptionsV2 {
                     cruise_speed: self.cruise,
                     look_at: f.look_at.into(),
                     follow_preference: f.preference,

@@ -105,7 +105,7 @@ impl Engine {
             Err(r) => {
                 self.out.metrics.refused_entry(r.label);
                 tracing::info!(shot = label, code = r.code, why = %r.why, "site scan refused");
-                self.out.app(solo_proto::SoloMessage::ShotError(r.code));
+                self.out.app(skymesh_ipc_types::ShotEvent::Refused(r.code));
                 return None;
             }
         };

@@ -17,8 +17,8 @@
 //! yaw and gimbal to the pilot (no camera command); spot lock points nose and gimbal
 //! at the spot with an ROI.
 
+use skymesh_ipc_types::shot_api::{Location, ShotEvent};
 use skymesh_ipc_types::Button;
-use solo_proto::{Location, SoloMessage};
 
 use super::shot::{geo, location, Active, ShotKind};
 use super::Engine;
@@ -42,8 +42,8 @@ impl ZiplineShot {
     }
 
     /// SOLO_ZIPLINE_OPTIONS as the engine uses them.
-    pub fn options(&self, cruise: f32) -> SoloMessage {
-        SoloMessage::ZiplineOptions {
+    pub fn options(&self, cruise: f32) -> ShotEvent {
+        ShotEvent::ZiplineOptions {
             cruise_speed: cruise,
             is_3d: self.is_3d.into(),
             cam_pointing: self.line.spot_lock().is_some().into(),
@@ -137,7 +137,7 @@ impl Engine {
                 alt = spot.alt_rel_m,
                 "zipline: spot lock"
             );
-            self.out.app(SoloMessage::Location(location(&spot)));
+            self.out.app(ShotEvent::Location(location(&spot)));
         }
         let options = z.options(cruise);
         self.out.app(options);
@@ -158,7 +158,7 @@ impl Engine {
         };
         z.line.set_spot_lock(Some(spot));
         tracing::info!(lat = spot.lat_deg, lon = spot.lon_deg, "zipline: new spot");
-        self.out.app(SoloMessage::Location(location(&spot)));
+        self.out.app(ShotEvent::Location(location(&spot)));
     }
 
     /// A or B in zipline.

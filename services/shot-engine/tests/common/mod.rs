@@ -6,11 +6,9 @@
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use bytes::BytesMut;
-use skymesh_ipc_types::{AppMessage, ServiceId};
+use skymesh_ipc_types::{ServiceId, ShotRequest, ShotRequestSample};
 use skymesh_runtime::{Bus, CancellationToken, Domain, Stats};
 use skymesh_shot_engine::{RawConfig, Settings};
-use solo_proto::SoloMessage;
 use tokio::task::JoinHandle;
 
 pub const VEHICLE: u8 = 1;
@@ -35,11 +33,9 @@ pub fn settings(dir: &std::path::Path) -> Settings {
     s
 }
 
-/// `msg` as solo-gateway publishes it for app session 1.
-pub fn app_msg(msg: &SoloMessage) -> AppMessage {
-    let mut v = BytesMut::new();
-    msg.encode_value(&mut v);
-    AppMessage::new(1, msg.msg_type(), &v).expect("fits")
+/// `msg` as a gateway publishes it for app session 1.
+pub fn app_msg(msg: &ShotRequest) -> ShotRequestSample {
+    ShotRequestSample::new(1, msg)
 }
 
 /// The engine running in-process on `domain`.

@@ -7,7 +7,9 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use skymesh_ipc_types::{topics, AppGeofence, AppMessage, AppSession, ServiceId};
+use skymesh_ipc_types::{
+    topics, AppGeofence, AppSession, ServiceId, ShotEvent, ShotEventSample, ShotRequestSample,
+};
 use skymesh_runtime::{Bus, CancellationToken, Context, Domain, Publisher, Stats, Subscriber};
 use skymesh_solo_gateway::{run, Settings, Sockets};
 use solo_proto::SoloMessage;
@@ -43,17 +45,56 @@ pub fn value_of(m: &SoloMessage) -> Vec<u8> {
     b.to_vec()
 }
 
+/// A request the gateway published, read back as the Solo message it stands for
+/// (`msg_type` and `value` as the app sent them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FromApp {
+    pub header: skymesh_ipc_types::SampleHeader,
+    pub session: u32,
+    /// Bytes of the Solo value.
+    pub len: u32,
+    pub msg_type: u32,
+    pub flags: u32,
+    value: Vec<u8>,
+}
+
+impl FromApp {
+    pub fn new(sample: &ShotRequestSample) -> FromApp {
+        let request = sample
+            .request()
+            .expect("the gateway publishes valid requests");
+        let m = skymesh_solo_gateway::translate::solo_request(&request);
+        let value = value_of(&m);
+        FromApp {
+            header: sample.header,
+            session: sample.session,
+            len: value.len() as u32,
+            msg_type: m.msg_type(),
+            flags: sample.flags,
+            value,
+        }
+    }
+
+    pub fn value(&self) -> &[u8] {
+        &self.value
+    }
+
+    pub fn is_follow_stream(&self) -> bool {
+        self.flags & skymesh_ipc_types::shot_api::request_flags::FOLLOW_STREAM != 0
+    }
+}
+
 /// solo-gateway running in-process, and the engine side of the bus.
 pub struct Gateway {
     pub domain: Domain,
     pub stats: Stats,
     pub tcp: SocketAddr,
     pub udp: SocketAddr,
-    pub from_app: Subscriber<AppMessage>,
+    pub from_app: Subscriber<ShotRequestSample>,
     /// GEOFENCE_SET_DATA, translated.
     pub geofence: Subscriber<AppGeofence>,
     pub sessions: Subscriber<AppSession>,
-    pub to_app: Publisher<AppMessage>,
+    pub to_app: Publisher<ShotEventSample>,
     shutdown: CancellationToken,
     task: Option<JoinHandle<anyhow::Result<()>>>,
 }
@@ -85,8 +126,8 @@ impl Gateway {
         .expect("tool bus");
         // Before the gateway runs: from_app has no history.
         let from_app = tool
-            .subscriber::<AppMessage>(&topics::shot_from_app())
-            .expect("from_app subscriber");
+            .subscriber::<ShotRequestSample>(&topics::shot_requests())
+            .expect("shot requests subscriber");
         let geofence = tool
             .subscriber::<AppGeofence>(&topics::shot_app_geofence())
             .expect("app_geofence subscriber");
@@ -94,8 +135,8 @@ impl Gateway {
             .subscriber::<AppSession>(&topics::shot_app_session())
             .expect("app_session subscriber");
         let to_app = tool
-            .publisher::<AppMessage>(&topics::shot_to_app())
-            .expect("to_app publisher");
+            .publisher::<ShotEventSample>(&topics::shot_events())
+            .expect("shot events publisher");
         let sockets = Sockets::bind(&settings).await.expect("bind");
         let (tcp, udp) = sockets.local_addrs().expect("addresses");
         let shutdown = CancellationToken::new();
@@ -144,12 +185,14 @@ impl Gateway {
     }
 
     /// The next message the gateway publishes for the engine.
-    pub async fn next_from_app(&mut self) -> AppMessage {
-        self.from_app
+    pub async fn next_from_app(&mut self) -> FromApp {
+        let sample = self
+            .from_app
             .recv_timeout(PATIENCE)
             .await
-            .expect("from_app")
-            .unwrap_or_else(|| panic!("no AppMessage within {PATIENCE:?}"))
+            .expect("shot requests")
+            .unwrap_or_else(|| panic!("no ShotRequestSample within {PATIENCE:?}"));
+        FromApp::new(&sample)
     }
 
     /// The next geofence the gateway publishes for the engine.
@@ -186,10 +229,11 @@ impl Gateway {
         .await
     }
 
-    /// Sends a message to the app as the engine does (session 0 = whoever is connected).
-    pub fn send_to_app(&mut self, session: u32, m: &SoloMessage) {
-        let sample = AppMessage::new(session, m.msg_type(), &value_of(m)).expect("fits");
-        self.to_app.publish(sample).expect("publish to_app");
+    /// Sends an event to the app as the engine does (session 0 = whoever is connected).
+    pub fn send_to_app(&mut self, session: u32, e: &ShotEvent) {
+        self.to_app
+            .publish(ShotEventSample::new(session, e))
+            .expect("publish shot event");
     }
 
     /// The current value of a series (`labels` as `k=v,k=v`), if registered.

@@ -2,8 +2,8 @@
 //! (RECORD_POSITION, A, B) or loaded by the app (SPLINE_POINT), each request
 //! answered with exactly one SPLINE_POINT (see the parent module's table).
 
+use skymesh_ipc_types::shot_api::{ShotEvent, SplinePoint};
 use skymesh_ipc_types::Button;
-use solo_proto::{SoloMessage, SplinePoint};
 
 use super::{Active, Engine, MultipointShot, Out, ShotKind};
 use crate::shots::spline::MAX_KEYPOINTS;
@@ -67,7 +67,7 @@ impl Engine {
         let spacing = self.settings.keypoint_min_spacing_m;
         let reply = |out: &mut Out, p: SplinePoint| {
             if from_app {
-                out.app(SoloMessage::SplinePoint(p));
+                out.app(ShotEvent::SplinePoint(p));
             }
         };
         let failed = |index: i32, status: i16| SplinePoint {
@@ -130,7 +130,7 @@ impl Engine {
             "multipoint: keypoint recorded"
         );
         // A recorded keypoint is always sent: that is how the app learns of it.
-        self.out.app(SoloMessage::SplinePoint(p));
+        self.out.app(ShotEvent::SplinePoint(p));
         true
     }
 
@@ -142,7 +142,7 @@ impl Engine {
             Slot::Record(m) => m,
             Slot::Playing => {
                 tracing::info!(index = p.index, "multipoint: keypoint refused in play mode");
-                self.out.app(SoloMessage::SplinePoint(reply(status::MODE)));
+                self.out.app(ShotEvent::SplinePoint(reply(status::MODE)));
                 return;
             }
             Slot::NotInShot => {
@@ -150,7 +150,7 @@ impl Engine {
                     index = p.index,
                     "SPLINE_POINT outside the multipoint cable cam refused"
                 );
-                self.out.app(SoloMessage::SplinePoint(reply(status::OTHER)));
+                self.out.app(ShotEvent::SplinePoint(reply(status::OTHER)));
                 return;
             }
         };
@@ -182,7 +182,7 @@ impl Engine {
             };
         if status != status::OK {
             tracing::info!(index = p.index, status, "multipoint: app keypoint refused");
-            self.out.app(SoloMessage::SplinePoint(reply(status)));
+            self.out.app(ShotEvent::SplinePoint(reply(status)));
             return;
         }
         if m.keypoints.is_empty() {
@@ -191,7 +191,7 @@ impl Engine {
         m.keypoints.insert(p.index, k);
         let stored = m.point(p.index, &k, 0.0, status::OK);
         tracing::info!(index = p.index, "multipoint: app keypoint loaded");
-        self.out.app(SoloMessage::SplinePoint(stored));
+        self.out.app(ShotEvent::SplinePoint(stored));
     }
 
     /// A or B in the multipoint cable cam (record mode only, as on the Solo).

@@ -1,14 +1,14 @@
 //! Entry gating, entry and exit messages, the status sample.
 
+use skymesh_ipc_types::shot_api::shots::{CABLECAM, FOLLOW, NONE, ORBIT, SELFIE};
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest};
 use skymesh_ipc_types::{Button, CommandKind, FlightMode, ShotPhase};
-use solo_proto::shots::{CABLECAM, FOLLOW, NONE, ORBIT, SELFIE};
-use solo_proto::SoloMessage;
 
 use super::*;
 
 fn refused_with(h: &mut Harness, code: u32) {
-    let out = h.app(SoloMessage::SetCurrentShot(ORBIT));
-    assert_eq!(out.to_app, [SoloMessage::ShotError(code)]);
+    let out = h.app(ShotRequest::StartShot(ORBIT));
+    assert_eq!(out.to_app, [ShotEvent::Refused(code)]);
     assert!(out.commands.is_empty());
     assert_eq!(h.engine.current_shot(), NONE);
 }
@@ -69,13 +69,10 @@ fn no_vehicle_state_yet_is_refused_as_rtl() {
 #[test]
 fn entry_tells_the_app_and_exit_sends_minus_one() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(ORBIT));
-    assert_eq!(out.to_app[0], SoloMessage::GetCurrentShot(ORBIT));
+    let out = h.app(ShotRequest::StartShot(ORBIT));
+    assert_eq!(out.to_app[0], ShotEvent::CurrentShot(ORBIT));
     // Orbit tells the app its (initial) speed.
-    assert_eq!(
-        out.to_app[1],
-        SoloMessage::ShotOptions { cruise_speed: 0.0 }
-    );
+    assert_eq!(out.to_app[1], ShotEvent::ShotOptions { cruise_speed: 0.0 });
     assert!(out.commands.is_empty(), "setup sends no flight command");
     assert_eq!(h.engine.current_shot(), ORBIT);
     let st = out.status.unwrap();
@@ -83,8 +80,8 @@ fn entry_tells_the_app_and_exit_sends_minus_one() {
     assert_eq!(st.phase(), ShotPhase::Setup);
     assert!(st.last_exit.is_empty());
 
-    let out = h.app(SoloMessage::SetCurrentShot(NONE));
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(NONE)]);
+    let out = h.app(ShotRequest::StartShot(NONE));
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(NONE)]);
     assert!(out.commands.is_empty(), "nothing was flying");
     assert_eq!(h.engine.last_exit(), "app");
     let st = out.status.unwrap();
@@ -105,11 +102,11 @@ fn a_button_entry_also_tells_the_app_the_shot() {
     let mut h = Harness::ready();
     // Factory defaults: A = cable cam, B = orbit.
     let out = h.button(Button::A);
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(CABLECAM)]);
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(CABLECAM)]);
     assert_eq!(h.engine.current_shot(), CABLECAM);
     h.button(Button::Fly);
     let out = h.button(Button::B);
-    assert_eq!(out.to_app[0], SoloMessage::GetCurrentShot(ORBIT));
+    assert_eq!(out.to_app[0], ShotEvent::CurrentShot(ORBIT));
 }
 
 #[test]
@@ -118,8 +115,8 @@ fn a_refused_entry_leaves_the_current_shot_running() {
     h.orbiting();
     h.status.armed = 0;
     h.push_status();
-    let out = h.app(SoloMessage::SetCurrentShot(SELFIE));
-    assert_eq!(out.to_app, [SoloMessage::ShotError(1)]);
+    let out = h.app(ShotRequest::StartShot(SELFIE));
+    assert_eq!(out.to_app, [ShotEvent::Refused(1)]);
     assert_eq!(h.engine.current_shot(), ORBIT);
     assert!(h.engine.is_flying());
 }
@@ -128,18 +125,15 @@ fn a_refused_entry_leaves_the_current_shot_running() {
 fn the_same_shot_again_is_only_re_announced_and_another_replaces_it() {
     let mut h = Harness::ready();
     h.orbiting();
-    let out = h.app(SoloMessage::SetCurrentShot(ORBIT));
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(ORBIT)]);
+    let out = h.app(ShotRequest::StartShot(ORBIT));
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(ORBIT)]);
     assert!(out.commands.is_empty());
     assert!(h.engine.is_flying());
 
-    let out = h.app(SoloMessage::SetCurrentShot(SELFIE));
+    let out = h.app(ShotRequest::StartShot(SELFIE));
     assert_eq!(
         out.to_app[..2],
-        [
-            SoloMessage::GetCurrentShot(NONE),
-            SoloMessage::GetCurrentShot(SELFIE)
-        ]
+        [ShotEvent::CurrentShot(NONE), ShotEvent::CurrentShot(SELFIE)]
     );
     // The orbit hands the vehicle back before the selfie's setup.
     assert_eq!(
@@ -167,16 +161,16 @@ fn buttons_without_an_app_enter_nothing_and_follow_is_not_for_buttons() {
     assert_eq!(h.engine.current_shot(), NONE);
 
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetButtonSetting(solo_proto::ButtonSetting {
-        button: 4,
-        event: 0,
-        shot: FOLLOW,
-        mode: -1,
-    }));
+    h.app(ShotRequest::SetButtonSetting(
+        skymesh_ipc_types::shot_api::ButtonSetting {
+            button: 4,
+            event: 0,
+            shot: FOLLOW,
+            mode: -1,
+        },
+    ));
     let out = h.button(Button::A);
-    assert!(
-        matches!(&out.to_app[..], [SoloMessage::ShotManagerError(t)] if t.contains("controller"))
-    );
+    assert!(matches!(&out.to_app[..], [ShotEvent::Error(t)] if t.contains("controller")));
     assert_eq!(h.engine.current_shot(), NONE);
 }
 
@@ -190,7 +184,7 @@ fn status_reports_phase_speed_roi_and_is_rate_limited() {
     assert_eq!(st.roi_valid, 1);
     assert!((st.roi_lat_deg - (LAT + 30.0 * M_LAT)).abs() < 1e-9);
     assert!((st.progress - 30.0).abs() < 0.5, "radius {}", st.progress);
-    h.app(SoloMessage::ShotOptions { cruise_speed: 2.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 2.0 });
     // A change publishes at once; nothing new within 200 ms; then the 5 Hz repeat.
     let next = h.tick();
     assert_eq!(next.status.map(|s| s.phase()), None);

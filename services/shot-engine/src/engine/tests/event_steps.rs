@@ -1,7 +1,7 @@
 //! Which inputs ask the service for a step at once (`take_step_request`).
 
+use skymesh_ipc_types::shot_api::{shots, ShotRequest};
 use skymesh_ipc_types::Button;
-use solo_proto::{shots, SoloMessage};
 
 use super::*;
 
@@ -9,22 +9,22 @@ use super::*;
 fn guidance_changes_of_a_flying_shot_ask_for_a_step() {
     let mut h = Harness::ready();
     h.connect_app(1);
-    h.app(SoloMessage::SetCurrentShot(shots::ORBIT));
+    h.app(ShotRequest::StartShot(shots::ORBIT));
     // In setup (no ROI yet): nothing flies, nothing to step.
     assert!(!h.engine.take_step_request());
     // The ROI starts the flight: the first setpoint should not wait for a tick.
-    h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::Location(loc(30.0)));
     assert!(h.engine.take_step_request());
     assert!(!h.engine.take_step_request(), "asked once");
     h.set_mode(FlightMode::Guided);
     h.run(200);
 
-    h.app(SoloMessage::ShotOptions { cruise_speed: 3.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 3.0 });
     assert!(h.engine.take_step_request());
     h.button(Button::Pause);
     assert!(h.engine.take_step_request());
     // A tick is the step: a request made before it is served by it.
-    h.app(SoloMessage::ShotOptions { cruise_speed: 1.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 1.0 });
     h.tick();
     assert!(!h.engine.take_step_request());
 }
@@ -33,16 +33,16 @@ fn guidance_changes_of_a_flying_shot_ask_for_a_step() {
 fn other_messages_and_idle_engines_do_not() {
     let mut h = Harness::ready();
     h.connect_app(1);
-    h.app(SoloMessage::ShotOptions { cruise_speed: 3.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 3.0 });
     assert!(!h.engine.take_step_request(), "no shot");
     h.orbiting();
     h.run(200);
-    h.app(SoloMessage::GoProRequestState);
+    h.app(ShotRequest::GoProRequestState);
     assert!(!h.engine.take_step_request(), "not guidance");
     // Follow-stream fixes are a stream of their own: stepped by the loop.
     h.fix(5.0);
     assert!(!h.engine.take_step_request());
-    h.app(SoloMessage::SetCurrentShot(shots::NONE));
+    h.app(ShotRequest::StartShot(shots::NONE));
     assert!(!h.engine.take_step_request(), "the shot ended");
 }
 
@@ -55,7 +55,7 @@ fn an_event_step_sends_the_new_guidance_with_the_measured_dt() {
     // 10 ms after a tick: a step now carries the new speed, limited by the
     // acceleration over those 10 ms.
     h.now += 10 * MS;
-    h.app(SoloMessage::ShotOptions { cruise_speed: 3.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 3.0 });
     assert!(h.engine.take_step_request());
     let out = h.engine.tick(h.now);
     let vel = cmds(&out)

@@ -1,11 +1,11 @@
 //! How shots end: FLY, mode change, pre-emption, app loss, link loss, shutdown.
 
+use skymesh_ipc_types::shot_api::shots::{CABLECAM, FOLLOW, NONE, ORBIT, SELFIE};
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest};
 use skymesh_ipc_types::{
     AckResult, ArbiterEvent, ArbiterEventKind, Button, Command, CommandKind, CommandSource,
     FixedStr, FlightMode, RefusalReason,
 };
-use solo_proto::shots::{CABLECAM, FOLLOW, NONE, ORBIT, SELFIE};
-use solo_proto::SoloMessage;
 
 use super::*;
 
@@ -24,7 +24,7 @@ fn fly_brakes_hands_over_in_loiter_and_tells_the_app() {
             Command::ReleaseFlightAuthority
         ]
     );
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(NONE)]);
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(NONE)]);
     assert_eq!(h.engine.last_exit(), "fly_button");
     assert_eq!(out.status.unwrap().last_exit.as_str(), "fly_button");
     // No more setpoints.
@@ -42,15 +42,15 @@ fn leaving_guided_ends_the_shot_without_overriding_the_pilot() {
         cmds(&out),
         [Command::ClearRoi, Command::ReleaseFlightAuthority]
     );
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(NONE)]);
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(NONE)]);
     assert_eq!(h.engine.last_exit(), "mode_change");
 }
 
 #[test]
 fn a_status_before_guided_took_effect_does_not_end_the_shot() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    h.app(ShotRequest::Location(loc(30.0)));
     // The vehicle is still in LOITER: the mode change has not happened yet.
     h.set_mode(FlightMode::Loiter);
     assert!(h.engine.is_flying());
@@ -67,12 +67,12 @@ fn a_shot_right_after_another_waits_for_its_own_guided() {
     let mut h = Harness::ready();
     h.orbiting();
     h.run(200);
-    let out = h.app(SoloMessage::SetCurrentShot(NONE));
+    let out = h.app(ShotRequest::StartShot(NONE));
     assert!(cmds(&out).contains(&Command::SetMode(FlightMode::Loiter)));
     // The next shot 40 ms later; still no heartbeat since the LOITER.
     h.tick();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    h.app(ShotRequest::Location(loc(30.0)));
     assert!(h.engine.is_flying());
     // autopilot-link's once-a-second status repeats the last heartbeat (GUIDED, from
     // before both requests): not evidence for the new one.
@@ -97,18 +97,18 @@ fn a_shot_right_after_another_waits_for_its_own_guided() {
 #[test]
 fn guided_refused_or_never_reached_ends_the_shot() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    let out = h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    let out = h.app(ShotRequest::Location(loc(30.0)));
     let set_mode = find(&out, CommandKind::SetMode).unwrap();
     let out = h.ack(&set_mode, AckResult::Refused, RefusalReason::Denied);
-    assert!(matches!(&out.to_app[0], SoloMessage::ShotManagerError(t) if t.contains("refused")));
-    assert_eq!(out.to_app[1], SoloMessage::GetCurrentShot(NONE));
+    assert!(matches!(&out.to_app[0], ShotEvent::Error(t) if t.contains("refused")));
+    assert_eq!(out.to_app[1], ShotEvent::CurrentShot(NONE));
     assert_eq!(h.engine.last_exit(), "guided_refused");
 
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    h.app(ShotRequest::Location(loc(30.0)));
     let out = h.run(6_000);
-    assert!(out.to_app.contains(&SoloMessage::GetCurrentShot(NONE)));
+    assert!(out.to_app.contains(&ShotEvent::CurrentShot(NONE)));
     assert_eq!(h.engine.last_exit(), "guided_refused");
 }
 
@@ -123,7 +123,7 @@ fn another_holder_in_the_authority_state_preempts_the_shot() {
     h.run(80);
     let out = h.authority(Some(CommandSource::ManualRc));
     assert!(out.commands.is_empty(), "no command once authority is gone");
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(NONE)]);
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(NONE)]);
     assert_eq!(h.engine.last_exit(), "preempted");
     assert!(h.run(200).commands.is_empty());
 }
@@ -142,7 +142,7 @@ fn a_refused_flight_command_ends_the_shot() {
         let v = find(&out, CommandKind::VelocityNed).unwrap();
         let out = h.ack(&v, AckResult::Refused, reason);
         assert!(
-            out.to_app.contains(&SoloMessage::GetCurrentShot(NONE)),
+            out.to_app.contains(&ShotEvent::CurrentShot(NONE)),
             "{reason}"
         );
         assert!(out.commands.is_empty(), "{reason}");
@@ -198,17 +198,17 @@ fn app_loss_ends_follow_selfie_and_setups_but_not_a_flying_orbit_or_cable() {
 
     // Cable cam in setup (one point): ends.
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(CABLECAM));
-    h.app(SoloMessage::RecordPosition);
+    h.app(ShotRequest::StartShot(CABLECAM));
+    h.app(ShotRequest::RecordPosition);
     h.session(1, false);
     assert_eq!(h.engine.current_shot(), NONE);
     assert_eq!(h.engine.last_exit(), "app_disconnected");
 
     // Selfie flying: ends, braked and handed over.
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(SELFIE));
+    h.app(ShotRequest::StartShot(SELFIE));
     for n in [10.0, 40.0, 0.0] {
-        h.app(SoloMessage::Location(loc(n)));
+        h.app(ShotRequest::Location(loc(n)));
     }
     h.set_mode(FlightMode::Guided);
     let out = h.session(1, false);
@@ -226,7 +226,7 @@ fn app_loss_ends_follow_selfie_and_setups_but_not_a_flying_orbit_or_cable() {
 
     // Follow flying: ends when the gateway stops reporting the session (gateway gone).
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(FOLLOW));
+    h.app(ShotRequest::StartShot(FOLLOW));
     h.fix(20.0);
     h.tick();
     assert!(h.engine.is_flying());
@@ -242,9 +242,9 @@ fn a_reconnecting_app_learns_the_current_shot() {
     h.orbiting();
     h.session(1, false);
     let out = h.connect_app(2);
-    assert_eq!(out.to_app[0], SoloMessage::GetCurrentShot(ORBIT));
-    assert!(matches!(out.to_app[1], SoloMessage::GoProV1State(_)));
-    assert!(matches!(out.to_app[2], SoloMessage::GoProV2State(_)));
+    assert_eq!(out.to_app[0], ShotEvent::CurrentShot(ORBIT));
+    assert!(matches!(out.to_app[1], ShotEvent::GoProV1State(_)));
+    assert!(matches!(out.to_app[2], ShotEvent::GoProV2State(_)));
 }
 
 #[test]
@@ -279,8 +279,8 @@ fn shutdown_hands_the_vehicle_back() {
 #[test]
 fn fly_before_guided_took_effect_still_ends_in_loiter() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    h.app(SoloMessage::Location(loc(30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    h.app(ShotRequest::Location(loc(30.0)));
     // Our SetMode(Guided) may still be on its way: LOITER follows it, no brake.
     let out = h.button(Button::Fly);
     assert_eq!(

@@ -1,8 +1,8 @@
 //! Follow: options V1 then V2, flying from the first phone position, target loss.
 
+use skymesh_ipc_types::shot_api::shots::FOLLOW;
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest};
 use skymesh_ipc_types::{CommandKind, FlightMode};
-use solo_proto::shots::FOLLOW;
-use solo_proto::SoloMessage;
 
 use super::*;
 use crate::engine::shot::ShotKind;
@@ -18,16 +18,16 @@ fn follow_mode(h: &Harness) -> FollowMode {
 #[test]
 fn follow_options_are_answered_v1_then_v2() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(FOLLOW));
+    let out = h.app(ShotRequest::StartShot(FOLLOW));
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::GetCurrentShot(FOLLOW),
-            SoloMessage::FollowOptions {
+            ShotEvent::CurrentShot(FOLLOW),
+            ShotEvent::FollowOptions {
                 cruise_speed: 0.0,
                 look_at: 0
             },
-            SoloMessage::FollowOptionsV2 {
+            ShotEvent::FollowOptionsV2 {
                 cruise_speed: 0.0,
                 look_at: 0,
                 follow_preference: 0
@@ -36,7 +36,7 @@ fn follow_options_are_answered_v1_then_v2() {
     );
     assert_eq!(follow_mode(&h), FollowMode::Orbit);
 
-    let out = h.app(SoloMessage::FollowOptionsV2 {
+    let out = h.app(ShotRequest::FollowOptionsV2 {
         cruise_speed: 1.5,
         look_at: 0,
         follow_preference: 2,
@@ -44,11 +44,11 @@ fn follow_options_are_answered_v1_then_v2() {
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::FollowOptions {
+            ShotEvent::FollowOptions {
                 cruise_speed: 1.5,
                 look_at: 0
             },
-            SoloMessage::FollowOptionsV2 {
+            ShotEvent::FollowOptionsV2 {
                 cruise_speed: 1.5,
                 look_at: 0,
                 follow_preference: 2
@@ -58,20 +58,20 @@ fn follow_options_are_answered_v1_then_v2() {
     assert_eq!(follow_mode(&h), FollowMode::Leash);
 
     // V1 keeps the preference; look-at wins over it.
-    let out = h.app(SoloMessage::FollowOptions {
+    let out = h.app(ShotRequest::FollowOptions {
         cruise_speed: -1.0,
         look_at: 1,
     });
     assert_eq!(
         out.to_app[1],
-        SoloMessage::FollowOptionsV2 {
+        ShotEvent::FollowOptionsV2 {
             cruise_speed: -1.0,
             look_at: 1,
             follow_preference: 2
         }
     );
     assert_eq!(follow_mode(&h), FollowMode::LookAt);
-    h.app(SoloMessage::FollowOptionsV2 {
+    h.app(ShotRequest::FollowOptionsV2 {
         cruise_speed: 0.0,
         look_at: 0,
         follow_preference: 1,
@@ -82,7 +82,7 @@ fn follow_options_are_answered_v1_then_v2() {
 #[test]
 fn follow_flies_from_the_first_position_and_holds_when_positions_stop() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(FOLLOW));
+    h.app(ShotRequest::StartShot(FOLLOW));
     // No position yet: setup, no commands.
     assert!(h.run(400).commands.is_empty());
     assert!(!h.engine.is_flying());
@@ -108,11 +108,11 @@ fn follow_flies_from_the_first_position_and_holds_when_positions_stop() {
     let errors: Vec<_> = out
         .to_app
         .iter()
-        .filter(|m| matches!(m, SoloMessage::ShotManagerError(_)))
+        .filter(|m| matches!(m, ShotEvent::Error(_)))
         .collect();
     assert_eq!(
         errors,
-        [&SoloMessage::ShotManagerError(
+        [&ShotEvent::Error(
             "follow: no phone position for 3 s, holding".into()
         )]
     );
@@ -133,7 +133,7 @@ fn follow_flies_from_the_first_position_and_holds_when_positions_stop() {
     assert_eq!(
         out.to_app
             .iter()
-            .filter(|m| matches!(m, SoloMessage::ShotManagerError(_)))
+            .filter(|m| matches!(m, ShotEvent::Error(_)))
             .count(),
         1
     );

@@ -1,9 +1,8 @@
 //! The app's geofence: validation and acks, the arbiter's `GeofenceSet`, updates,
 //! clears, and the predictive check with its hold.
 
+use skymesh_ipc_types::shot_api::shots::{NONE, ORBIT};
 use skymesh_ipc_types::{AppGeofence, ArbiterEvent, ArbiterEventKind, FenceKind, GeofenceSet};
-use solo_proto::shots::{NONE, ORBIT};
-use solo_proto::GeofenceData;
 
 use super::*;
 
@@ -61,7 +60,7 @@ impl Harness {
     }
 
     fn update(&mut self, action: u8, polygon: u16, vertex: u16, p: [f64; 2]) -> Outputs {
-        self.app(SoloMessage::GeofenceUpdatePoly {
+        self.app(ShotRequest::GeofenceUpdatePoly {
             action,
             polygon_index: polygon,
             vertex_index: vertex,
@@ -81,15 +80,15 @@ impl Harness {
     }
 }
 
-fn ack(count: u16, valid: bool) -> SoloMessage {
-    SoloMessage::GeofenceSetAck { count, valid }
+fn ack(count: u16, valid: bool) -> ShotEvent {
+    ShotEvent::GeofenceSetAck { count, valid }
 }
 
 fn error_text(out: &Outputs) -> String {
     out.to_app
         .iter()
         .find_map(|m| match m {
-            SoloMessage::ShotManagerError(t) => Some(t.clone()),
+            ShotEvent::Error(t) => Some(t.clone()),
             _ => None,
         })
         .unwrap_or_default()
@@ -120,21 +119,6 @@ fn a_valid_geofence_is_acknowledged_and_given_to_the_arbiter() {
     );
     assert!(out.commands.is_empty(), "the vehicle is well inside");
     assert!(h.run(200).to_app.is_empty());
-}
-
-#[test]
-fn a_small_geofence_may_arrive_as_an_app_message() {
-    let mut h = Harness::ready();
-    let tri = vec![[-35.3, 149.1], [-35.3, 149.3], [-35.5, 149.1]];
-    let sub = vec![[-35.31, 149.11], [-35.31, 149.28], [-35.48, 149.11]];
-    let out = h.app(SoloMessage::GeofenceSetData(GeofenceData {
-        coord: vec![tri.clone()],
-        sub_coord: vec![sub],
-        kinds: vec![0],
-    }));
-    assert_eq!(out.to_app, [ack(1, true)]);
-    let set = out.geofence.unwrap();
-    assert_eq!(set.polygons().unwrap(), [(FenceKind::KeepIn, &tri[..])]);
 }
 
 #[test]
@@ -173,20 +157,23 @@ fn an_invalid_geofence_is_refused_and_the_one_before_kept() {
         );
         assert!(out.geofence.is_none(), "{why}: nothing for the arbiter");
     }
-    // More than the arbiter carries (only an AppMessage-sized path could try).
-    for data in [
-        GeofenceData {
-            coord: vec![good.1.clone(); 9],
-            sub_coord: vec![good.2.clone(); 9],
-            kinds: vec![1; 9],
-        },
-        GeofenceData {
-            coord: vec![(0..33).map(|i| pt(f64::from(i), 0.0)).collect()],
-            sub_coord: vec![(0..33).map(|i| pt(f64::from(i), 0.0)).collect()],
-            kinds: vec![1],
-        },
+    // More than the arbiter carries (no `AppGeofence` can hold it; the engine
+    // checks all the same).
+    let long: Vec<[f64; 2]> = (0..33).map(|i| pt(f64::from(i), 0.0)).collect();
+    for (coord, sub, kinds) in [
+        (
+            vec![good.1.clone(); 9],
+            vec![good.2.clone(); 9],
+            vec![1u8; 9],
+        ),
+        (vec![long.clone()], vec![long.clone()], vec![1u8]),
     ] {
-        h.engine.geofence_set_data(&data);
+        let zones: Vec<_> = kinds
+            .iter()
+            .zip(coord.iter().zip(&sub))
+            .map(|(k, (c, s))| (*k, c.as_slice(), s.as_slice()))
+            .collect();
+        h.engine.geofence_set(&zones);
         let out = h.drain();
         assert_eq!(out.to_app[0], ack(1, false));
         assert!(error_text(&out).contains("at most"), "{}", error_text(&out));
@@ -255,11 +242,11 @@ fn update_poly_updates_adds_and_removes_vertices() {
 #[test]
 fn clear_from_the_app_is_acknowledged_and_given_to_the_arbiter() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::GeofenceClear);
+    let out = h.app(ShotRequest::GeofenceClear);
     assert_eq!(out.to_app, [ack(0, true)]);
     assert!(out.geofence.is_none(), "ours was never set");
     h.fence(&field());
-    let out = h.app(SoloMessage::GeofenceClear);
+    let out = h.app(ShotRequest::GeofenceClear);
     assert_eq!(out.to_app, [ack(0, true)]);
     let set = out.geofence.unwrap();
     assert_eq!((set.enabled, set.polygon_count), (0, 0));
@@ -325,7 +312,7 @@ fn a_fence_the_arbiter_refuses_is_answered_invalid_and_the_one_before_kept() {
     assert!(error_text(&out).contains("polygon 1 does not exist"));
     // A refused clear: the fence stays.
     h.fence_answer = FenceAnswer::Refuse;
-    let out = h.app(SoloMessage::GeofenceClear);
+    let out = h.app(ShotRequest::GeofenceClear);
     assert_eq!(out.to_app[0], ack(1, false));
 }
 
@@ -378,16 +365,13 @@ fn the_fence_goes_with_the_app_and_the_next_app_is_told() {
     assert!(out.to_app.is_empty(), "nobody to tell");
     let out = h.connect_app(2);
     assert!(
-        out.to_app.contains(&SoloMessage::GeofenceClear),
+        out.to_app.contains(&ShotEvent::GeofenceClear),
         "{:?}",
         out.to_app
     );
     // Once.
     h.session(2, false);
-    assert!(!h
-        .connect_app(3)
-        .to_app
-        .contains(&SoloMessage::GeofenceClear));
+    assert!(!h.connect_app(3).to_app.contains(&ShotEvent::GeofenceClear));
 }
 
 #[test]
@@ -399,7 +383,7 @@ fn a_pilot_flying_at_a_keep_out_is_held_at_its_hold_line_then_handed_back() {
     assert!(h.tick().commands.is_empty(), "10 m north: clear");
     h.place(20.0, 5.0);
     let out = h.tick();
-    assert_eq!(out.to_app, [SoloMessage::GeofenceActivated]);
+    assert_eq!(out.to_app, [ShotEvent::GeofenceActivated]);
     let sent = cmds(&out);
     assert_eq!(sent[0], Command::GrabFlightAuthority);
     assert_eq!(sent[1], Command::SetMode(FlightMode::Guided));
@@ -450,7 +434,7 @@ fn a_pilot_flying_at_a_keep_out_is_held_at_its_hold_line_then_handed_back() {
     // The pilot pushes out again: held again.
     h.place(25.2, 4.0);
     let out = h.tick();
-    assert_eq!(out.to_app, [SoloMessage::GeofenceActivated]);
+    assert_eq!(out.to_app, [ShotEvent::GeofenceActivated]);
     assert_eq!(h.counter("skymesh_shot_geofence_activations_total", &[]), 2);
 }
 
@@ -460,7 +444,7 @@ fn leaving_the_keep_in_area_is_held_inside_its_hold_line() {
     h.fence(&field()[..1]);
     h.place(-95.0, -4.0);
     let out = h.tick();
-    assert_eq!(out.to_app, [SoloMessage::GeofenceActivated]);
+    assert_eq!(out.to_app, [ShotEvent::GeofenceActivated]);
     let Some(Command::GoTo { lat_deg, .. }) = cmds(&out).into_iter().nth(2) else {
         panic!("{:?}", cmds(&out));
     };
@@ -478,10 +462,7 @@ fn a_shot_flying_at_the_fence_ends_with_the_reason_geofence() {
     let out = h.tick();
     assert_eq!(
         out.to_app,
-        [
-            SoloMessage::GetCurrentShot(NONE),
-            SoloMessage::GeofenceActivated
-        ]
+        [ShotEvent::CurrentShot(NONE), ShotEvent::GeofenceActivated]
     );
     assert_eq!(h.engine.current_shot(), NONE);
     assert_eq!(h.engine.last_exit(), "geofence");
@@ -503,8 +484,8 @@ fn a_shot_flying_at_the_fence_ends_with_the_reason_geofence() {
     );
     assert!(!h.engine.is_flying());
     // A new shot may start; it takes the vehicle over from the hold.
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    h.app(SoloMessage::Location(loc(-30.0)));
+    h.app(ShotRequest::StartShot(ORBIT));
+    h.app(ShotRequest::Location(loc(-30.0)));
     h.place(20.0, 0.0);
     h.tick();
     assert!(!h.engine.fence.holding());
@@ -630,7 +611,7 @@ fn clearing_the_fence_or_stopping_during_a_hold_hands_back_in_loiter() {
     h.fence(&field());
     h.place(20.0, 5.0);
     h.tick();
-    let out = h.app(SoloMessage::GeofenceClear);
+    let out = h.app(ShotRequest::GeofenceClear);
     assert_eq!(
         cmds(&out),
         [

@@ -1,9 +1,9 @@
 //! The GoPro model and requests.
 
+use skymesh_ipc_types::shot_api::{GoProState, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{
     AckResult, Command, CommandKind, GoProStatus, PayloadState, RefusalReason,
 };
-use solo_proto::{GoProState, SoloMessage};
 
 use super::*;
 
@@ -21,7 +21,7 @@ fn states(out: &Outputs) -> Vec<GoProState> {
     out.to_app
         .iter()
         .filter_map(|m| match m {
-            SoloMessage::GoProV1State(s) | SoloMessage::GoProV2State(s) => Some(*s),
+            ShotEvent::GoProV1State(s) | ShotEvent::GoProV2State(s) => Some(*s),
             _ => None,
         })
         .collect()
@@ -32,11 +32,11 @@ fn state_is_sent_v1_then_v2_on_connect_request_and_change() {
     let mut h = Harness::new();
     h.vehicle_ok();
     let out = h.connect_app(1);
-    assert_eq!(out.to_app[0], SoloMessage::GetCurrentShot(-1));
+    assert_eq!(out.to_app[0], ShotEvent::CurrentShot(-1));
     let s = states(&out);
     assert_eq!(s.len(), 2);
-    assert!(matches!(out.to_app[1], SoloMessage::GoProV1State(_)));
-    assert!(matches!(out.to_app[2], SoloMessage::GoProV2State(_)));
+    assert!(matches!(out.to_app[1], ShotEvent::GoProV1State(_)));
+    assert!(matches!(out.to_app[2], ShotEvent::GoProV2State(_)));
     assert_eq!((s[0].version, s[1].version), (1, 2));
     assert_eq!(s[1].status, 0, "no GoPro heard yet");
 
@@ -50,7 +50,7 @@ fn state_is_sent_v1_then_v2_on_connect_request_and_change() {
     let out = h.payload(gopro(0, 1));
     assert_eq!(states(&out)[1].recording, 1);
 
-    let out = h.app(SoloMessage::GoProRequestState);
+    let out = h.app(ShotRequest::GoProRequestState);
     assert_eq!(states(&out).len(), 2);
     assert_eq!(out.to_app.len(), 2);
 }
@@ -59,7 +59,7 @@ fn state_is_sent_v1_then_v2_on_connect_request_and_change() {
 fn record_in_video_mode_is_shutter_on_off_and_toggles_from_the_recording_flag() {
     let mut h = Harness::ready();
     h.payload(gopro(0, 0));
-    let out = h.app(SoloMessage::GoProRecord(1));
+    let out = h.app(ShotRequest::GoProRecord(1));
     assert_eq!(
         cmds(&out),
         [
@@ -71,7 +71,7 @@ fn record_in_video_mode_is_shutter_on_off_and_toggles_from_the_recording_flag() 
         ]
     );
     // Toggle while not recording → start; while recording → stop.
-    let out = h.app(SoloMessage::GoProRecord(2));
+    let out = h.app(ShotRequest::GoProRecord(2));
     assert_eq!(
         cmds(&out)[1],
         Command::GoProSet {
@@ -80,7 +80,7 @@ fn record_in_video_mode_is_shutter_on_off_and_toggles_from_the_recording_flag() 
         }
     );
     h.payload(gopro(0, 1));
-    let out = h.app(SoloMessage::GoProRecord(2));
+    let out = h.app(ShotRequest::GoProRecord(2));
     assert_eq!(
         cmds(&out)[1],
         Command::GoProSet {
@@ -88,7 +88,7 @@ fn record_in_video_mode_is_shutter_on_off_and_toggles_from_the_recording_flag() 
             value: [0, 0, 0, 0]
         }
     );
-    let out = h.app(SoloMessage::GoProRecord(0));
+    let out = h.app(ShotRequest::GoProRecord(0));
     assert_eq!(
         cmds(&out)[1],
         Command::GoProSet {
@@ -103,7 +103,7 @@ fn record_in_photo_mode_takes_a_photo() {
     let mut h = Harness::ready();
     h.payload(gopro(1, 0));
     for what in [1, 2] {
-        let out = h.app(SoloMessage::GoProRecord(what));
+        let out = h.app(ShotRequest::GoProRecord(what));
         assert_eq!(
             cmds(&out)[1],
             Command::GoProSet {
@@ -112,22 +112,19 @@ fn record_in_photo_mode_takes_a_photo() {
             }
         );
     }
-    assert!(h.app(SoloMessage::GoProRecord(0)).commands.is_empty());
+    assert!(h.app(ShotRequest::GoProRecord(0)).commands.is_empty());
     // Unknown capture mode: refused, nothing sent.
     h.payload(gopro(255, 0));
-    let out = h.app(SoloMessage::GoProRecord(1));
+    let out = h.app(ShotRequest::GoProRecord(1));
     assert!(out.commands.is_empty());
-    assert!(matches!(
-        &out.to_app[..],
-        [SoloMessage::ShotManagerError(_)]
-    ));
+    assert!(matches!(&out.to_app[..], [ShotEvent::Error(_)]));
 }
 
 #[test]
 fn accepted_settings_change_the_model_and_are_sent() {
     let mut h = Harness::ready();
     h.payload(gopro(0, 0));
-    let out = h.app(SoloMessage::GoProSetExtendedRequest {
+    let out = h.app(ShotRequest::GoProSetExtendedRequest {
         command: 5,
         value: [3, 7, 1, 0],
     });
@@ -152,7 +149,7 @@ fn accepted_settings_change_the_model_and_are_sent() {
     );
 
     // The legacy request sets the first byte; a refusal is reported.
-    let out = h.app(SoloMessage::GoProSetRequest {
+    let out = h.app(ShotRequest::GoProSetRequest {
         command: 9,
         value: 1,
     });
@@ -165,28 +162,23 @@ fn accepted_settings_change_the_model_and_are_sent() {
         }
     );
     let out = h.ack(&set, AckResult::Refused, RefusalReason::Unsupported);
-    assert!(
-        matches!(&out.to_app[0], SoloMessage::ShotManagerError(t) if t.contains("unsupported"))
-    );
+    assert!(matches!(&out.to_app[0], ShotEvent::Error(t) if t.contains("unsupported")));
     assert_eq!(h.engine.gopro_state().video_protune, 0);
 
     // Out of range commands and values are refused before anything is sent.
     for bad in [
-        SoloMessage::GoProSetRequest {
+        ShotRequest::GoProSetRequest {
             command: 32,
             value: 0,
         },
-        SoloMessage::GoProSetRequest {
+        ShotRequest::GoProSetRequest {
             command: 1,
             value: 256,
         },
     ] {
         let out = h.app(bad);
         assert!(out.commands.is_empty());
-        assert!(matches!(
-            &out.to_app[..],
-            [SoloMessage::ShotManagerError(_)]
-        ));
+        assert!(matches!(&out.to_app[..], [ShotEvent::Error(_)]));
     }
 }
 
@@ -194,20 +186,18 @@ fn accepted_settings_change_the_model_and_are_sent() {
 fn disabled_gopro_refuses_requests_reports_status_0_and_persists() {
     let mut h = Harness::ready();
     h.payload(gopro(0, 0));
-    let out = h.app(SoloMessage::GoProSetEnabled(0));
+    let out = h.app(ShotRequest::GoProSetEnabled(0));
     assert_eq!(states(&out)[1].status, 0);
-    let out = h.app(SoloMessage::GoProRecord(1));
+    let out = h.app(ShotRequest::GoProRecord(1));
     assert!(out.commands.is_empty());
-    assert!(
-        matches!(&out.to_app[..], [SoloMessage::ShotManagerError(t)] if t.contains("disabled"))
-    );
+    assert!(matches!(&out.to_app[..], [ShotEvent::Error(t)] if t.contains("disabled")));
 
     let mut again = Harness::on_file(&h.state_file);
     again.vehicle_ok();
     again.payload(gopro(0, 0));
     assert_eq!(again.engine.gopro_state().status, 0);
     again.connect_app(1);
-    let out = again.app(SoloMessage::GoProSetEnabled(1));
+    let out = again.app(ShotRequest::GoProSetEnabled(1));
     assert_eq!(states(&out)[1].status, 2);
 }
 

@@ -1,8 +1,8 @@
 //! `Engine::idle_until`: when the service loop may skip its `loop_hz` ticks.
 
 use super::*;
-use solo_proto::shots::ORBIT;
-use solo_proto::SoloMessage;
+use skymesh_ipc_types::shot_api::shots::ORBIT;
+use skymesh_ipc_types::shot_api::ShotRequest;
 
 use crate::engine::{IDLE_STATUS_PERIOD_NS, STATUS_PERIOD_NS};
 
@@ -49,7 +49,7 @@ fn an_idle_status_comes_once_a_second_on_the_whole_second_and_at_once_on_a_chang
 #[test]
 fn during_a_shot_the_status_comes_five_times_a_second() {
     let mut h = Harness::ready();
-    assert!(h.app(SoloMessage::SetCurrentShot(ORBIT)).status.is_some());
+    assert!(h.app(ShotRequest::StartShot(ORBIT)).status.is_some());
     assert_eq!(h.engine.idle_until(), None);
     let first = h.now;
     h.now = first + STATUS_PERIOD_NS - 1;

@@ -19,17 +19,16 @@ mod zipline;
 
 use std::path::{Path, PathBuf};
 
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest, ShotRequestSample};
 use skymesh_ipc_types::{
     AckResult, AppSession, ArbiterEvent, ArbiterEventKind, AuthorityState, Button, ButtonEvent,
     ButtonEventKind, Command, CommandAck, CommandKind, CommandSource, FixedStr, FlightMode,
     PayloadState, RefusalReason, VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::Stats;
-use solo_proto::{Location, SoloMessage};
 
 use super::{Engine, Outputs};
 use crate::config::{RawConfig, Settings};
-use crate::ipc::app_message;
 use crate::metrics::Metrics;
 use crate::persist::Store;
 
@@ -199,23 +198,26 @@ impl Harness {
         self.drain()
     }
 
-    pub fn app(&mut self, msg: SoloMessage) -> Outputs {
-        let mut m = app_message(&msg).unwrap();
-        m.session = 1;
+    /// A request from app session 1 (an options event stands for the request
+    /// with the same options).
+    pub fn app(&mut self, msg: impl AsRequest) -> Outputs {
+        let m = ShotRequestSample::new(1, &msg.request());
         self.engine.handle_app(&m, self.now);
         self.drain()
     }
 
     /// A follow-stream position (UDP) `north_m` north of the vehicle's start.
     pub fn fix(&mut self, north_m: f64) {
-        let mut m = app_message(&SoloMessage::Location(Location {
-            lat_deg: LAT + north_m * M_LAT,
-            lon_deg: LON,
-            alt_m: 0.0,
-        }))
-        .unwrap();
+        let mut m = ShotRequestSample::new(
+            0,
+            &ShotRequest::Location(Location {
+                lat_deg: LAT + north_m * M_LAT,
+                lon_deg: LON,
+                alt_m: 0.0,
+            }),
+        );
         m.session = 1;
-        m.flags = skymesh_ipc_types::shot::app_flags::FOLLOW_STREAM;
+        m.flags = skymesh_ipc_types::shot_api::request_flags::FOLLOW_STREAM;
         self.engine.handle_app(&m, self.now);
     }
 
@@ -327,8 +329,10 @@ impl Harness {
 
     /// Enters orbit and locks an ROI 30 m north: flying.
     pub fn orbiting(&mut self) -> Outputs {
-        self.app(SoloMessage::SetCurrentShot(solo_proto::shots::ORBIT));
-        let out = self.app(SoloMessage::Location(loc(30.0)));
+        self.app(ShotRequest::StartShot(
+            skymesh_ipc_types::shot_api::shots::ORBIT,
+        ));
+        let out = self.app(ShotRequest::Location(loc(30.0)));
         self.set_mode(FlightMode::Guided);
         out
     }
@@ -369,4 +373,58 @@ pub fn all_ours(out: &Outputs) -> bool {
     out.commands
         .iter()
         .all(|c| c.vehicle_id == VEHICLE && c.source == CommandSource::ShotEngine.to_wire())
+}
+
+/// What [`Harness::app`] sends: a request, or an options event that the app sends
+/// back as the same options.
+pub trait AsRequest {
+    fn request(self) -> ShotRequest;
+}
+
+impl AsRequest for ShotRequest {
+    fn request(self) -> ShotRequest {
+        self
+    }
+}
+
+impl AsRequest for ShotEvent {
+    fn request(self) -> ShotRequest {
+        use ShotEvent as E;
+        use ShotRequest as R;
+        match self {
+            E::PanoOptions {
+                pano_type,
+                run_state,
+                cylinder_fov,
+                deg_second_yaw,
+                lens_fov,
+            } => R::PanoOptions {
+                pano_type,
+                run_state,
+                cylinder_fov,
+                deg_second_yaw,
+                lens_fov,
+            },
+            E::ZiplineOptions {
+                cruise_speed,
+                is_3d,
+                cam_pointing,
+            } => R::ZiplineOptions {
+                cruise_speed,
+                is_3d,
+                cam_pointing,
+            },
+            E::RewindOptions {
+                enabled,
+                hover,
+                rewind_distance,
+            } => R::RewindOptions {
+                enabled,
+                hover,
+                rewind_distance,
+            },
+            E::ShotOptions { cruise_speed } => R::ShotOptions { cruise_speed },
+            other => panic!("{} is no request", other.name()),
+        }
+    }
 }

@@ -1,9 +1,9 @@
 //! Multipoint cable cam: record mode (one SPLINE_POINT per request), play mode,
 //! attach, seek, playback status, path settings, pause and SPLINE_RECORD.
 
+use skymesh_ipc_types::shot_api::shots::{MULTIPOINT, NONE};
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest, SplinePoint};
 use skymesh_ipc_types::{Button, Command, CommandKind, FlightMode};
-use solo_proto::shots::{MULTIPOINT, NONE};
-use solo_proto::{SoloMessage, SplinePoint};
 
 use super::*;
 use crate::engine::shot::ShotKind;
@@ -29,7 +29,7 @@ fn points(out: &Outputs) -> Vec<SplinePoint> {
     out.to_app
         .iter()
         .filter_map(|m| match m {
-            SoloMessage::SplinePoint(p) => Some(*p),
+            ShotEvent::SplinePoint(p) => Some(*p),
             _ => None,
         })
         .collect()
@@ -39,7 +39,7 @@ fn statuses(out: &Outputs) -> Vec<(f32, i32)> {
     out.to_app
         .iter()
         .filter_map(|m| match m {
-            SoloMessage::SplinePlaybackStatus {
+            ShotEvent::SplinePlaybackStatus {
                 u_position,
                 cruise_state,
             } => Some((*u_position, *cruise_state)),
@@ -50,7 +50,7 @@ fn statuses(out: &Outputs) -> Vec<(f32, i32)> {
 
 fn error_text(out: &Outputs) -> Option<String> {
     out.to_app.iter().find_map(|m| match m {
-        SoloMessage::ShotManagerError(t) => Some(t.clone()),
+        ShotEvent::Error(t) => Some(t.clone()),
         _ => None,
     })
 }
@@ -61,8 +61,8 @@ fn entered() -> Harness {
     h.status.home_alt_msl_m = HOME_MSL;
     h.push_status();
     h.drain();
-    let out = h.app(SoloMessage::SetCurrentShot(MULTIPOINT));
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(MULTIPOINT)]);
+    let out = h.app(ShotRequest::StartShot(MULTIPOINT));
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(MULTIPOINT)]);
     assert!(out.commands.is_empty(), "record mode does not fly");
     h
 }
@@ -77,7 +77,7 @@ fn at(h: &mut Harness, north_m: f64) {
 
 fn record_at(h: &mut Harness, north_m: f64) -> Outputs {
     at(h, north_m);
-    h.app(SoloMessage::RecordPosition)
+    h.app(ShotRequest::RecordPosition)
 }
 
 /// Three keypoints 0, 20, 40 m north, then play.
@@ -86,18 +86,18 @@ fn playing() -> Harness {
     for n in [0.0, 20.0, 40.0] {
         record_at(&mut h, n);
     }
-    h.app(SoloMessage::SplinePlay);
+    h.app(ShotRequest::SplinePlay);
     h
 }
 
 /// Playing, attached at keypoint 0 (the vehicle put there), in GUIDED.
 fn attached() -> Harness {
     let mut h = playing();
-    h.app(SoloMessage::SplineAttach(0));
+    h.app(ShotRequest::SplineAttach(0));
     h.set_mode(FlightMode::Guided);
     at(&mut h, 0.0);
     let out = h.run(200);
-    assert!(out.to_app.contains(&SoloMessage::SplineAttach(0)));
+    assert!(out.to_app.contains(&ShotEvent::SplineAttach(0)));
     h
 }
 
@@ -149,7 +149,7 @@ fn recorded_keypoints_are_acknowledged_once_each_and_coalesced_when_too_close() 
 fn a_recording_without_a_position_still_gets_its_one_reply() {
     let mut h = entered();
     h.now += 2_000 * MS; // the vehicle state is now stale
-    let out = h.app(SoloMessage::RecordPosition);
+    let out = h.app(ShotRequest::RecordPosition);
     assert_eq!(out.to_app.len(), 1);
     assert_eq!(points(&out)[0].status, -4);
 }
@@ -158,7 +158,7 @@ fn a_recording_without_a_position_still_gets_its_one_reply() {
 fn app_keypoints_are_validated_and_each_gets_one_reply() {
     let mut h = entered();
     let reply = |h: &mut Harness, p: SplinePoint| {
-        let out = h.app(SoloMessage::SplinePoint(p));
+        let out = h.app(ShotRequest::SplinePoint(p));
         assert_eq!(out.to_app.len(), 1, "{:?}", out.to_app);
         points(&out)[0]
     };
@@ -200,17 +200,17 @@ fn app_keypoints_are_validated_and_each_gets_one_reply() {
         "the path's absAltRef, from keypoint 0"
     );
     // The loaded path plays.
-    let out = h.app(SoloMessage::SplinePlay);
+    let out = h.app(ShotRequest::SplinePlay);
     assert_eq!(points(&out).len(), 3);
 }
 
 #[test]
 fn spline_point_outside_the_shot_gets_status_minus_4() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SplinePoint(point(0, 0.0)));
+    let out = h.app(ShotRequest::SplinePoint(point(0, 0.0)));
     assert_eq!(
         out.to_app,
-        [SoloMessage::SplinePoint(SplinePoint {
+        [ShotEvent::SplinePoint(SplinePoint {
             status: -4,
             ..point(0, 0.0)
         })]
@@ -221,7 +221,7 @@ fn spline_point_outside_the_shot_gets_status_minus_4() {
 fn play_needs_a_valid_path() {
     let mut h = entered();
     record_at(&mut h, 0.0);
-    let out = h.app(SoloMessage::SplinePlay);
+    let out = h.app(ShotRequest::SplinePlay);
     assert!(
         error_text(&out).unwrap().contains("at least 2 keypoints"),
         "{:?}",
@@ -229,18 +229,18 @@ fn play_needs_a_valid_path() {
     );
     assert!(points(&out).is_empty());
     // Indices 0 and 2: 1 is missing.
-    h.app(SoloMessage::SplinePoint(point(2, 40.0)));
-    let out = h.app(SoloMessage::SplinePlay);
+    h.app(ShotRequest::SplinePoint(point(2, 40.0)));
+    let out = h.app(ShotRequest::SplinePlay);
     assert!(error_text(&out).unwrap().contains("keypoint 1 is missing"));
     assert!(out.commands.is_empty());
     // Still recording.
     assert_eq!(
-        points(&h.app(SoloMessage::SplinePoint(point(1, 20.0))))[0].status,
+        points(&h.app(ShotRequest::SplinePoint(point(1, 20.0))))[0].status,
         0
     );
     // Outside the shot.
     let mut idle = Harness::ready();
-    let out = idle.app(SoloMessage::SplinePlay);
+    let out = idle.app(ShotRequest::SplinePlay);
     assert!(error_text(&out).is_some());
 }
 
@@ -250,7 +250,7 @@ fn play_sends_every_keypoint_with_its_u_then_the_durations_and_does_not_fly() {
     for n in [0.0, 20.0, 40.0] {
         record_at(&mut h, n);
     }
-    let out = h.app(SoloMessage::SplinePlay);
+    let out = h.app(ShotRequest::SplinePlay);
     assert!(out.commands.is_empty(), "nothing flies before ATTACH");
     let p = points(&out);
     assert_eq!(p.len(), 3);
@@ -262,7 +262,7 @@ fn play_sends_every_keypoint_with_its_u_then_the_durations_and_does_not_fly() {
     assert!((p[1].u_position - 0.5).abs() < 0.01, "{}", p[1].u_position);
     assert_eq!(p[2].u_position, 1.0);
     match out.to_app.last() {
-        Some(SoloMessage::SplineDurations {
+        Some(ShotEvent::SplineDurations {
             min_time_s,
             max_time_s,
         }) => {
@@ -273,11 +273,11 @@ fn play_sends_every_keypoint_with_its_u_then_the_durations_and_does_not_fly() {
     }
     assert_eq!(out.to_app.len(), 4);
     // In play mode, keypoints are a mode error; a seek before attaching is ignored.
-    let out = h.app(SoloMessage::RecordPosition);
+    let out = h.app(ShotRequest::RecordPosition);
     assert_eq!(points(&out)[0].status, -1);
-    let out = h.app(SoloMessage::SplinePoint(point(3, 80.0)));
+    let out = h.app(ShotRequest::SplinePoint(point(3, 80.0)));
     assert_eq!(points(&out)[0].status, -1);
-    let out = h.app(SoloMessage::SplineSeek {
+    let out = h.app(ShotRequest::SplineSeek {
         u_position: 0.5,
         cruise_state: 0,
     });
@@ -285,7 +285,7 @@ fn play_sends_every_keypoint_with_its_u_then_the_durations_and_does_not_fly() {
     // A and B do nothing in play mode.
     assert!(h.button(Button::A).to_app.is_empty());
     // PLAY again sends the path again.
-    let out = h.app(SoloMessage::SplinePlay);
+    let out = h.app(ShotRequest::SplinePlay);
     assert_eq!(points(&out).len(), 3);
 }
 
@@ -297,11 +297,11 @@ fn b_records_the_last_keypoint_and_plays_telling_the_app_first() {
     at(&mut h, 25.0);
     let out = h.button(Button::B);
     assert_eq!(points(&out)[0].index, 1, "B records first");
-    assert_eq!(out.to_app[1], SoloMessage::SplinePlay);
+    assert_eq!(out.to_app[1], ShotEvent::SplinePlay);
     assert_eq!(points(&out).len(), 3, "the recorded one, then the path");
     assert!(matches!(
         out.to_app.last(),
-        Some(SoloMessage::SplineDurations { .. })
+        Some(ShotEvent::SplineDurations { .. })
     ));
 }
 
@@ -309,7 +309,7 @@ fn b_records_the_last_keypoint_and_plays_telling_the_app_first() {
 fn attach_flies_to_the_keypoint_and_answers_when_there() {
     let mut h = playing();
     // The vehicle is at keypoint 2 (40 m north); attach to 0.
-    let out = h.app(SoloMessage::SplineAttach(0));
+    let out = h.app(ShotRequest::SplineAttach(0));
     assert_eq!(
         cmds(&out),
         [
@@ -328,7 +328,7 @@ fn attach_flies_to_the_keypoint_and_answers_when_there() {
         })
         .unwrap();
     assert!(v[0] < -0.1, "south, toward keypoint 0: {v:?}");
-    assert!(!out.to_app.contains(&SoloMessage::SplineAttach(0)));
+    assert!(!out.to_app.contains(&ShotEvent::SplineAttach(0)));
     // Camera to keypoint 0's attitude (heading 90, level).
     assert!(cmds(&out).iter().any(|c| matches!(
         c,
@@ -339,27 +339,27 @@ fn attach_flies_to_the_keypoint_and_answers_when_there() {
     let i = out
         .to_app
         .iter()
-        .position(|m| *m == SoloMessage::SplineAttach(0))
+        .position(|m| *m == ShotEvent::SplineAttach(0))
         .expect("attached");
     assert_eq!(
         out.to_app[i + 1],
-        SoloMessage::SplinePlaybackStatus {
+        ShotEvent::SplinePlaybackStatus {
             u_position: 0.0,
             cruise_state: 0
         }
     );
     // Valid once: a second attach is ignored.
-    let out = h.app(SoloMessage::SplineAttach(2));
+    let out = h.app(ShotRequest::SplineAttach(2));
     assert!(out.to_app.is_empty() && out.commands.is_empty());
 }
 
 #[test]
 fn attach_is_refused_outside_play_mode_or_past_the_path() {
     let mut h = entered();
-    let out = h.app(SoloMessage::SplineAttach(0));
+    let out = h.app(ShotRequest::SplineAttach(0));
     assert!(error_text(&out).unwrap().contains("play mode"));
     let mut h = playing();
-    let out = h.app(SoloMessage::SplineAttach(3));
+    let out = h.app(ShotRequest::SplineAttach(3));
     assert!(error_text(&out).unwrap().contains("cannot attach"));
     assert!(out.commands.is_empty());
     assert!(!h.engine.is_flying());
@@ -368,7 +368,7 @@ fn attach_is_refused_outside_play_mode_or_past_the_path() {
 #[test]
 fn seek_flies_to_u_with_playback_status_at_10_hz_and_stops_there() {
     let mut h = attached();
-    let out = h.app(SoloMessage::SplineSeek {
+    let out = h.app(ShotRequest::SplineSeek {
         u_position: 0.5,
         cruise_state: 0,
     });
@@ -399,7 +399,7 @@ fn seek_flies_to_u_with_playback_status_at_10_hz_and_stops_there() {
     // Stopped: no more reports.
     assert!(statuses(&h.run(500)).is_empty());
     // Seek to the end with cruise state 1 from here.
-    let out = h.app(SoloMessage::SplineSeek {
+    let out = h.app(ShotRequest::SplineSeek {
         u_position: 0.5,
         cruise_state: 1,
     });
@@ -409,8 +409,8 @@ fn seek_flies_to_u_with_playback_status_at_10_hz_and_stops_there() {
 #[test]
 fn seek_before_attaching_is_ignored() {
     let mut h = playing();
-    h.app(SoloMessage::SplineAttach(0));
-    let out = h.app(SoloMessage::SplineSeek {
+    h.app(ShotRequest::SplineAttach(0));
+    let out = h.app(ShotRequest::SplineSeek {
         u_position: 1.0,
         cruise_state: 1,
     });
@@ -420,13 +420,13 @@ fn seek_before_attaching_is_ignored() {
 #[test]
 fn pause_stops_on_the_path_and_a_second_pause_resumes_the_seek() {
     let mut h = attached();
-    h.app(SoloMessage::SplineSeek {
+    h.app(ShotRequest::SplineSeek {
         u_position: 1.0,
         cruise_state: 1,
     });
     h.run(400);
     let out = h.button(Button::Pause);
-    assert_eq!(out.to_app, [SoloMessage::Pause]);
+    assert_eq!(out.to_app, [ShotEvent::Pause]);
     assert_eq!(h.engine.status().cruise_speed_mps, 0.0);
     let out = h.run(3_000);
     let s = statuses(&out);
@@ -446,28 +446,28 @@ fn path_settings_set_the_speed_for_the_desired_time_and_free_the_camera() {
         3.0,
         "configured default"
     );
-    h.app(SoloMessage::SplinePathSettings {
+    h.app(ShotRequest::SplinePathSettings {
         camera_control: 1,
         desired_time_s: 30.0,
     });
     let speed = h.engine.status().cruise_speed_mps;
     assert!(speed > 1.0 && speed < 2.0, "about 40 m in 30 s: {speed}");
     // Free camera: no yaw or gimbal command while attaching.
-    h.app(SoloMessage::SplineAttach(0));
+    h.app(ShotRequest::SplineAttach(0));
     h.set_mode(FlightMode::Guided);
     let out = h.run(400);
     assert!(!kinds(&out).contains(&CommandKind::SetYaw));
     assert!(!kinds(&out).contains(&CommandKind::Gimbal));
     // Settings sent in record mode are kept for play.
     let mut h = entered();
-    h.app(SoloMessage::SplinePathSettings {
+    h.app(ShotRequest::SplinePathSettings {
         camera_control: 0,
         desired_time_s: 200.0,
     });
     for n in [0.0, 20.0, 40.0] {
         record_at(&mut h, n);
     }
-    h.app(SoloMessage::SplinePlay);
+    h.app(ShotRequest::SplinePlay);
     assert_eq!(
         h.engine.status().cruise_speed_mps,
         0.5,
@@ -478,7 +478,7 @@ fn path_settings_set_the_speed_for_the_desired_time_and_free_the_camera() {
 #[test]
 fn spline_record_in_play_mode_hands_the_vehicle_back_and_starts_a_new_path() {
     let mut h = attached();
-    let out = h.app(SoloMessage::SplineRecord);
+    let out = h.app(ShotRequest::SplineRecord);
     let c = cmds(&out);
     assert_eq!(c[0], Command::Brake);
     assert_eq!(c[1], Command::SetMode(FlightMode::Loiter));
@@ -496,6 +496,6 @@ fn spline_record_in_play_mode_hands_the_vehicle_back_and_starts_a_new_path() {
 fn fly_ends_the_multipoint_shot() {
     let mut h = attached();
     let out = h.button(Button::Fly);
-    assert!(out.to_app.contains(&SoloMessage::GetCurrentShot(NONE)));
+    assert!(out.to_app.contains(&ShotEvent::CurrentShot(NONE)));
     assert!(cmds(&out).contains(&Command::SetMode(FlightMode::Loiter)));
 }

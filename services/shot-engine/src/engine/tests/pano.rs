@@ -2,15 +2,15 @@
 //! station until it exits to FLY, the sphere's count, the video pan and its pause, A
 //! and B.
 
+use skymesh_ipc_types::shot_api::shots::{NONE, PANO};
+use skymesh_ipc_types::shot_api::{ShotEvent, ShotRequest};
 use skymesh_ipc_types::{Button, Command, CommandKind, FlightMode, PayloadState};
-use solo_proto::shots::{NONE, PANO};
-use solo_proto::SoloMessage;
 
 use super::*;
 use crate::shots::pano::{DEFAULT_LENS_FOV_DEG, SPHERE_ROWS};
 
-fn options(pano_type: u8, run_state: u8, fov: i16, rate: f32, lens: f32) -> SoloMessage {
-    SoloMessage::PanoOptions {
+fn options(pano_type: u8, run_state: u8, fov: i16, rate: f32, lens: f32) -> ShotEvent {
+    ShotEvent::PanoOptions {
         pano_type,
         run_state,
         cylinder_fov: fov,
@@ -23,11 +23,11 @@ fn options(pano_type: u8, run_state: u8, fov: i16, rate: f32, lens: f32) -> Solo
 fn in_pano() -> Harness {
     let mut h = Harness::ready();
     camera(&mut h, 0.0);
-    let out = h.app(SoloMessage::SetCurrentShot(PANO));
+    let out = h.app(ShotRequest::StartShot(PANO));
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::GetCurrentShot(PANO),
+            ShotEvent::CurrentShot(PANO),
             options(0, 0, 220, 2.0, DEFAULT_LENS_FOV_DEG)
         ]
     );
@@ -72,7 +72,7 @@ fn pano_states(out: &Outputs) -> Vec<(u8, u8)> {
     out.to_app
         .iter()
         .filter_map(|m| match m {
-            SoloMessage::PanoState { index, total } => Some((*index, *total)),
+            ShotEvent::PanoState { index, total } => Some((*index, *total)),
             _ => None,
         })
         .collect()
@@ -102,7 +102,7 @@ fn a_cylinder_is_photographed_station_by_station_then_the_shot_exits_to_fly() {
     let mut h = in_pano();
     // 180° with a 90° lens: 3 photos, 45° apart around the camera yaw (east).
     let out = h.app(options(0, 1, 180, 0.0, 90.0));
-    assert_eq!(out.to_app, [SoloMessage::PanoState { index: 0, total: 3 }]);
+    assert_eq!(out.to_app, [ShotEvent::PanoState { index: 0, total: 3 }]);
     let out = run_with_camera(&mut h, 15_000);
     assert_eq!(captures(&out), 3);
     assert_eq!(pano_states(&out), [(1, 3), (2, 3), (3, 3)]);
@@ -118,7 +118,7 @@ fn a_cylinder_is_photographed_station_by_station_then_the_shot_exits_to_fly() {
     let i = out
         .to_app
         .iter()
-        .position(|m| *m == SoloMessage::GetCurrentShot(NONE))
+        .position(|m| *m == ShotEvent::CurrentShot(NONE))
         .expect("exited");
     assert_eq!(out.to_app[i - 1], options(0, 2, 180, 0.0, 90.0));
     assert!(cmds(&out).contains(&Command::SetMode(FlightMode::Loiter)));
@@ -154,7 +154,7 @@ fn b_cycles_the_type_in_setup() {
     let mut types = Vec::new();
     for _ in 0..3 {
         match h.button(Button::B).to_app[..] {
-            [SoloMessage::PanoOptions {
+            [ShotEvent::PanoOptions {
                 pano_type,
                 run_state: 0,
                 deg_second_yaw,
@@ -176,7 +176,7 @@ fn a_starts_and_cancels_the_run() {
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::PanoState { index: 0, total: 5 },
+            ShotEvent::PanoState { index: 0, total: 5 },
             options(0, 1, 220, 2.0, DEFAULT_LENS_FOV_DEG)
         ]
     );
@@ -210,7 +210,7 @@ fn the_video_pan_turns_until_paused_and_resumes() {
     let out = h.button(Button::Pause);
     assert_eq!(
         out.to_app,
-        [SoloMessage::Pause, options(2, 1, 220, 0.0, 90.0)]
+        [ShotEvent::Pause, options(2, 1, 220, 0.0, 90.0)]
     );
     run_with_camera(&mut h, 400);
     let out = run_with_camera(&mut h, 2_000);

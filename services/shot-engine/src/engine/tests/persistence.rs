@@ -1,8 +1,8 @@
 //! Button mappings (get, set, persisted) and the restart after a crash.
 
+use skymesh_ipc_types::shot_api::shots::{CABLECAM, NONE, ORBIT, SELFIE};
+use skymesh_ipc_types::shot_api::{ButtonSetting, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{Button, Command, FlightMode};
-use solo_proto::shots::{CABLECAM, NONE, ORBIT, SELFIE};
-use solo_proto::{ButtonSetting, SoloMessage};
 
 use super::*;
 
@@ -11,14 +11,14 @@ const B: i32 = 5;
 const PRESS: i32 = 0;
 
 fn get(h: &mut Harness, button: i32, event: i32) -> ButtonSetting {
-    let out = h.app(SoloMessage::GetButtonSetting(ButtonSetting {
+    let out = h.app(ShotRequest::GetButtonSetting(ButtonSetting {
         button,
         event,
         shot: -1,
         mode: -1,
     }));
     match &out.to_app[..] {
-        [SoloMessage::GetButtonSetting(s)] => *s,
+        [ShotEvent::ButtonSetting(s)] => *s,
         other => panic!("{other:?}"),
     }
 }
@@ -41,29 +41,27 @@ fn button_settings_are_answered_stored_and_survive_a_new_engine() {
     assert_eq!(get(&mut h, 8, PRESS).shot, -1);
     assert_eq!(get(&mut h, A, 3).shot, -1);
 
-    let out = h.app(SoloMessage::SetButtonSetting(ButtonSetting {
+    let out = h.app(ShotRequest::SetButtonSetting(ButtonSetting {
         button: A,
         event: PRESS,
         shot: SELFIE,
         mode: -1,
     }));
     assert!(out.to_app.is_empty(), "SET is not answered");
-    h.app(SoloMessage::SetButtonSetting(ButtonSetting {
+    h.app(ShotRequest::SetButtonSetting(ButtonSetting {
         button: B,
         event: PRESS,
         shot: -1,
         mode: 5,
     }));
     // Only A and B.
-    let out = h.app(SoloMessage::SetButtonSetting(ButtonSetting {
+    let out = h.app(ShotRequest::SetButtonSetting(ButtonSetting {
         button: 8,
         event: PRESS,
         shot: ORBIT,
         mode: -1,
     }));
-    assert!(
-        matches!(&out.to_app[..], [SoloMessage::ShotManagerError(t)] if t.contains("only the A and B"))
-    );
+    assert!(matches!(&out.to_app[..], [ShotEvent::Error(t)] if t.contains("only the A and B")));
 
     let mut again = Harness::on_file(&h.state_file);
     again.vehicle_ok();
@@ -111,15 +109,15 @@ fn a_restart_never_resumes_the_shot_and_tells_the_app_once_connected() {
     assert_eq!(
         out.to_app[..2],
         [
-            SoloMessage::ShotManagerError("shot engine restarted; orbit ended".into()),
-            SoloMessage::GetCurrentShot(NONE)
+            ShotEvent::Error("shot engine restarted; orbit ended".into()),
+            ShotEvent::CurrentShot(NONE)
         ]
     );
-    assert!(matches!(out.to_app[2], SoloMessage::GoProV1State(_)));
+    assert!(matches!(out.to_app[2], ShotEvent::GoProV1State(_)));
     // Told once.
     h.session(7, false);
     let out = h.connect_app(8);
-    assert_eq!(out.to_app[0], SoloMessage::GetCurrentShot(NONE));
+    assert_eq!(out.to_app[0], ShotEvent::CurrentShot(NONE));
 
     // The pilot's FLY gives the sticks back (the vehicle was left braked in GUIDED).
     let out = h.button(Button::Fly);
@@ -139,10 +137,10 @@ fn a_restart_never_resumes_the_shot_and_tells_the_app_once_connected() {
 #[test]
 fn the_active_shot_is_recorded_while_it_runs() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(SELFIE));
+    h.app(ShotRequest::StartShot(SELFIE));
     let (store, _) = crate::persist::Store::open(&h.state_file);
     assert_eq!(store.state().active_shot, Some(SELFIE));
-    h.app(SoloMessage::SetCurrentShot(NONE));
+    h.app(ShotRequest::StartShot(NONE));
     let (store, _) = crate::persist::Store::open(&h.state_file);
     assert_eq!(store.state().active_shot, None);
 }

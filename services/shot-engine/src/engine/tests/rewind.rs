@@ -1,9 +1,9 @@
 //! Rewind: breadcrumbs, flying back, hover or RTL at the end, options both ways, the
 //! home location both ways.
 
+use skymesh_ipc_types::shot_api::shots::{NONE, REWIND};
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{AckResult, Command, CommandKind, FlightMode, RefusalReason};
-use solo_proto::shots::{NONE, REWIND};
-use solo_proto::{Location, SoloMessage};
 
 use super::*;
 
@@ -13,8 +13,8 @@ const HOME: Location = Location {
     alt_m: 584.0,
 };
 
-fn rewind_options(enabled: u8, hover: u8, distance: f32) -> SoloMessage {
-    SoloMessage::RewindOptions {
+fn rewind_options(enabled: u8, hover: u8, distance: f32) -> ShotEvent {
+    ShotEvent::RewindOptions {
         enabled,
         hover,
         rewind_distance: distance,
@@ -58,7 +58,7 @@ fn home_and_the_rewind_options_are_sent_on_connect_and_home_when_it_moves() {
     let n = out.to_app.len();
     assert_eq!(
         out.to_app[n - 2..],
-        [SoloMessage::HomeLocation(HOME), rewind_options(1, 0, 20.0)]
+        [ShotEvent::HomeLocation(HOME), rewind_options(1, 0, 20.0)]
     );
     // Unchanged: nothing; moved: told.
     h.push_status();
@@ -68,7 +68,7 @@ fn home_and_the_rewind_options_are_sent_on_connect_and_home_when_it_moves() {
         ..HOME
     };
     with_home(&mut h, moved);
-    assert_eq!(h.drain().to_app, [SoloMessage::HomeLocation(moved)]);
+    assert_eq!(h.drain().to_app, [ShotEvent::HomeLocation(moved)]);
     // No home known: none sent on connect.
     let mut h = Harness::new();
     h.vehicle_ok();
@@ -78,7 +78,7 @@ fn home_and_the_rewind_options_are_sent_on_connect_and_home_when_it_moves() {
     assert!(!out
         .to_app
         .iter()
-        .any(|m| matches!(m, SoloMessage::HomeLocation(_))));
+        .any(|m| matches!(m, ShotEvent::HomeLocation(_))));
 }
 
 /// `north_m` north of [`HOME`], `up_m` above it.
@@ -100,7 +100,7 @@ fn set_home(loc: Location) -> Command {
 
 fn app_error(out: &Outputs) -> &str {
     match out.to_app.as_slice() {
-        [SoloMessage::ShotManagerError(t)] => t,
+        [ShotEvent::Error(t)] => t,
         other => panic!("expected one SHOTMANAGER_ERROR, got {other:?}"),
     }
 }
@@ -119,7 +119,7 @@ fn the_apps_home_is_set_on_the_vehicle_and_the_new_home_is_told_back() {
     // The phone says 6 m higher: only the horizontal position moves home.
     let asked = near_home(50.0, 6.0);
     let there = near_home(50.0, 0.0);
-    let out = h.app(SoloMessage::HomeLocation(asked));
+    let out = h.app(ShotRequest::HomeLocation(asked));
     // Idle: the implicit grab is given back at once.
     assert_eq!(
         cmds(&out),
@@ -132,7 +132,7 @@ fn the_apps_home_is_set_on_the_vehicle_and_the_new_home_is_told_back() {
     let out = h.ack(&sent, AckResult::Accepted, RefusalReason::None);
     assert!(out.to_app.is_empty() && out.commands.is_empty());
     with_home(&mut h, there);
-    assert_eq!(h.drain().to_app, [SoloMessage::HomeLocation(there)]);
+    assert_eq!(h.drain().to_app, [ShotEvent::HomeLocation(there)]);
     assert_eq!(
         h.counter("skymesh_shot_unimplemented_requests_total", &[]),
         0
@@ -142,7 +142,7 @@ fn the_apps_home_is_set_on_the_vehicle_and_the_new_home_is_told_back() {
 #[test]
 fn a_refused_home_is_told_to_the_app_with_the_reason() {
     let mut h = ready_at_home();
-    let out = h.app(SoloMessage::HomeLocation(near_home(50.0, 0.0)));
+    let out = h.app(ShotRequest::HomeLocation(near_home(50.0, 0.0)));
     let sent = find(&out, CommandKind::SetHome).unwrap();
     // In progress is not an answer yet.
     let out = h.ack(&sent, AckResult::InProgress, RefusalReason::None);
@@ -158,14 +158,14 @@ fn a_refused_home_is_told_to_the_app_with_the_reason() {
     );
     assert!(out.commands.is_empty());
     // Answered: the next request goes out at once.
-    let out = h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0)));
+    let out = h.app(ShotRequest::HomeLocation(near_home(10.0, 0.0)));
     assert_eq!(kinds(&out)[0], CommandKind::SetHome);
 }
 
 #[test]
 fn impossible_app_homes_are_refused_without_a_command() {
     let mut h = ready_at_home();
-    let out = h.app(SoloMessage::HomeLocation(Location {
+    let out = h.app(ShotRequest::HomeLocation(Location {
         lat_deg: 0.0,
         lon_deg: 0.0,
         alt_m: 10.0,
@@ -178,7 +178,7 @@ fn impossible_app_homes_are_refused_without_a_command() {
     h.status.home_valid = 0;
     h.push_status();
     h.drain();
-    let out = h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0)));
+    let out = h.app(ShotRequest::HomeLocation(near_home(10.0, 0.0)));
     assert!(app_error(&out).contains("no home yet"), "{out:?}");
     assert!(out.commands.is_empty());
 }
@@ -186,8 +186,8 @@ fn impossible_app_homes_are_refused_without_a_command() {
 #[test]
 fn the_home_in_effect_is_answered_at_once_without_a_command() {
     let mut h = ready_at_home();
-    let out = h.app(SoloMessage::HomeLocation(HOME));
-    assert_eq!(out.to_app, [SoloMessage::HomeLocation(HOME)]);
+    let out = h.app(ShotRequest::HomeLocation(HOME));
+    assert_eq!(out.to_app, [ShotEvent::HomeLocation(HOME)]);
     assert!(out.commands.is_empty());
 }
 
@@ -195,13 +195,13 @@ fn the_home_in_effect_is_answered_at_once_without_a_command() {
 fn one_home_request_at_a_time_and_only_the_newest_waiting_one_is_sent() {
     let mut h = ready_at_home();
     let first = find(
-        &h.app(SoloMessage::HomeLocation(near_home(10.0, 0.0))),
+        &h.app(ShotRequest::HomeLocation(near_home(10.0, 0.0))),
         CommandKind::SetHome,
     )
     .unwrap();
     // While it is unanswered, newer locations wait; the newest wins.
     for north in [20.0, 30.0] {
-        let out = h.app(SoloMessage::HomeLocation(near_home(north, 0.0)));
+        let out = h.app(ShotRequest::HomeLocation(near_home(north, 0.0)));
         assert!(out.commands.is_empty() && out.to_app.is_empty());
     }
     let out = h.ack(&first, AckResult::Accepted, RefusalReason::None);
@@ -214,7 +214,7 @@ fn one_home_request_at_a_time_and_only_the_newest_waiting_one_is_sent() {
     );
     // An answer that never comes does not block the app for good.
     h.now += super::super::rewind::HOME_ANSWER_WAIT_NS;
-    let out = h.app(SoloMessage::HomeLocation(near_home(40.0, 0.0)));
+    let out = h.app(ShotRequest::HomeLocation(near_home(40.0, 0.0)));
     assert_eq!(cmds(&out)[0], set_home(near_home(40.0, 0.0)));
 }
 
@@ -223,7 +223,7 @@ fn setting_home_in_a_flying_shot_keeps_authority_and_a_refusal_keeps_the_shot() 
     let mut h = ready_at_home();
     h.orbiting();
     h.drain();
-    let out = h.app(SoloMessage::HomeLocation(near_home(50.0, 0.0)));
+    let out = h.app(ShotRequest::HomeLocation(near_home(50.0, 0.0)));
     assert_eq!(kinds(&out), [CommandKind::SetHome]);
     let sent = find(&out, CommandKind::SetHome).unwrap();
     let out = h.ack(&sent, AckResult::Refused, RefusalReason::Denied);
@@ -239,9 +239,9 @@ fn rewind_options_are_clamped_and_answered_and_disabled_refuses_the_shot() {
     assert_eq!(out.to_app, [rewind_options(1, 1, 60.0)]);
     let out = h.app(rewind_options(0, 0, 5.0));
     assert_eq!(out.to_app, [rewind_options(0, 0, 10.0)]);
-    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
-    assert!(matches!(&out.to_app[0], SoloMessage::ShotManagerError(t) if t.contains("disabled")));
-    assert_eq!(out.to_app[1], SoloMessage::GetCurrentShot(NONE));
+    let out = h.app(ShotRequest::StartShot(REWIND));
+    assert!(matches!(&out.to_app[0], ShotEvent::Error(t) if t.contains("disabled")));
+    assert_eq!(out.to_app[1], ShotEvent::CurrentShot(NONE));
     assert!(out.commands.is_empty());
     assert_eq!(
         h.counter(
@@ -255,8 +255,8 @@ fn rewind_options_are_clamped_and_answered_and_disabled_refuses_the_shot() {
 #[test]
 fn rewind_flies_back_along_the_path_then_returns_home() {
     let mut h = flown();
-    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(REWIND)]);
+    let out = h.app(ShotRequest::StartShot(REWIND));
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(REWIND)]);
     assert_eq!(
         cmds(&out),
         [
@@ -282,7 +282,7 @@ fn rewind_flies_back_along_the_path_then_returns_home() {
         .expect("RTL");
     assert_eq!(c[rtl + 1], Command::ReleaseFlightAuthority);
     assert!(!c.contains(&Command::SetMode(FlightMode::Loiter)));
-    assert!(out.to_app.contains(&SoloMessage::GetCurrentShot(NONE)));
+    assert!(out.to_app.contains(&ShotEvent::CurrentShot(NONE)));
     assert_eq!(h.engine.last_exit(), "finished_rtl");
 }
 
@@ -290,7 +290,7 @@ fn rewind_flies_back_along_the_path_then_returns_home() {
 fn rewind_with_hover_ends_in_loiter_and_respects_the_distance() {
     let mut h = flown();
     h.app(rewind_options(1, 1, 10.0));
-    h.app(SoloMessage::SetCurrentShot(REWIND));
+    h.app(ShotRequest::StartShot(REWIND));
     h.set_mode(FlightMode::Guided);
     h.run(400);
     // 10 m back, not 20: the end is at 30 m north.
@@ -306,11 +306,11 @@ fn rewind_with_hover_ends_in_loiter_and_respects_the_distance() {
 #[test]
 fn rewind_without_a_flown_path_says_so_and_ends() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    let out = h.app(ShotRequest::StartShot(REWIND));
     assert!(out
         .to_app
         .iter()
-        .any(|m| matches!(m, SoloMessage::ShotManagerError(t) if t.contains("no flown path"))));
+        .any(|m| matches!(m, ShotEvent::Error(t) if t.contains("no flown path"))));
     h.set_mode(FlightMode::Guided);
     let out = h.run(400);
     assert!(cmds(&out).contains(&Command::ReturnToLaunch));
@@ -326,10 +326,10 @@ fn disarming_forgets_the_breadcrumbs() {
     h.status.armed = 1;
     h.push_status();
     h.tick();
-    let out = h.app(SoloMessage::SetCurrentShot(REWIND));
+    let out = h.app(ShotRequest::StartShot(REWIND));
     assert!(out
         .to_app
         .iter()
-        .any(|m| matches!(m, SoloMessage::ShotManagerError(t) if t.contains("no flown path"))));
+        .any(|m| matches!(m, ShotEvent::Error(t) if t.contains("no flown path"))));
     assert!(kinds(&out).contains(&CommandKind::GrabFlightAuthority));
 }

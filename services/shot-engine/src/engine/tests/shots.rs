@@ -1,8 +1,8 @@
 //! Selfie, orbit and cable cam: setup, start of flight, options and pause.
 
+use skymesh_ipc_types::shot_api::shots::{CABLECAM, NONE, ORBIT, SELFIE};
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{Button, Command, CommandKind, FlightMode, ShotPhase};
-use solo_proto::shots::{CABLECAM, NONE, ORBIT, SELFIE};
-use solo_proto::{Location, SoloMessage};
 
 use super::*;
 use crate::shots::CABLE_MIN_LENGTH_M;
@@ -21,16 +21,16 @@ fn roi_of(c: &Command) -> (f64, f64, f32) {
 #[test]
 fn selfie_collects_near_far_roi_then_flies() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(SELFIE));
+    let out = h.app(ShotRequest::StartShot(SELFIE));
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::GetCurrentShot(SELFIE),
-            SoloMessage::ShotOptions { cruise_speed: 2.0 }
+            ShotEvent::CurrentShot(SELFIE),
+            ShotEvent::ShotOptions { cruise_speed: 2.0 }
         ]
     );
     for n in [5.0, 40.0] {
-        let out = h.app(SoloMessage::Location(loc(n)));
+        let out = h.app(ShotRequest::Location(loc(n)));
         assert!(
             out.commands.is_empty(),
             "not flying before the third location"
@@ -41,7 +41,7 @@ fn selfie_collects_near_far_roi_then_flies() {
         alt_m: 1.5,
         ..loc(-20.0)
     };
-    let out = h.app(SoloMessage::Location(roi));
+    let out = h.app(ShotRequest::Location(roi));
     let c = cmds(&out);
     assert_eq!(c[0], Command::GrabFlightAuthority);
     assert_eq!(c[1], Command::SetMode(FlightMode::Guided));
@@ -59,12 +59,12 @@ fn selfie_collects_near_far_roi_then_flies() {
     assert_eq!(out.commands.iter().filter(|c| c.kind == v.kind).count(), 1);
 
     // A fourth location is ignored: nothing changes.
-    let out = h.app(SoloMessage::Location(loc(100.0)));
+    let out = h.app(ShotRequest::Location(loc(100.0)));
     assert!(out.commands.is_empty() && out.to_app.is_empty());
     assert_eq!(h.engine.status().roi_lat_deg, roi.lat_deg);
 
     // SHOT_OPTIONS sets the speed (no echo).
-    let out = h.app(SoloMessage::ShotOptions { cruise_speed: 4.0 });
+    let out = h.app(ShotRequest::ShotOptions { cruise_speed: 4.0 });
     assert!(out.to_app.is_empty());
     assert_eq!(h.engine.status().cruise_speed_mps, 4.0);
 }
@@ -72,9 +72,9 @@ fn selfie_collects_near_far_roi_then_flies() {
 #[test]
 fn orbit_echoes_its_roi_and_a_new_location_starts_a_new_orbit() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    let out = h.app(SoloMessage::Location(loc(30.0)));
-    assert_eq!(out.to_app, [SoloMessage::Location(loc(30.0))]);
+    h.app(ShotRequest::StartShot(ORBIT));
+    let out = h.app(ShotRequest::Location(loc(30.0)));
+    assert_eq!(out.to_app, [ShotEvent::Location(loc(30.0))]);
     assert_eq!(
         kinds(&out),
         [
@@ -88,8 +88,8 @@ fn orbit_echoes_its_roi_and_a_new_location_starts_a_new_orbit() {
     assert_eq!(kinds(&h.tick()), [CommandKind::SetRoi]);
     h.run(200);
 
-    let out = h.app(SoloMessage::Location(loc(-10.0)));
-    assert_eq!(out.to_app, [SoloMessage::Location(loc(-10.0))]);
+    let out = h.app(ShotRequest::Location(loc(-10.0)));
+    assert_eq!(out.to_app, [ShotEvent::Location(loc(-10.0))]);
     // Same flight: a new ROI, no new GUIDED or grab.
     assert_eq!(kinds(&out), [CommandKind::SetRoi]);
     assert!((h.engine.status().progress - 10.0).abs() < 0.5);
@@ -98,10 +98,10 @@ fn orbit_echoes_its_roi_and_a_new_location_starts_a_new_orbit() {
 #[test]
 fn orbit_roi_from_the_a_button_is_the_projected_roi() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
+    h.app(ShotRequest::StartShot(ORBIT));
     // Camera level, vehicle heading east: the ROI is 20 m east at the vehicle's altitude.
     let out = h.button(Button::A);
-    let [SoloMessage::Location(l)] = out.to_app[..] else {
+    let [ShotEvent::Location(l)] = out.to_app[..] else {
         panic!("{:?}", out.to_app);
     };
     assert!((l.lat_deg - LAT).abs() < 1e-6);
@@ -116,13 +116,13 @@ fn orbit_roi_from_the_a_button_is_the_projected_roi() {
         gimbal_pitch_deg: -90.0,
         ..Default::default()
     });
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
-    let out = h.app(SoloMessage::RecordPosition);
+    h.app(ShotRequest::StartShot(ORBIT));
+    let out = h.app(ShotRequest::RecordPosition);
     let l = out
         .to_app
         .iter()
         .find_map(|m| match m {
-            SoloMessage::Location(l) => Some(*l),
+            ShotEvent::Location(l) => Some(*l),
             _ => None,
         })
         .unwrap();
@@ -134,28 +134,28 @@ fn orbit_roi_from_the_a_button_is_the_projected_roi() {
 fn pause_toggles_both_ways_and_tells_the_app() {
     let mut h = Harness::ready();
     h.orbiting();
-    h.app(SoloMessage::ShotOptions { cruise_speed: 3.0 });
+    h.app(ShotRequest::ShotOptions { cruise_speed: 3.0 });
     // From the app: options back, no SOLO_PAUSE echo.
-    let out = h.app(SoloMessage::Pause);
-    assert_eq!(out.to_app, [SoloMessage::ShotOptions { cruise_speed: 0.0 }]);
+    let out = h.app(ShotRequest::Pause);
+    assert_eq!(out.to_app, [ShotEvent::ShotOptions { cruise_speed: 0.0 }]);
     assert_eq!(out.status.unwrap().phase(), ShotPhase::Paused);
-    let out = h.app(SoloMessage::Pause);
-    assert_eq!(out.to_app, [SoloMessage::ShotOptions { cruise_speed: 3.0 }]);
+    let out = h.app(ShotRequest::Pause);
+    assert_eq!(out.to_app, [ShotEvent::ShotOptions { cruise_speed: 3.0 }]);
     // From the controller: the app also gets SOLO_PAUSE.
     let out = h.button(Button::Pause);
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::Pause,
-            SoloMessage::ShotOptions { cruise_speed: 0.0 }
+            ShotEvent::Pause,
+            ShotEvent::ShotOptions { cruise_speed: 0.0 }
         ]
     );
     let out = h.button(Button::Pause);
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::Pause,
-            SoloMessage::ShotOptions { cruise_speed: 3.0 }
+            ShotEvent::Pause,
+            ShotEvent::ShotOptions { cruise_speed: 3.0 }
         ]
     );
     // Outside a shot a pause does nothing.
@@ -166,18 +166,18 @@ fn pause_toggles_both_ways_and_tells_the_app() {
 #[test]
 fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(CABLECAM));
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(CABLECAM)]);
+    let out = h.app(ShotRequest::StartShot(CABLECAM));
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(CABLECAM)]);
     h.payload(skymesh_ipc_types::PayloadState {
         gimbal_valid: 1,
         gimbal_pitch_deg: -30.0,
         ..Default::default()
     });
 
-    let out = h.app(SoloMessage::RecordPosition);
+    let out = h.app(ShotRequest::RecordPosition);
     assert_eq!(
         out.to_app,
-        [SoloMessage::CableCamWaypoint {
+        [ShotEvent::CableCamWaypoint {
             lat_deg: LAT,
             lon_deg: LON,
             alt_m: ALT,
@@ -193,9 +193,9 @@ fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::GetCurrentShot(NONE),
-            SoloMessage::GetCurrentShot(CABLECAM),
-            SoloMessage::CableCamWaypoint {
+            ShotEvent::CurrentShot(NONE),
+            ShotEvent::CurrentShot(CABLECAM),
+            ShotEvent::CableCamWaypoint {
                 lat_deg: moved,
                 lon_deg: LON,
                 alt_m: ALT,
@@ -211,13 +211,13 @@ fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
     // direction, current speed), then the flight starts.
     h.state.heading_deg = 120.0;
     h.move_north(30.0);
-    let out = h.app(SoloMessage::RecordPosition);
+    let out = h.app(ShotRequest::RecordPosition);
     assert!(
-        matches!(out.to_app[0], SoloMessage::CableCamWaypoint { yaw_deg, .. } if yaw_deg == 120.0)
+        matches!(out.to_app[0], ShotEvent::CableCamWaypoint { yaw_deg, .. } if yaw_deg == 120.0)
     );
     assert_eq!(
         out.to_app[1],
-        SoloMessage::CableCamOptions {
+        ShotEvent::CableOptions {
             cam_interpolation: 1,
             yaw_direction_cw: 1,
             cruise_speed: 0.0
@@ -232,7 +232,7 @@ fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
     assert!(h.engine.is_flying());
 
     // The app's options: speed, then pause → speed 0 and back.
-    h.app(SoloMessage::CableCamOptions {
+    h.app(ShotRequest::CableOptions {
         cam_interpolation: 0,
         yaw_direction_cw: 0,
         cruise_speed: -2.5,
@@ -241,25 +241,25 @@ fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::Pause,
-            SoloMessage::CableCamOptions {
+            ShotEvent::Pause,
+            ShotEvent::CableOptions {
                 cam_interpolation: 0,
                 yaw_direction_cw: 0,
                 cruise_speed: 0.0
             }
         ]
     );
-    let out = h.app(SoloMessage::Pause);
+    let out = h.app(ShotRequest::Pause);
     assert_eq!(
         out.to_app,
-        [SoloMessage::CableCamOptions {
+        [ShotEvent::CableOptions {
             cam_interpolation: 0,
             yaw_direction_cw: 0,
             cruise_speed: -2.5
         }]
     );
     // A third record is ignored.
-    let out = h.app(SoloMessage::RecordPosition);
+    let out = h.app(ShotRequest::RecordPosition);
     assert!(out.to_app.is_empty() && out.commands.is_empty());
 }
 
@@ -267,7 +267,7 @@ fn cable_cam_waypoints_overwrite_and_options_after_the_second_point() {
 fn cruise_speeds_from_the_app_are_limited_to_max_speed() {
     let mut h = Harness::ready();
     h.orbiting();
-    h.app(SoloMessage::ShotOptions {
+    h.app(ShotRequest::ShotOptions {
         cruise_speed: -40.0,
     });
     assert_eq!(h.engine.status().cruise_speed_mps, -6.0);

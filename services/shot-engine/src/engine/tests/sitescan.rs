@@ -1,8 +1,8 @@
 //! Site Scan: inspect (take-off, waypoints, gimbal, body velocities), structure
 //! scan and survey, flown on a point mass that follows the setpoints.
 
+use skymesh_ipc_types::shot_api::shots::{NONE, ORBIT};
 use skymesh_ipc_types::{AppGeofence, ShotPhase};
-use solo_proto::shots::{NONE, ORBIT};
 
 use super::*;
 use crate::engine::sitescan::{INSPECT, SCAN, SURVEY};
@@ -15,7 +15,7 @@ fn error_text(out: &Outputs) -> String {
     out.to_app
         .iter()
         .find_map(|m| match m {
-            SoloMessage::ShotManagerError(t) => Some(t.clone()),
+            ShotEvent::Error(t) => Some(t.clone()),
             _ => None,
         })
         .unwrap_or_default()
@@ -65,7 +65,7 @@ impl Harness {
     }
 
     fn inspecting(&mut self) {
-        self.app(SoloMessage::InspectStart {
+        self.app(ShotRequest::InspectStart {
             takeoff_alt_m: 30.0,
         });
         self.set_mode(FlightMode::Guided);
@@ -76,7 +76,7 @@ impl Harness {
 #[test]
 fn inspect_start_on_the_ground_takes_off_once_guided() {
     let mut h = Harness::landed();
-    let out = h.app(SoloMessage::InspectStart {
+    let out = h.app(ShotRequest::InspectStart {
         takeoff_alt_m: 10.0,
     });
     assert_eq!(
@@ -106,7 +106,7 @@ fn inspect_start_on_the_ground_takes_off_once_guided() {
 #[test]
 fn inspect_start_in_the_air_climbs_straight_up() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::InspectStart {
+    h.app(ShotRequest::InspectStart {
         takeoff_alt_m: 35.0,
     });
     h.set_mode(FlightMode::Guided);
@@ -127,21 +127,21 @@ fn inspect_start_is_gated_checked_and_once() {
     let mut h = Harness::landed();
     h.status.armed = 0;
     h.push_status();
-    let out = h.app(SoloMessage::InspectStart {
+    let out = h.app(ShotRequest::InspectStart {
         takeoff_alt_m: 10.0,
     });
-    assert_eq!(out.to_app, [SoloMessage::ShotError(1)]);
+    assert_eq!(out.to_app, [ShotEvent::Refused(1)]);
     assert!(out.commands.is_empty());
     assert_eq!(h.engine.current_shot(), NONE);
 
     let mut h = Harness::ready();
     for alt in [0.5, 500.0] {
-        let out = h.app(SoloMessage::InspectStart { takeoff_alt_m: alt });
+        let out = h.app(ShotRequest::InspectStart { takeoff_alt_m: alt });
         assert!(error_text(&out).contains("outside 1..=120 m"), "{out:?}");
         assert!(out.commands.is_empty());
     }
     h.inspecting();
-    let out = h.app(SoloMessage::InspectStart {
+    let out = h.app(ShotRequest::InspectStart {
         takeoff_alt_m: 50.0,
     });
     assert!(out.commands.is_empty() && out.to_app.is_empty());
@@ -151,7 +151,7 @@ fn inspect_start_is_gated_checked_and_once() {
 fn inspect_flies_waypoints_gimbal_and_body_velocities() {
     let mut h = Harness::ready();
     h.inspecting();
-    let out = h.app(SoloMessage::InspectSetWaypoint {
+    let out = h.app(ShotRequest::InspectSetWaypoint {
         lat_deg: -35.3625,
         lon_deg: 149.1655,
         alt_m: 25.0,
@@ -166,7 +166,7 @@ fn inspect_flies_waypoints_gimbal_and_body_velocities() {
             speed_mps: Some(6.0)
         }]
     );
-    let out = h.app(SoloMessage::InspectMoveGimbal {
+    let out = h.app(ShotRequest::InspectMoveGimbal {
         pitch_deg: -120.0,
         roll_deg: 5.0,
         yaw_deg: 370.0,
@@ -186,7 +186,7 @@ fn inspect_flies_waypoints_gimbal_and_body_velocities() {
         ]
     );
     // Heading east: forward is east, right is south.
-    let out = h.app(SoloMessage::InspectMoveVehicle {
+    let out = h.app(ShotRequest::InspectMoveVehicle {
         vx: 2.0,
         vy: 1.0,
         vz: -0.5,
@@ -203,7 +203,7 @@ fn inspect_flies_waypoints_gimbal_and_body_velocities() {
         assert!((got - want).abs() < 1e-5, "{vel_ned_mps:?}");
     }
     // Too fast: within the limits.
-    let out = h.app(SoloMessage::InspectMoveVehicle {
+    let out = h.app(ShotRequest::InspectMoveVehicle {
         vx: 20.0,
         vy: 0.0,
         vz: 5.0,
@@ -219,16 +219,16 @@ fn inspect_flies_waypoints_gimbal_and_body_velocities() {
 #[test]
 fn inspect_commands_wait_for_guided_and_velocities_need_it() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::InspectStart {
+    h.app(ShotRequest::InspectStart {
         takeoff_alt_m: 30.0,
     });
-    let out = h.app(SoloMessage::InspectSetWaypoint {
+    let out = h.app(ShotRequest::InspectSetWaypoint {
         lat_deg: -35.3625,
         lon_deg: 149.1655,
         alt_m: 25.0,
     });
     assert!(out.commands.is_empty());
-    let out = h.app(SoloMessage::InspectMoveVehicle {
+    let out = h.app(ShotRequest::InspectMoveVehicle {
         vx: 1.0,
         vy: 0.0,
         vz: 0.0,
@@ -250,19 +250,19 @@ fn inspect_commands_wait_for_guided_and_velocities_need_it() {
 #[test]
 fn inspect_commands_outside_inspect_are_refused_and_bad_altitudes_too() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::InspectSetWaypoint {
+    let out = h.app(ShotRequest::InspectSetWaypoint {
         lat_deg: -35.3625,
         lon_deg: 149.1655,
         alt_m: 25.0,
     });
     assert!(error_text(&out).contains("needs an inspect shot"));
-    let out = h.app(SoloMessage::InspectMoveGimbal {
+    let out = h.app(ShotRequest::InspectMoveGimbal {
         pitch_deg: -10.0,
         roll_deg: 0.0,
         yaw_deg: 0.0,
     });
     assert!(error_text(&out).contains("needs an inspect shot"));
-    let out = h.app(SoloMessage::InspectMoveVehicle {
+    let out = h.app(ShotRequest::InspectMoveVehicle {
         vx: 1.0,
         vy: 0.0,
         vz: 0.0,
@@ -270,7 +270,7 @@ fn inspect_commands_outside_inspect_are_refused_and_bad_altitudes_too() {
     assert!(out.to_app.is_empty() && out.commands.is_empty());
 
     h.inspecting();
-    let out = h.app(SoloMessage::InspectSetWaypoint {
+    let out = h.app(ShotRequest::InspectSetWaypoint {
         lat_deg: -35.3625,
         lon_deg: 149.1655,
         alt_m: 300.0,
@@ -308,9 +308,9 @@ fn scan_circles_the_orbit_roi_level_by_level_with_photos_then_loiters() {
     let mut h = Harness::ready();
     h.engine.settings.site_scan.scan_speed_mps = 6.0;
     h.orbiting();
-    let out = h.app(SoloMessage::ScanStart);
+    let out = h.app(ShotRequest::ScanStart);
     // The orbit hands over (LOITER), the scan takes the vehicle (GUIDED again).
-    assert_eq!(out.to_app, [SoloMessage::GetCurrentShot(NONE)]);
+    assert_eq!(out.to_app, [ShotEvent::CurrentShot(NONE)]);
     assert_eq!(h.engine.last_exit(), "");
     assert_eq!(h.engine.current_shot(), SCAN);
     let st = h.engine.status();
@@ -342,7 +342,7 @@ fn scan_circles_the_orbit_roi_level_by_level_with_photos_then_loiters() {
             CommandKind::ReleasePayloadAuthority
         ]
     );
-    assert_eq!(out.to_app.last(), Some(&SoloMessage::GetCurrentShot(NONE)));
+    assert_eq!(out.to_app.last(), Some(&ShotEvent::CurrentShot(NONE)));
 }
 
 #[test]
@@ -353,7 +353,7 @@ fn scan_reports_progress_and_pauses() {
         lon_deg: LON + 25.0 * m_lon(),
         alt_rel_m: 0.0,
     });
-    h.app(SoloMessage::ScanStart);
+    h.app(ShotRequest::ScanStart);
     let st = h.engine.status();
     assert!(
         (st.roi_lon_deg - LON - 25.0 * m_lon()).abs() < 1e-9,
@@ -363,7 +363,7 @@ fn scan_reports_progress_and_pauses() {
     h.fly(30_000);
     let p = h.engine.status().progress;
     assert!(p > 0.05 && p < 1.0, "{p}");
-    h.app(SoloMessage::Pause);
+    h.app(ShotRequest::Pause);
     assert_eq!(h.engine.status().phase(), ShotPhase::Paused);
     h.fly(10_000);
     let held = h.engine.status().progress;
@@ -378,7 +378,7 @@ fn scan_reports_progress_and_pauses() {
 #[test]
 fn scan_without_an_roi_looks_where_the_camera_looks() {
     let mut h = Harness::ready();
-    h.app(SoloMessage::ScanStart);
+    h.app(ShotRequest::ScanStart);
     // Camera level, heading east: 20 m ahead (the test's metres are spherical).
     let st = h.engine.status();
     assert!(
@@ -387,13 +387,13 @@ fn scan_without_an_roi_looks_where_the_camera_looks() {
     );
     assert!((st.roi_lat_deg - LAT).abs() < 1e-9);
     // Once only.
-    let out = h.app(SoloMessage::ScanStart);
+    let out = h.app(ShotRequest::ScanStart);
     assert!(out.commands.is_empty() && out.to_app.is_empty());
 }
 
 #[test]
 fn scan_and_survey_need_the_air() {
-    for msg in [SoloMessage::ScanStart, SoloMessage::SurveyStart] {
+    for msg in [ShotRequest::ScanStart, ShotRequest::SurveyStart] {
         let mut h = Harness::landed();
         h.engine.settings.site_scan.survey_area = vec![
             crate::shots::GeoPoint {
@@ -428,7 +428,7 @@ fn scan_and_survey_need_the_air() {
 #[test]
 fn survey_without_an_area_is_refused() {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SurveyStart);
+    let out = h.app(ShotRequest::SurveyStart);
     assert!(error_text(&out).starts_with("survey: no area to survey"));
     assert!(out.commands.is_empty());
 }
@@ -444,7 +444,7 @@ fn survey_mows_the_keep_in_hold_line_with_photos_then_loiters() {
     let g = AppGeofence::new(1, [(0u8, &fence[..], &hold[..])].into_iter()).unwrap();
     h.engine.handle_app_geofence(&g, h.now);
     h.drain();
-    let out = h.app(SoloMessage::SurveyStart);
+    let out = h.app(ShotRequest::SurveyStart);
     assert_eq!(h.engine.current_shot(), SURVEY);
     assert_eq!(
         kinds(&out)[..2],
@@ -484,14 +484,14 @@ fn survey_uses_the_configured_area_without_a_fence_and_survives_the_app() {
             alt_rel_m: 0.0,
         })
         .collect();
-    h.app(SoloMessage::SurveyStart);
+    h.app(ShotRequest::SurveyStart);
     h.set_mode(FlightMode::Guided);
     h.fly(5_000);
     h.session(1, false);
     assert_eq!(h.engine.current_shot(), SURVEY, "flies on without the app");
     // Another shot replaces it.
     h.connect_app(2);
-    h.app(SoloMessage::SetCurrentShot(ORBIT));
+    h.app(ShotRequest::StartShot(ORBIT));
     assert_eq!(h.engine.current_shot(), ORBIT);
     assert_eq!(
         h.counter("skymesh_shot_exits_total", &[("reason", "replaced")]),

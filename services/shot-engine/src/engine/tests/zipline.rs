@@ -1,15 +1,15 @@
 //! Zipline: flies from entry, options both ways, A (new line), B / ZIPLINE_LOCK (spot
 //! lock), LOCATION while locked, pause.
 
+use skymesh_ipc_types::shot_api::shots::ZIPLINE;
+use skymesh_ipc_types::shot_api::{Location, ShotEvent, ShotRequest};
 use skymesh_ipc_types::{Button, Command, CommandKind, FlightMode};
-use solo_proto::shots::ZIPLINE;
-use solo_proto::{Location, SoloMessage};
 
 use super::*;
 use crate::shots::{projected_roi, VehicleView};
 
-fn options(cruise: f32, is_3d: u8, cam: u8) -> SoloMessage {
-    SoloMessage::ZiplineOptions {
+fn options(cruise: f32, is_3d: u8, cam: u8) -> ShotEvent {
+    ShotEvent::ZiplineOptions {
         cruise_speed: cruise,
         is_3d,
         cam_pointing: cam,
@@ -20,10 +20,10 @@ fn options(cruise: f32, is_3d: u8, cam: u8) -> SoloMessage {
 /// GUIDED reached.
 fn zipping() -> Harness {
     let mut h = Harness::ready();
-    let out = h.app(SoloMessage::SetCurrentShot(ZIPLINE));
+    let out = h.app(ShotRequest::StartShot(ZIPLINE));
     assert_eq!(
         out.to_app,
-        [SoloMessage::GetCurrentShot(ZIPLINE), options(0.0, 0, 0)]
+        [ShotEvent::CurrentShot(ZIPLINE), options(0.0, 0, 0)]
     );
     assert_eq!(
         cmds(&out),
@@ -92,7 +92,7 @@ fn b_and_zipline_lock_toggle_the_spot_lock() {
     assert_eq!(
         out.to_app,
         [
-            SoloMessage::Location(Location {
+            ShotEvent::Location(Location {
                 lat_deg: spot.lat_deg,
                 lon_deg: spot.lon_deg,
                 alt_m: spot.alt_rel_m
@@ -108,19 +108,19 @@ fn b_and_zipline_lock_toggle_the_spot_lock() {
     }));
     assert_eq!(h.engine.status().roi_valid, 1);
     // The app's lock toggles it off: the ROI is cleared.
-    let out = h.app(SoloMessage::ZiplineLock);
+    let out = h.app(ShotRequest::ZiplineLock);
     assert_eq!(out.to_app, [options(0.0, 0, 0)]);
     assert!(kinds(&h.tick()).contains(&CommandKind::ClearRoi));
     // Options with camPointing 1 lock it again.
     let out = h.app(options(1.0, 1, 1));
-    assert!(matches!(out.to_app[0], SoloMessage::Location(_)));
+    assert!(matches!(out.to_app[0], ShotEvent::Location(_)));
     assert_eq!(out.to_app[1], options(1.0, 1, 1));
 }
 
 #[test]
 fn a_location_moves_a_locked_spot_keeping_its_altitude() {
     let mut h = zipping();
-    let out = h.app(SoloMessage::Location(loc(50.0)));
+    let out = h.app(ShotRequest::Location(loc(50.0)));
     assert!(out.to_app.is_empty(), "no spot lock: ignored");
     h.button(Button::B);
     let spot = projected_roi(&view(&h));
@@ -128,12 +128,12 @@ fn a_location_moves_a_locked_spot_keeping_its_altitude() {
         alt_m: 7.0,
         ..loc(50.0)
     };
-    let out = h.app(SoloMessage::Location(target));
+    let out = h.app(ShotRequest::Location(target));
     let moved = Location {
         alt_m: spot.alt_rel_m,
         ..loc(50.0)
     };
-    assert_eq!(out.to_app, [SoloMessage::Location(moved)]);
+    assert_eq!(out.to_app, [ShotEvent::Location(moved)]);
     assert_eq!(h.engine.status().roi_lat_deg, moved.lat_deg);
 }
 
@@ -157,8 +157,8 @@ fn pause_toggles_the_cruise_speed_and_tells_the_app() {
     let mut h = zipping();
     h.app(options(2.5, 0, 0));
     let out = h.button(Button::Pause);
-    assert_eq!(out.to_app, [SoloMessage::Pause, options(0.0, 0, 0)]);
-    let out = h.app(SoloMessage::Pause);
+    assert_eq!(out.to_app, [ShotEvent::Pause, options(0.0, 0, 0)]);
+    let out = h.app(ShotRequest::Pause);
     assert_eq!(out.to_app, [options(2.5, 0, 0)]);
 }
 
@@ -167,7 +167,7 @@ fn zipline_entry_is_gated_like_every_shot() {
     let mut h = Harness::ready();
     h.status.armed = 0;
     h.push_status();
-    let out = h.app(SoloMessage::SetCurrentShot(ZIPLINE));
-    assert_eq!(out.to_app, [SoloMessage::ShotError(1)]);
+    let out = h.app(ShotRequest::StartShot(ZIPLINE));
+    assert_eq!(out.to_app, [ShotEvent::Refused(1)]);
     assert!(out.commands.is_empty());
 }
