@@ -86,10 +86,13 @@ impl Demand {
     fn next_deadline(&self, control_hold: Duration) -> Option<tokio::time::Instant> {
         let now = Instant::now();
         let now_ns = monotonic_ns();
+        // Lapsed words are not deadlines any more (they are forgotten only where the
+        // demand is asked for, which `always_on` skips).
         let lease = self
             .words
             .iter()
-            .map(|&(_, until)| now + Duration::from_nanos(until.saturating_sub(now_ns)))
+            .filter(|&&(_, until)| until > now_ns)
+            .map(|&(_, until)| now + Duration::from_nanos(until - now_ns))
             .min();
         let hold = self
             .last_control
