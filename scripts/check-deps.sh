@@ -12,7 +12,7 @@
 # the list only shrinks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-KNOWN="skymesh-dji-gateway -> skymesh-shot-engine"
+KNOWN=""
 cargo metadata --format-version 1 --no-deps --offline 2>/dev/null \
   | KNOWN="$KNOWN" python3 -c '
 import json, os, sys

@@ -24,6 +24,7 @@ pub mod shot;
 pub mod shot_api;
 pub mod shot_fence;
 pub mod swarm;
+pub mod task;
 pub mod topics;
 pub mod vehicle;
 pub mod view;
@@ -64,6 +65,10 @@ pub use swarm::{
     drone_flags, swarm_flags, DroneState, SwarmCommand, SwarmCommandError, SwarmCommandKind,
     SwarmDrone, SwarmReply, SwarmResult, SwarmState, SwarmWatch, ALL_DRONES, SWARM_MAX_DRONES,
     SWARM_WATCH_LEASE_NS,
+};
+pub use task::{
+    FlightTaskStatus, PoiReason, PoiTaskStatus, TaskEvent, TaskEventKind, TaskPoint, TaskRequest,
+    TaskRequestKind, TaskResult, TASK_MAX_POINTS,
 };
 pub use topics::{Topic, TopicQos};
 pub use vehicle::{FlightMode, GpsFix, VehicleState, VehicleStatus};

@@ -224,6 +224,17 @@ pub fn input_buttons() -> Topic {
     Topic::new("skymesh/input/buttons".into(), TopicQos::COMMANDS)
 }
 
+/// [`crate::TaskRequest`]s for vehicle `id` from gateways to the shot engine's
+/// task runner.
+pub fn task_request(id: u8) -> Topic {
+    Topic::new(format!("skymesh/task/{id}/request"), TopicQos::COMMANDS)
+}
+
+/// [`crate::TaskEvent`]s of the task runner for vehicle `id`: replies and progress.
+pub fn task_event(id: u8) -> Topic {
+    Topic::new(format!("skymesh/task/{id}/event"), TopicQos::EVENTS)
+}
+
 /// [`crate::HardwareRequest`]s from gateways to the hardware service.
 pub fn hardware_request() -> Topic {
     Topic::new("skymesh/hardware/request".into(), TopicQos::COMMANDS)

@@ -625,10 +625,33 @@ restart = {{ initial_backoff_ms = 1500, jitter = 0.0 }}
 name = "dji-gateway"
 binary = "{bins}/skymesh-dji-gateway"
 config = "dji-gateway.toml"
-after = ["{link}", "mqtt-broker"]
+after = ["{link}", "mqtt-broker", "shot-engine"]
 "#,
                 bins = bins.display(),
             );
+            // The DJI gateway's takeoff, fly-to and POI are flown by the shot engine's
+            // task runner: a mesh without the Solo services gets the engine alone.
+            if !opts.solo {
+                std::fs::write(
+                    d.join("shot-engine.toml"),
+                    format!(
+                        "vehicle_id = 1\nstate_file = \"{}\"\n{}\n",
+                        d.join("shot-engine-state.json").display(),
+                        opts.shot_engine_extra
+                    ),
+                )?;
+                let _ = write!(
+                    services,
+                    r#"
+[[service]]
+name = "shot-engine"
+binary = "{bins}/skymesh-shot-engine"
+config = "shot-engine.toml"
+after = ["{link}"]
+"#,
+                    bins = bins.display(),
+                );
+            }
         }
 
         let mut digiview_port = 0;

@@ -21,20 +21,16 @@ use std::time::Duration;
 
 use dji_proto::{codes, Envelope, ServiceRequest};
 use skymesh_ipc_types::{AuthorityDomain, Command};
-use skymesh_runtime::clock::monotonic_ns;
-use skymesh_shot_engine::shots::GeoPoint;
 use tokio::sync::Mutex;
 
 use crate::config::Settings;
 use crate::drc::Drc;
-use crate::flight_task::{self, Control, TaskHandle, TaskKind, TaskSpec};
 use crate::link::Snapshot;
 use crate::pano_task::{self, PanoControl, PanoHandle};
 use crate::payload::{self, PayloadMemory, Plan};
-use crate::poi;
-use crate::poi_task::{self, PoiControl, PoiHandle};
 use crate::progress::Heights;
 use crate::shared::{failure_code, run_commands, Shared};
+use crate::tasks::{task_point, TaskClient};
 
 /// Which authority a method needs before anything is sent.
 pub fn authority_needed(req: &ServiceRequest) -> Option<AuthorityDomain> {
@@ -94,14 +90,22 @@ pub fn precheck(
     }
 }
 
-/// The services side's state: running tasks, POI, panorama, the DRC link, payload
-/// memory.
+/// `|speed| ≤ max`, finite (poi_circle_speed_set).
+pub fn check_speed(speed: f64, max: f64) -> Result<f64, u32> {
+    if speed.is_finite() && speed.abs() <= max {
+        Ok(speed)
+    } else {
+        Err(codes::OUT_OF_RANGE)
+    }
+}
+
+/// The services side's state: the task runner's client (flight tasks, POI), the
+/// panorama, the DRC link, payload memory.
 #[derive(Debug)]
 pub struct Dispatcher {
     shared: Shared,
     drc: Arc<Mutex<Drc>>,
-    task: Option<TaskHandle>,
-    poi: Option<PoiHandle>,
+    tasks: TaskClient,
     pano: Option<PanoHandle>,
     /// Locked briefly by `handle` and by a camera_mode_switch once acknowledged
     /// (never across an await).
@@ -109,23 +113,22 @@ pub struct Dispatcher {
 }
 
 impl Dispatcher {
-    pub fn new(shared: Shared, drc: Drc) -> Self {
+    pub fn new(shared: Shared, drc: Drc, tasks: TaskClient) -> Self {
         Dispatcher {
             shared,
             drc: Arc::new(Mutex::new(drc)),
-            task: None,
-            poi: None,
+            tasks,
             pano: None,
             memory: Arc::default(),
         }
     }
 
     pub fn task_active(&self) -> bool {
-        self.task.as_ref().is_some_and(TaskHandle::is_running)
+        self.tasks.task_active()
     }
 
     pub fn poi_active(&self) -> bool {
-        self.poi.as_ref().is_some_and(PoiHandle::is_running)
+        self.tasks.poi_active()
     }
 
     pub fn pano_active(&self) -> bool {
@@ -167,20 +170,15 @@ impl Dispatcher {
                 };
                 let target_rel = heights.rel_from_ellipsoid(t.target_height);
                 let flight_alt = t.commander_flight_height.unwrap_or(target_rel);
-                let spec = TaskSpec {
-                    kind: TaskKind::Takeoff {
-                        flight_id: t.flight_id.clone(),
-                    },
-                    climb_alt_rel_m: Some(t.security_takeoff_height),
-                    target: GeoPoint {
-                        lat_deg: t.target_latitude,
-                        lon_deg: t.target_longitude,
-                        alt_rel_m: flight_alt as f32,
-                    },
-                    speed_mps: Some(t.max_speed as f32),
+                let target = task_point(t.target_latitude, t.target_longitude, flight_alt);
+                self.tasks.takeoff(
+                    env,
+                    t.flight_id.clone(),
+                    t.security_takeoff_height,
+                    target,
+                    t.max_speed as f32,
                     heights,
-                };
-                self.start_task(spec, env);
+                );
             }
             S::FlyToPoint(f) => {
                 let Some(heights) = self.heights(&snap) else {
@@ -190,30 +188,17 @@ impl Dispatcher {
                 let Some(p) = f.points.first().copied() else {
                     return self.reply(env, codes::BAD_ARRAY_SIZE);
                 };
-                let spec = TaskSpec {
-                    kind: TaskKind::FlyTo {
-                        fly_to_id: f.fly_to_id.clone(),
-                    },
-                    climb_alt_rel_m: None,
-                    target: GeoPoint {
-                        lat_deg: p.latitude,
-                        lon_deg: p.longitude,
-                        alt_rel_m: heights.rel_from_ellipsoid(p.height) as f32,
-                    },
-                    // 0: the autopilot's own speed (WPNAV_SPEED on ArduCopter).
-                    speed_mps: (f.max_speed > 0).then_some(f.max_speed as f32),
-                    heights,
-                };
-                self.start_task(spec, env);
+                let target = task_point(
+                    p.latitude,
+                    p.longitude,
+                    heights.rel_from_ellipsoid(p.height),
+                );
+                // 0: the autopilot's own speed (WPNAV_SPEED on ArduCopter).
+                let speed = (f.max_speed > 0).then_some(f.max_speed as f32);
+                self.tasks
+                    .fly_to(env, f.fly_to_id.clone(), target, speed, heights);
             }
-            S::FlyToPointStop => match self.running_task() {
-                Some(t) => {
-                    if let Err(e) = t.control.send(Control::Stop { request: env }) {
-                        self.reply(control_request(e.0), codes::NO_TASK);
-                    }
-                }
-                None => self.reply(env, codes::NO_TASK),
-            },
+            S::FlyToPointStop => self.tasks.stop(env),
             S::FlyToPointUpdate(u) => {
                 let Some(heights) = self.heights(&snap) else {
                     return self.reply(env, codes::WRONG_STATE);
@@ -222,57 +207,31 @@ impl Dispatcher {
                 let Some(p) = u.points.first().copied() else {
                     return self.reply(env, codes::BAD_ARRAY_SIZE);
                 };
-                let target = GeoPoint {
-                    lat_deg: p.latitude,
-                    lon_deg: p.longitude,
-                    alt_rel_m: heights.rel_from_ellipsoid(p.height) as f32,
-                };
-                match self.running_task() {
-                    Some(t) => {
-                        let c = Control::Update {
-                            target,
-                            speed_mps: Some(u.max_speed as f32),
-                            request: env,
-                        };
-                        if let Err(e) = t.control.send(c) {
-                            self.reply(control_request(e.0), codes::NO_TASK);
-                        }
-                    }
-                    None => self.reply(env, codes::NO_TASK),
-                }
+                let target = task_point(
+                    p.latitude,
+                    p.longitude,
+                    heights.rel_from_ellipsoid(p.height),
+                );
+                self.tasks.update(env, target, u.max_speed as f32);
             }
             S::PoiModeEnter {
                 latitude,
                 longitude,
                 height,
-            } => self.poi_enter(env, &snap, latitude, longitude, height),
-            S::PoiModeExit => match self.running_poi() {
-                Some(p) => {
-                    if let Err(e) = p.control.send(PoiControl::Exit { request: env }) {
-                        self.reply(poi_request(e.0), codes::WRONG_STATE);
-                    }
-                }
-                None => self.reply(env, codes::WRONG_STATE),
-            },
+            } => {
+                // The document: POI height is relative to the takeoff point (home).
+                self.tasks
+                    .poi_enter(env, task_point(latitude, longitude, height));
+            }
+            S::PoiModeExit => self.tasks.poi_exit(env),
             S::PoiCircleSpeedSet { circle_speed } => {
                 let max = self.shared.settings.poi.max_circle_speed_mps;
-                let speed = match poi::check_speed(circle_speed, max) {
-                    Ok(s) => s,
+                match check_speed(circle_speed, max) {
+                    Ok(speed) => self.tasks.poi_speed(env, speed),
                     Err(code) => {
                         tracing::info!(circle_speed, max, "POI speed refused");
-                        return self.reply(env, code);
+                        self.reply(env, code);
                     }
-                };
-                match self.running_poi() {
-                    Some(p) => {
-                        if let Err(e) = p.control.send(PoiControl::Speed {
-                            speed,
-                            request: env,
-                        }) {
-                            self.reply(poi_request(e.0), codes::WRONG_STATE);
-                        }
-                    }
-                    None => self.reply(env, codes::WRONG_STATE),
                 }
             }
             other => self.payload(env, &other, &snap),
@@ -281,62 +240,6 @@ impl Dispatcher {
 
     fn heights(&self, snap: &Snapshot) -> Option<Heights> {
         Heights::from_snapshot(snap, self.shared.settings.flight.geoid_undulation_m)
-    }
-
-    fn running_task(&self) -> Option<&TaskHandle> {
-        self.task.as_ref().filter(|t| t.is_running())
-    }
-
-    fn running_poi(&self) -> Option<&PoiHandle> {
-        self.poi.as_ref().filter(|p| p.is_running())
-    }
-
-    /// Ends a running task and POI (they end with `wayline_cancel` / status ok).
-    fn preempt_all(&mut self) {
-        if let Some(t) = self.task.take().filter(TaskHandle::is_running) {
-            let _ = t.control.send(Control::Preempt);
-        }
-        if let Some(p) = self.poi.take().filter(PoiHandle::is_running) {
-            let _ = p.control.send(PoiControl::Preempt);
-        }
-    }
-
-    fn start_task(&mut self, spec: TaskSpec, env: Envelope) {
-        self.preempt_all();
-        self.task = Some(flight_task::spawn(self.shared.clone(), spec, env));
-    }
-
-    fn poi_enter(&mut self, env: Envelope, snap: &Snapshot, lat: f64, lon: f64, height: f64) {
-        let view = match poi::enter_check(snap, monotonic_ns()) {
-            Ok(v) => v,
-            Err((code, why)) => {
-                tracing::info!(
-                    result = code,
-                    reason = why,
-                    "POI refused: the vehicle cannot orbit now"
-                );
-                self.shared.emit.event(
-                    "poi_status_notify",
-                    dji_proto::PoiStatusNotify {
-                        status: dji_proto::PoiStatus::Failed,
-                        reason: why,
-                        circle_radius: 0.0,
-                        circle_speed: 0.0,
-                        max_circle_speed: self.shared.settings.poi.max_circle_speed_mps,
-                    },
-                    true,
-                );
-                return self.reply(env, code);
-            }
-        };
-        self.preempt_all();
-        // The document: POI height is relative to the takeoff point (home).
-        let point = GeoPoint {
-            lat_deg: lat,
-            lon_deg: lon,
-            alt_rel_m: height as f32,
-        };
-        self.poi = Some(poi_task::spawn(self.shared.clone(), point, view, env));
     }
 
     fn grab(&self, env: Envelope, domain: AuthorityDomain) {
@@ -442,30 +345,6 @@ impl Dispatcher {
                 });
             }
         }
-    }
-}
-
-fn control_request(c: Control) -> Envelope {
-    match c {
-        Control::Stop { request } | Control::Update { request, .. } => request,
-        // Never sent with a request.
-        Control::Preempt => Envelope {
-            tid: String::new(),
-            bid: String::new(),
-            timestamp: 0,
-            gateway: None,
-            method: String::new(),
-            data: serde_json::Value::Null,
-            need_reply: None,
-            seq: None,
-        },
-    }
-}
-
-fn poi_request(c: PoiControl) -> Envelope {
-    match c {
-        PoiControl::Speed { request, .. } | PoiControl::Exit { request } => request,
-        PoiControl::Preempt => control_request(Control::Preempt),
     }
 }
 
@@ -610,5 +489,13 @@ mod tests {
             Some(AuthorityDomain::Flight)
         );
         assert_eq!(authority_needed(&S::DrcModeExit), None);
+    }
+
+    #[test]
+    fn poi_speed_sign_and_limit() {
+        assert_eq!(check_speed(-5.0, 5.0), Ok(-5.0));
+        assert_eq!(check_speed(5.01, 5.0), Err(codes::OUT_OF_RANGE));
+        assert_eq!(check_speed(-5.01, 5.0), Err(codes::OUT_OF_RANGE));
+        assert_eq!(check_speed(f64::NAN, 5.0), Err(codes::OUT_OF_RANGE));
     }
 }

@@ -29,6 +29,7 @@ use crate::mqtt::{self, MqttEvent};
 use crate::outbox::{OutMessage, Outbox};
 use crate::ratelimit::RateLimiter;
 use crate::shared::{Emitter, Keep, Outgoing, Shared};
+use crate::tasks::TaskClient;
 
 /// Outbox draining, the authority keep-alive and the task gauges, while any of them
 /// has something to do.
@@ -356,6 +357,12 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
         ctx.shutdown.clone(),
     );
     let keep = Arc::new(Keep::default());
+    let tasks = TaskClient::open(
+        &ctx.bus,
+        settings.clone(),
+        emit.clone(),
+        ctx.shutdown.clone(),
+    )?;
     let shared = Shared {
         settings: settings.clone(),
         link: link.clone(),
@@ -383,7 +390,7 @@ pub async fn run(settings: Settings, ctx: Context) -> anyhow::Result<()> {
     );
     let mut gw = Gateway {
         metrics: metrics.clone(),
-        dispatcher: Dispatcher::new(shared, drc),
+        dispatcher: Dispatcher::new(shared, drc, tasks),
         link,
         keep,
         client,

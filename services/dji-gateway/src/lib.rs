@@ -2,7 +2,9 @@
 //! (`../shared/specs/dji-cloud-live-flight-controls.md` with `specs/FACTS.md`). A
 //! cloud written for the DJI Cloud API talks MQTT to "the dock" `gateway_sn`; this
 //! gateway answers as that dock and flies a MAVLink aircraft through skymesh's
-//! arbiter (source `dji_drc`).
+//! arbiter (source `dji_drc`): directly for authority, payload and DRC sticks, and
+//! through the shot engine's task runner for takeoff_to_point, fly_to_point and POI
+//! (the flight logic is the engine's; the gateway translates).
 //!
 //! | module | role |
 //! |---|---|
@@ -12,8 +14,8 @@
 //! | [`inbound`] | the checks of one inbound message, in order (pure) |
 //! | `gateway` | the one loop: MQTT in/out, replies and events, authority keep-alive |
 //! | [`dispatch`] | the checks every service shares (gateway, payload_index, authority) and each method's execution |
-//! | [`progress`], [`flight_task`] | takeoff_to_point / fly_to_point: pure progress rules, and the running task |
-//! | [`poi`], [`poi_task`] | POI orbit (the shot engine's `Orbit`): pure rules, and the 25 Hz task |
+//! | [`tasks`] | takeoff_to_point, fly_to_point, POI ↔ the shot engine's task runner (`TaskRequest` / `TaskEvent`) |
+//! | [`progress`] | DJI ellipsoid heights ↔ above home, the planned path points |
 //! | [`payload`] | payload methods → camera/gimbal commands (pure) |
 //! | [`pano`], [`pano_task`] | panorama capture (camera_mode_switch 3 + camera_photo_take): pure station plan and progress, and the running gimbal sweep |
 //! | [`shared`] | what tasks share: settings, vehicle link, reply/event emitter, result-code mapping |
@@ -29,7 +31,6 @@ pub mod cloud;
 pub mod config;
 pub mod dispatch;
 pub mod drc;
-pub mod flight_task;
 mod gateway;
 pub mod inbound;
 pub mod link;
@@ -39,12 +40,11 @@ pub mod outbox;
 pub mod pano;
 pub mod pano_task;
 pub mod payload;
-pub mod poi;
-pub mod poi_task;
 pub mod progress;
 pub mod ratelimit;
 pub mod service;
 pub mod shared;
+pub mod tasks;
 pub mod tls;
 
 pub use config::{RawConfig, Settings};

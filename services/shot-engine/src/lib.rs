@@ -18,6 +18,7 @@
 //! | [`metrics`] | the exported `skymesh_shot_*` series |
 //! | [`ipc`] | the bus ports |
 //! | `service` | the event loop tying them together |
+//! | [`tasks`] | the task runner: gateways' flight tasks (takeoff, fly-to, POI orbit) over the bus |
 //!
 //! A restarted engine never resumes a shot: the arbiter's freshness brake stopped
 //! the vehicle when the setpoints stopped, and the engine only tells the app.
@@ -30,6 +31,7 @@ pub mod metrics;
 pub mod persist;
 mod service;
 pub mod shots;
+pub mod tasks;
 
 use skymesh_runtime::{Bus, CancellationToken, Context, Stats};
 
@@ -67,6 +69,8 @@ pub async fn run_with(
         "shot-engine starting"
     );
     let period = settings.loop_period;
+    // Flight tasks asked by gateways (the DJI gateway's takeoff, fly-to and POI).
+    tasks::spawn(&bus, settings.vehicle_id, shutdown.clone())?;
     let engine = Engine::open(settings, metrics);
     ready();
     service::run_loop(engine, ports, period, shutdown, overruns).await

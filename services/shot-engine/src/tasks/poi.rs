@@ -1,40 +1,25 @@
-//! POI mode: orbit a point with the shot engine's [`Orbit`] (pure geometry: radius =
-//! the vehicle's ground distance from the point when POI starts, altitude held, the
-//! tangential speed the cloud sets). This module holds the pure rules; `poi_task`
-//! runs them at [`TICK`] through the arbiter.
-//!
-//! Sign: DJI's `circle_speed` is negative clockwise, positive counter-clockwise, as
-//! the shot engine's cruise speed (positive = counter-clockwise seen from above):
-//! passed through unchanged.
+//! Orbiting a point of interest with the engine's [`Orbit`] (radius = the vehicle's
+//! ground distance from the point when the orbit starts, altitude held, the
+//! tangential speed the requester sets; positive counter-clockwise seen from above,
+//! as the engine's cruise speed). This module holds the pure rules; `poi_task` runs
+//! them at [`TICK`] through the arbiter.
 
 use std::time::Duration;
 
-use dji_proto::{codes, PoiStatus, PoiStatusNotify};
-use skymesh_ipc_types::FlightMode;
-use skymesh_shot_engine::shots::{GeoPoint, Limits, Orbit, VehicleView};
+use skymesh_ipc_types::{FlightMode, PoiReason, TaskResult};
 
-use crate::link::Snapshot;
-use crate::progress::{is_flying, position};
+use super::link::Snapshot;
+use super::progress::{is_flying, position};
+use crate::shots::{GeoPoint, Limits, Orbit, VehicleView};
 
 /// The orbit's control period (25 Hz, as the shot engine).
 pub const TICK: Duration = Duration::from_millis(40);
-/// Max age of each velocity setpoint: the arbiter brakes if the gateway stops.
+/// Max age of each velocity setpoint: the arbiter brakes if the runner stops.
 pub const SETPOINT_MAX_AGE_MS: u32 = 500;
 /// Orbit shaping: the shot engine's defaults.
 pub const MAX_ACCEL_MPS2: f32 = 2.0;
 pub const MAX_CLIMB_MPS: f32 = 1.5;
 pub const POSITION_GAIN: f32 = 0.5;
-
-/// poi_status_notify reasons (the document's table).
-pub mod reason {
-    pub const NORMAL: u8 = 0;
-    pub const POSITIONING_FAILURE: u8 = 4;
-    pub const NOT_TAKEN_OFF: u8 = 5;
-    pub const FLIGHT_MODE_ERROR: u8 = 6;
-    /// Returning, landing, attitude mode.
-    pub const UNAVAILABLE_MODE: u8 = 7;
-    pub const LINK_LOST: u8 = 8;
-}
 
 /// What the shots see of the vehicle, if its position is fresh at `now_ns`.
 pub fn view(s: &Snapshot, now_ns: u64) -> Option<VehicleView> {
@@ -56,54 +41,45 @@ fn unavailable_mode(m: FlightMode) -> bool {
     )
 }
 
-/// Whether POI may start now: `Err((result, poi reason))` if not.
-pub fn enter_check(s: &Snapshot, now_ns: u64) -> Result<VehicleView, (u32, u8)> {
+/// Whether an orbit may start now: `Err((result, reason))` if not.
+pub fn enter_check(s: &Snapshot, now_ns: u64) -> Result<VehicleView, (TaskResult, PoiReason)> {
     if !s.status.is_some_and(|st| st.is_link_up()) {
-        return Err((codes::VEHICLE_UNAVAILABLE, reason::LINK_LOST));
+        return Err((TaskResult::VehicleUnavailable, PoiReason::LinkLost));
     }
     let Some(v) = view(s, now_ns) else {
-        return Err((codes::WRONG_STATE, reason::POSITIONING_FAILURE));
+        return Err((TaskResult::WrongState, PoiReason::PositioningFailure));
     };
     if !is_flying(s) {
-        return Err((codes::WRONG_STATE, reason::NOT_TAKEN_OFF));
+        return Err((TaskResult::WrongState, PoiReason::NotTakenOff));
     }
     if s.status
         .is_some_and(|st| unavailable_mode(st.flight_mode()))
     {
-        return Err((codes::WRONG_STATE, reason::UNAVAILABLE_MODE));
+        return Err((TaskResult::WrongState, PoiReason::UnavailableMode));
     }
     Ok(v)
 }
 
 /// The reason to report when a running orbit has to end, if it has.
-pub fn running_check(s: &Snapshot, now_ns: u64) -> Option<u8> {
+pub fn running_check(s: &Snapshot, now_ns: u64) -> Option<PoiReason> {
     if !s.status.is_some_and(|st| st.is_link_up()) {
-        return Some(reason::LINK_LOST);
+        return Some(PoiReason::LinkLost);
     }
     if view(s, now_ns).is_none() {
-        return Some(reason::POSITIONING_FAILURE);
+        return Some(PoiReason::PositioningFailure);
     }
     if !s.holds_flight() {
-        return Some(reason::FLIGHT_MODE_ERROR);
+        return Some(PoiReason::FlightModeError);
     }
     match s.status.map(|st| st.flight_mode()) {
         Some(FlightMode::Guided) => {}
-        Some(m) if unavailable_mode(m) => return Some(reason::UNAVAILABLE_MODE),
-        _ => return Some(reason::FLIGHT_MODE_ERROR),
+        Some(m) if unavailable_mode(m) => return Some(PoiReason::UnavailableMode),
+        _ => return Some(PoiReason::FlightModeError),
     }
     if !is_flying(s) {
-        return Some(reason::NOT_TAKEN_OFF);
+        return Some(PoiReason::NotTakenOff);
     }
     None
-}
-
-/// `|speed| ≤ max`, finite.
-pub fn check_speed(speed: f64, max: f64) -> Result<f64, u32> {
-    if speed.is_finite() && speed.abs() <= max {
-        Ok(speed)
-    } else {
-        Err(codes::OUT_OF_RANGE)
-    }
 }
 
 /// One orbit around the point.
@@ -143,6 +119,10 @@ impl PoiController {
         self.speed
     }
 
+    pub fn max_speed(&self) -> f64 {
+        self.max_speed
+    }
+
     pub fn set_speed(&mut self, speed: f64) {
         self.speed = speed;
     }
@@ -153,24 +133,13 @@ impl PoiController {
             .step(v, dt_s, self.speed as f32, &self.limits)
             .velocity_ned_mps
     }
-
-    /// poi_status_notify data.
-    pub fn status(&self, status: PoiStatus, reason: u8) -> PoiStatusNotify {
-        PoiStatusNotify {
-            status,
-            reason,
-            circle_radius: crate::progress::round1(self.radius_m()),
-            circle_speed: self.speed,
-            max_circle_speed: self.max_speed,
-        }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shots::{bearing_deg, ground_distance_m, offset};
     use skymesh_ipc_types::{AuthorityState, CommandSource, VehicleState, VehicleStatus};
-    use skymesh_shot_engine::shots::{bearing_deg, ground_distance_m, offset};
 
     const POINT: GeoPoint = GeoPoint {
         lat_deg: -35.363_261,
@@ -199,6 +168,7 @@ mod tests {
                 flight_holder: CommandSource::DjiDrc.to_wire(),
                 ..Default::default()
             }),
+            source: CommandSource::DjiDrc,
         }
     }
 
@@ -216,23 +186,23 @@ mod tests {
         let ground = snap(at(0.0, 20.0, 0.0), FlightMode::Loiter, true);
         assert_eq!(
             enter_check(&ground, 1).unwrap_err(),
-            (codes::WRONG_STATE, reason::NOT_TAKEN_OFF)
+            (TaskResult::WrongState, PoiReason::NotTakenOff)
         );
         let rtl = snap(at(0.0, 20.0, 15.0), FlightMode::Rtl, true);
         assert_eq!(
             enter_check(&rtl, 1).unwrap_err(),
-            (codes::WRONG_STATE, reason::UNAVAILABLE_MODE)
+            (TaskResult::WrongState, PoiReason::UnavailableMode)
         );
         assert_eq!(
             enter_check(&flying, 10_000_000_000).unwrap_err(),
-            (codes::WRONG_STATE, reason::POSITIONING_FAILURE),
+            (TaskResult::WrongState, PoiReason::PositioningFailure),
             "stale position"
         );
         let mut down = flying;
         down.status.as_mut().unwrap().link_up = 0;
         assert_eq!(
             enter_check(&down, 1).unwrap_err(),
-            (codes::VEHICLE_UNAVAILABLE, reason::LINK_LOST)
+            (TaskResult::VehicleUnavailable, PoiReason::LinkLost)
         );
     }
 
@@ -241,20 +211,12 @@ mod tests {
         let ok = snap(at(0.0, 20.0, 15.0), FlightMode::Guided, true);
         assert_eq!(running_check(&ok, 1), None);
         let loiter = snap(at(0.0, 20.0, 15.0), FlightMode::Loiter, true);
-        assert_eq!(running_check(&loiter, 1), Some(reason::FLIGHT_MODE_ERROR));
+        assert_eq!(running_check(&loiter, 1), Some(PoiReason::FlightModeError));
         let land = snap(at(0.0, 20.0, 15.0), FlightMode::Land, true);
-        assert_eq!(running_check(&land, 1), Some(reason::UNAVAILABLE_MODE));
+        assert_eq!(running_check(&land, 1), Some(PoiReason::UnavailableMode));
         let mut taken = ok;
         taken.authority.as_mut().unwrap().flight_holder = CommandSource::ManualRc.to_wire();
-        assert_eq!(running_check(&taken, 1), Some(reason::FLIGHT_MODE_ERROR));
-    }
-
-    #[test]
-    fn speed_sign_and_limit() {
-        assert_eq!(check_speed(-5.0, 5.0), Ok(-5.0));
-        assert_eq!(check_speed(5.01, 5.0), Err(codes::OUT_OF_RANGE));
-        assert_eq!(check_speed(-5.01, 5.0), Err(codes::OUT_OF_RANGE));
-        assert_eq!(check_speed(f64::NAN, 5.0), Err(codes::OUT_OF_RANGE));
+        assert_eq!(running_check(&taken, 1), Some(PoiReason::FlightModeError));
     }
 
     /// Flies the controller on an ideal point mass: positive speed goes
@@ -271,7 +233,7 @@ mod tests {
         let mut prev = bearing_deg(&POINT, &v.position);
         for _ in 0..250 {
             let vel = c.step(&v, dt);
-            let frame = skymesh_shot_engine::shots::LocalFrame::new(v.position);
+            let frame = crate::shots::LocalFrame::new(v.position);
             v.position = frame.to_geo(&nalgebra::Vector3::new(
                 f64::from(vel[0]) * f64::from(dt),
                 f64::from(vel[1]) * f64::from(dt),
@@ -286,7 +248,7 @@ mod tests {
     }
 
     #[test]
-    fn the_orbit_turns_the_way_dji_says() {
+    fn positive_speed_turns_counter_clockwise() {
         let (ccw, r) = fly(3.0);
         assert!(
             ccw < -30.0,
@@ -297,16 +259,5 @@ mod tests {
         assert!(cw > 30.0, "negative speed: clockwise, turned {cw}°");
         let (still, _) = fly(0.0);
         assert!(still.abs() < 1.0, "zero holds: {still}");
-    }
-
-    #[test]
-    fn status_reports_radius_and_speeds() {
-        let s = snap(at(90.0, 12.34, 15.0), FlightMode::Guided, true);
-        let v = view(&s, 1).unwrap();
-        let mut c = PoiController::new(POINT, &v, 2.0, 5.0);
-        c.set_speed(-1.5);
-        let st = c.status(PoiStatus::InProgress, reason::NORMAL);
-        assert_eq!(st.circle_radius, 12.3);
-        assert_eq!((st.circle_speed, st.max_circle_speed), (-1.5, 5.0));
     }
 }
