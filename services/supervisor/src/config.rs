@@ -60,6 +60,7 @@ struct RawSupervisor {
     cleanup_interval_ms: u64,
     ipc_config: Option<String>,
     log_dir: Option<String>,
+    vehicles: Vec<i64>,
 }
 
 impl Default for RawSupervisor {
@@ -73,6 +74,7 @@ impl Default for RawSupervisor {
             cleanup_interval_ms: 2_000,
             ipc_config: None,
             log_dir: None,
+            vehicles: vec![1],
         }
     }
 }
@@ -144,6 +146,9 @@ pub struct Settings {
     pub ipc_config: Option<PathBuf>,
     /// Where children's output goes (`<log_dir>/<name>.log`), if configured.
     pub log_dir: Option<PathBuf>,
+    /// MAVLink system ids of the vehicles whose `skymesh_vehicle_*` gauges
+    /// `/metrics` exports (crate::vehicles), ascending.
+    pub vehicles: Vec<u8>,
     /// Enabled services in start order (every service after the ones it names in `after`).
     pub services: Vec<ServiceSpec>,
     /// Names of services configured with `enabled = false`.
@@ -343,6 +348,7 @@ impl RawConfig {
         )?);
         let ipc_config = s.ipc_config.as_deref().map(|p| resolve(base, p));
         let log_dir = s.log_dir.as_deref().map(|p| resolve(base, p));
+        let vehicles = vehicle_ids(&s.vehicles)?;
         let default_policy = self.restart.apply("restart", RestartPolicy::default())?;
 
         let all_names: Vec<&str> = self.services.iter().map(|s| s.name.as_str()).collect();
@@ -469,10 +475,28 @@ impl RawConfig {
             cleanup_interval,
             ipc_config,
             log_dir,
+            vehicles,
             services,
             disabled,
         })
     }
+}
+
+/// `supervisor.vehicles`: MAVLink system ids 1..=255, each once; sorted.
+fn vehicle_ids(raw: &[i64]) -> Result<Vec<u8>, ConfigError> {
+    const KEY: &str = "supervisor.vehicles";
+    let mut ids = Vec::with_capacity(raw.len());
+    for &v in raw {
+        let id = u8::try_from(v).ok().filter(|id| *id >= 1).ok_or_else(|| {
+            ConfigError::invalid(KEY, format!("{v} is not a MAVLink system id (1..=255)"))
+        })?;
+        if ids.contains(&id) {
+            return Err(ConfigError::invalid(KEY, format!("{id} is listed twice")));
+        }
+        ids.push(id);
+    }
+    ids.sort_unstable();
+    Ok(ids)
 }
 
 /// Topological order of `(name, after)` nodes (indices into `graph`); ties keep file
@@ -606,6 +630,21 @@ mod tests {
         assert!(s.services.is_empty());
         assert_eq!(s.heartbeat, Duration::from_millis(500));
         assert_eq!(s.ipc_config, None);
+        assert_eq!(s.vehicles, [1]);
+    }
+
+    #[test]
+    fn vehicles_are_system_ids_listed_once() {
+        let s = parse("[supervisor]\nvehicles = [3, 1, 255]").unwrap();
+        assert_eq!(s.vehicles, [1, 3, 255]);
+        assert!(parse("[supervisor]\nvehicles = []")
+            .unwrap()
+            .vehicles
+            .is_empty());
+        for bad in ["[0]", "[256]", "[-1]", "[2, 2]", "1", "[\"1\"]"] {
+            let e = parse(&format!("[supervisor]\nvehicles = {bad}")).unwrap_err();
+            assert!(e.to_string().contains("vehicles"), "{bad}: {e}");
+        }
     }
 
     #[test]

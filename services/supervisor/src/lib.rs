@@ -32,6 +32,7 @@ pub mod state;
 pub mod status_cmd;
 pub mod supervise;
 pub mod table;
+pub mod vehicles;
 
 use std::io::IsTerminal;
 use std::net::SocketAddr;
@@ -200,6 +201,12 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         .collect();
     let mesh = Arc::new(Mesh::new(&services, monitor_only));
     let registry = metrics::registry(mesh.clone()).context("registering the metrics collector")?;
+    let vehicles = Arc::new(vehicles::VehicleGauges::new(&settings.vehicles));
+    registry
+        .register(Box::new(
+            vehicles::Collect::new(vehicles.clone()).context("describing the vehicle gauges")?,
+        ))
+        .context("registering the vehicle gauges")?;
     if let Output::Files(dir) = &output {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating log directory {}", dir.display()))?;
@@ -249,6 +256,9 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     };
     monitor::spawn_watchers(&bus, &mesh, rule, &watch_stop, &watchers)
         .context("subscribing to service heartbeats")?;
+    vehicles
+        .attach(&bus)
+        .context("subscribing to the vehicles' state and status")?;
 
     if let Some(f) = &status_file {
         write_status_file(f, addr)
@@ -369,7 +379,9 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     watch_stop.cancel();
     watchers.close();
     watchers.wait().await;
-    // Our own node must be gone before asking whether any node of the domain is alive.
+    // Our own node must be gone before asking whether any node of the domain is alive
+    // (the vehicle gauges' subscribers hold it too).
+    vehicles.detach();
     drop(bus);
     // An adopted service that stopped is reaped by its parent (init), not by us, and
     // iceoryx2 takes a zombie's node for alive: give init a moment (it may reap only

@@ -349,7 +349,10 @@ impl MeshCollector {
             }
             _ => raw_name.clone(),
         };
-        if name == BUILD_INFO || OWN.iter().any(|(n, _, _)| *n == name) {
+        if name == BUILD_INFO
+            || OWN.iter().any(|(n, _, _)| *n == name)
+            || name.starts_with(crate::vehicles::PREFIX)
+        {
             return fail("name reserved for the supervisor's own metrics");
         }
         if entry.labels.try_as_str().is_none() {
@@ -510,6 +513,7 @@ mod tests {
             entry(StatKind::Gauge, "x_gauge", "service=evil", 1.0), // reserved label
             entry(StatKind::Gauge, "y_gauge", "9bad=1", 1.0),  // invalid label
             entry(StatKind::Gauge, "skymesh_service_up", "", 1.0), // supervisor's name
+            entry(StatKind::Gauge, "skymesh_vehicle_armed", "", 1.0), // supervisor's prefix
             entry(StatKind::Gauge, "g_total", "", 1.0),        // gauge named like a counter
         ];
         let b_only = [entry(StatKind::Gauge, "frames_total", "dir=in", 1.0)]; // type conflict with a's counter
@@ -640,12 +644,14 @@ mod tests {
             text.contains(r#"skymesh_topic_sample_age_seconds_count{service="a",topic="x"} 4"#),
             "{text}"
         );
-        // Dropped: bad name, reserved label, bad label, supervisor name, gauge *_total, type conflict.
+        // Dropped: bad name, reserved label, bad label, supervisor name, supervisor
+        // prefix, gauge *_total, type conflict.
         assert!(
-            text.contains("skymesh_supervisor_invalid_stats_entries 6"),
+            text.contains("skymesh_supervisor_invalid_stats_entries 7"),
             "{text}"
         );
         assert!(!text.contains("bad-name") && !text.contains("evil") && !text.contains("g_total"));
+        assert!(!text.contains("skymesh_vehicle_armed"), "{text}");
         assert_eq!(
             text.matches(r#"skymesh_service_up{service="a"}"#).count(),
             1
