@@ -53,10 +53,7 @@ pub use hardware::{
 pub use header::{Sample, SampleHeader, ServiceId};
 pub use payload::{GoProStatus, PayloadState};
 pub use service::{ServiceHealth, ServiceState, ServiceStats, StatEntry, StatKind};
-pub use shot::{
-    AppMessage, AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus,
-    APP_VALUE_CAPACITY,
-};
+pub use shot::{AppSession, Button, ButtonEvent, ButtonEventKind, ShotPhase, ShotStatus};
 pub use shot_api::{
     ShotDecodeError, ShotEvent, ShotEventSample, ShotRequest, ShotRequestSample, SHOT_BODY_CAPACITY,
 };

@@ -1,101 +1,12 @@
-//! Samples between the Solo app gateway and the shot engine, and button events.
-//!
-//! The gateway owns the transports (TCP 5507, UDP 14558): framing, the one-app rule,
-//! malformed-input accounting. It forwards each *decoded and validated* app message
-//! as an [`AppMessage`] (the message's Solo type id and its little-endian value, at
-//! most [`APP_VALUE_CAPACITY`] bytes) and the engine answers with [`AppMessage`]s the
-//! gateway writes to the app. Both sides read the value with the `solo-proto` codec,
-//! so the engine never sees a byte the gateway has not checked, and the engine's
-//! vocabulary is the Solo app protocol it implements (it *is* the ShotManager).
+//! The app connection and button samples of the shot path, and the engine's status.
+//! What apps ask of the shot engine and what it answers are protocol-neutral
+//! ([`crate::shot_api`]); gateways translate their wire protocols into them.
 
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::fixed::FixedStr;
 use crate::header::SampleHeader;
 use crate::wire_enum;
-
-/// The largest Solo message value carried on the bus. Every fixed-length message of
-/// the protocol fits; the only longer ones are SHOTMANAGER_ERROR text (truncated by
-/// the engine) and GEOFENCE_SET_DATA JSON (translated by the gateway).
-pub const APP_VALUE_CAPACITY: usize = 240;
-
-/// One Solo app message on the bus, either direction.
-///
-/// Topics: [`crate::topics::shot_from_app`] (gateway → engine) and
-/// [`crate::topics::shot_to_app`] (engine → gateway).
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.AppMessage.v1")]
-#[repr(C)]
-pub struct AppMessage {
-    pub header: SampleHeader,
-    /// From the gateway: the app connection it came from (1, 2, …; follow-stream
-    /// datagrams carry the session of the connected app, or 0 with none). To the
-    /// gateway: 0 = whichever app is connected now, else only that session.
-    pub session: u32,
-    /// Solo message type id (`messageType` on the wire).
-    pub msg_type: u32,
-    /// Bytes of `value` in use.
-    pub len: u32,
-    /// See [`app_flags`].
-    pub flags: u32,
-    pub value: [u8; APP_VALUE_CAPACITY],
-}
-crate::assert_layout!(AppMessage, size = 24 + 16 + APP_VALUE_CAPACITY, align = 8);
-
-/// Flag bits of [`AppMessage::flags`].
-pub mod app_flags {
-    /// The message arrived on the UDP follow stream, not the TCP connection.
-    pub const FOLLOW_STREAM: u32 = 0x01;
-}
-
-impl Default for AppMessage {
-    fn default() -> Self {
-        AppMessage {
-            header: SampleHeader::default(),
-            session: 0,
-            msg_type: 0,
-            len: 0,
-            flags: 0,
-            value: [0; APP_VALUE_CAPACITY],
-        }
-    }
-}
-
-/// A message value longer than [`APP_VALUE_CAPACITY`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[error("message type {msg_type}: value of {len} bytes exceeds the bus capacity of {APP_VALUE_CAPACITY}")]
-pub struct ValueTooLong {
-    pub msg_type: u32,
-    pub len: usize,
-}
-
-impl AppMessage {
-    pub fn new(session: u32, msg_type: u32, value: &[u8]) -> Result<Self, ValueTooLong> {
-        if value.len() > APP_VALUE_CAPACITY {
-            return Err(ValueTooLong {
-                msg_type,
-                len: value.len(),
-            });
-        }
-        let mut m = AppMessage {
-            session,
-            msg_type,
-            len: value.len() as u32,
-            ..AppMessage::default()
-        };
-        m.value[..value.len()].copy_from_slice(value);
-        Ok(m)
-    }
-
-    /// The value bytes; a `len` beyond capacity (another process wrote garbage) is clamped.
-    pub fn value(&self) -> &[u8] {
-        &self.value[..(self.len as usize).min(APP_VALUE_CAPACITY)]
-    }
-
-    pub fn is_follow_stream(&self) -> bool {
-        self.flags & app_flags::FOLLOW_STREAM != 0
-    }
-}
 
 /// The app connection as the gateway sees it: published on every connect and
 /// disconnect and once a second, so an engine that restarts learns it within a second.
@@ -238,27 +149,11 @@ impl ShotStatus {
     }
 }
 
-crate::impl_sample!(AppMessage, AppSession, ButtonEvent, ShotStatus);
+crate::impl_sample!(AppSession, ButtonEvent, ShotStatus);
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn app_message_round_trips_its_value() {
-        let m = AppMessage::new(3, 2, &[1, 2, 3]).unwrap();
-        assert_eq!(m.value(), &[1, 2, 3]);
-        assert_eq!(m.msg_type, 2);
-        assert!(AppMessage::new(1, 1000, &[0; APP_VALUE_CAPACITY + 1]).is_err());
-        assert!(AppMessage::new(1, 1000, &[0; APP_VALUE_CAPACITY]).is_ok());
-    }
-
-    #[test]
-    fn a_forged_length_is_clamped() {
-        let mut m = AppMessage::new(1, 2, &[9; 20]).unwrap();
-        m.len = u32::MAX;
-        assert_eq!(m.value().len(), APP_VALUE_CAPACITY);
-    }
 
     #[test]
     fn button_events_are_checked() {

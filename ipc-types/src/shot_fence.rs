@@ -1,8 +1,8 @@
 //! The Solo app's geofence on its way from the gateway to the shot engine.
 //!
-//! GEOFENCE_SET_DATA is JSON of up to 64 KiB and does not fit an
-//! [`crate::AppMessage`] (240 bytes), so solo-gateway decodes it and publishes the
-//! polygons as one fixed-capacity [`AppGeofence`]: at most
+//! GEOFENCE_SET_DATA is JSON of up to 64 KiB and fits no [`crate::ShotRequestSample`]
+//! (240 bytes of body), so solo-gateway decodes it and publishes the polygons as one
+//! fixed-capacity [`AppGeofence`]: at most
 //! [`MAX_APP_FENCE_POLYGONS`] polygons of at most [`MAX_APP_FENCE_VERTICES`]
 //! vertices each (more cannot be carried: the gateway answers the app itself).
 //! The gateway only translates; whether the polygons make a usable fence (three or
@@ -87,7 +87,7 @@ pub enum AppFenceTooLarge {
 #[repr(C)]
 pub struct AppGeofence {
     pub header: SampleHeader,
-    /// The app connection it came from (as [`crate::AppMessage::session`]).
+    /// The app connection it came from (as [`crate::ShotRequestSample::session`]).
     pub session: u32,
     /// Valid entries of `polygons` (0 = the app sent no polygon).
     pub polygon_count: u8,

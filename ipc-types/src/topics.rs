@@ -180,16 +180,6 @@ pub fn vehicle_payload(id: u8) -> Topic {
     Topic::new(format!("skymesh/vehicle/{id}/payload"), TopicQos::STATE)
 }
 
-/// [`crate::AppMessage`]s from the Solo app (gateway → shot engine).
-pub fn shot_from_app() -> Topic {
-    Topic::new("skymesh/shot/from_app".into(), TopicQos::EVENTS)
-}
-
-/// [`crate::AppMessage`]s to the Solo app (shot engine → gateway).
-pub fn shot_to_app() -> Topic {
-    Topic::new("skymesh/shot/to_app".into(), TopicQos::EVENTS)
-}
-
 /// [`crate::ShotRequestSample`]s: what apps ask of the shot engine, translated by
 /// their gateways (gateway → shot engine).
 pub fn shot_requests() -> Topic {

@@ -2,9 +2,9 @@
 //!
 //! No I/O and no runtime: the `solo-gateway` service owns the sockets (TCP 5507 for
 //! the app connection, UDP 14558 for the follow stream) and uses [`TlvCodec`] with
-//! `tokio_util::codec::Framed`; the `shot-engine` reads and writes the same values
-//! carried on the bus in `ipc_types::AppMessage` with [`SoloMessage::decode`] and
-//! [`SoloMessage::encode_value`].
+//! `tokio_util::codec::Framed`, and translates decoded messages into the shot
+//! engine's protocol-neutral requests and its events back (the engine never sees
+//! this crate).
 //!
 //! Wire format (`../shared/specs/solo-app-shotmanager.md`, corrected by
 //! `../shared/specs/FACTS.md`): little-endian TLV, `u32 type, u32 length, value`.

@@ -264,7 +264,7 @@ impl SoloMessage {
         dst.freeze()
     }
 
-    /// The value alone as one buffer (what `ipc_types::AppMessage` carries).
+    /// The value alone as one buffer.
     pub fn value_bytes(&self) -> Bytes {
         let mut dst = BytesMut::new();
         self.encode_value(&mut dst);
