@@ -236,6 +236,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(deprecated)]
     fn attitude_goes_at_the_ground_rate_while_disarmed() {
         let ground = stream_requests(&rates(), T, true, false);
         assert_eq!(

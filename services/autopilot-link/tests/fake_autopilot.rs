@@ -242,8 +242,9 @@ async fn it_introduces_itself_and_asks_for_telemetry() {
     assert_eq!(hb.mavtype, MavType::MAV_TYPE_ONBOARD_CONTROLLER);
     assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_INVALID);
 
+    // A disarmed autopilot: ATTITUDE at the ground rate (`ground_attitude_hz`).
     let c = fake.expect_interval("ATTITUDE", 30).await;
-    assert_eq!(c.param2, 20_000.0, "50 Hz");
+    assert_eq!(c.param2, 100_000.0, "10 Hz on the ground");
     assert_eq!((c.target_system, c.target_component), (VEHICLE, 1));
     // The flight mode arrives with the autopilot's HEARTBEAT: asked for at 5 Hz, not
     // ArduPilot's own 1 Hz, so a pilot's mode switch is known within 200 ms.

@@ -54,6 +54,10 @@ impl Mesh {
             port,
         });
         settings.reconnect_max = Duration::from_secs(1);
+        // These tests measure the telemetry of a disarmed simulator at the flight
+        // rate; the ground rate has tests of its own (`requests`, `fake_autopilot`,
+        // and tests/tests/ground_rates.rs end to end).
+        settings.rates.ground_attitude_hz = None;
         Mesh::start_with(settings).await
     }
 
