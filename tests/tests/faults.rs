@@ -469,6 +469,9 @@ fn every_service_killed_under_load_recovers_and_leaks_nothing() {
         .await;
 
         let files = settled_files(&mesh);
+        // A scrape first: the vehicle gauges connect to the vehicle topics at the
+        // first /metrics, which is the supervisor's steady state, not a leak.
+        mesh.http_get("/metrics").expect("/metrics");
         let sup_fds_start = fds(supervisor);
         for round in 1..=rounds {
             load.v.take_off(10.0).await;
