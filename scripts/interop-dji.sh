@@ -5,7 +5,8 @@
 # DRC link), and paho-mqtt from PyPI plays the cloud (tests/interop/dji_cloud.py):
 # authority, takeoff_to_point, drc_mode_enter over TLS, drone_control at 10 Hz,
 # seq rules, heart_beat, emergency stop, drc_mode_exit, hostile payloads.
-# The mesh is vehicle-sim + autopilot-link + dji-gateway under `skymesh up`, without
+# The mesh is vehicle-sim + autopilot-link + shot-engine (the DJI flight tasks) +
+# dji-gateway under `skymesh up`, without
 # the embedded mqtt-broker. Uses the binaries in target/debug (cargo build --workspace
 # first); installs mosquitto (apt-get) and paho-mqtt (pip, a venv if pip refuses).
 set -euo pipefail
@@ -110,6 +111,7 @@ printf 'endpoint = "tcp:127.0.0.1:%s"\nhome_lat = %s\nhome_lon = %s\nhome_alt_ms
   "$sim_port" "$home_lat" "$home_lon" "$home_alt" > "$work/vehicle-sim.toml"
 printf 'connection = "tcpout:127.0.0.1:%s"\nvehicle_id = 1\nendpoints = []\n' \
   "$sim_port" > "$work/autopilot-link.toml"
+printf 'vehicle_id = 1\nstate_file = "%s"\n' "$work/shot-engine-state.json" > "$work/shot-engine.toml"
 cat > "$work/dji-gateway.toml" <<EOF
 gateway_sn = "$sn"
 vehicle_id = 1
@@ -143,11 +145,18 @@ config = "autopilot-link.toml"
 after = ["vehicle-sim"]
 critical = true
 
+# The DJI takeoff, fly-to and POI are flown by the shot engine's task runner.
+[[service]]
+name = "shot-engine"
+binary = "$root/target/debug/skymesh-shot-engine"
+config = "shot-engine.toml"
+after = ["autopilot-link"]
+
 [[service]]
 name = "dji-gateway"
 binary = "$root/target/debug/skymesh-dji-gateway"
 config = "dji-gateway.toml"
-after = ["autopilot-link"]
+after = ["autopilot-link", "shot-engine"]
 EOF
 SKYMESH_DOMAIN="interopdji$$" RUST_LOG=info target/debug/skymesh up --config "$work/skymesh.toml" \
   --metrics 127.0.0.1:0 --status-file "$work/metrics.addr" > "$work/mesh.log" 2>&1 &

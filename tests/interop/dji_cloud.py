@@ -231,7 +231,7 @@ def wait_for_mesh(status_file, timeout=60.0):
             if addr:
                 with urllib.request.urlopen(f"http://{addr}/status", timeout=2) as r:
                     last = {s["name"]: s["state"] for s in json.load(r)}
-                if all(last.get(n) == "running" for n in ("vehicle-sim", "autopilot-link", "dji-gateway")):
+                if all(last.get(n) == "running" for n in ("vehicle-sim", "autopilot-link", "shot-engine", "dji-gateway")):
                     return addr
         except (OSError, ValueError):
             pass
@@ -327,7 +327,7 @@ def drc_enter_request(args, password):
 
 
 def scenario(args, codes):
-    step("waiting for the mesh (vehicle-sim, autopilot-link, dji-gateway)")
+    step("waiting for the mesh (vehicle-sim, autopilot-link, shot-engine, dji-gateway)")
     addr = wait_for_mesh(args.status_file)
 
     step("mosquitto refuses a wrong password")
