@@ -738,7 +738,9 @@ async fn a_tcpin_client_gets_nothing_before_signing_and_replays_cross_no_endpoin
                 let (link, _) = verify(&KEY, f.as_bytes())
                     .unwrap_or_else(|| panic!("{f:?} is not signed with the key"));
                 assert_eq!(link, 1);
-                if f.message_id() == 0 && f.system_id() == VEHICLE {
+                // The autopilot's (component 1), not autopilot-link's own
+                // heartbeat, which goes out as the same system from component 191.
+                if f.message_id() == 0 && f.system_id() == VEHICLE && f.component_id() == 1 {
                     return f;
                 }
             }
