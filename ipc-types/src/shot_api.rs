@@ -498,9 +498,10 @@ impl ShotEventSample {
     }
 }
 
+mod body;
 mod codec;
 
-use codec::{check_f32, check_lat, check_lon, Reader, Writer};
+use body::{check_f32, check_lat, check_lon, Reader, Writer};
 
 #[cfg(test)]
 mod tests;
