@@ -1,13 +1,15 @@
-//! Flight tasks asked of the shot engine's task runner by a gateway: take off to a
-//! point, fly to a point (stop, update), orbit a point of interest (speed, exit).
-//! Protocol-neutral: a gateway translates its protocol's requests into
-//! [`TaskRequest`]s and the runner's [`TaskEvent`]s back into its protocol's
-//! replies and events (the DJI gateway: services replies, `*_progress` and
-//! `poi_status_notify` events).
+//! Tasks asked of the shot engine's task runner by a gateway: take off to a
+//! point, fly to a point (stop, update), orbit a point of interest (speed, exit),
+//! sweep the gimbal through a panorama (stop). Protocol-neutral: a gateway
+//! translates its protocol's requests into [`TaskRequest`]s and the runner's
+//! [`TaskEvent`]s back into its protocol's replies and events (the DJI gateway:
+//! services replies, `*_progress`, `poi_status_notify` and
+//! `camera_photo_take_progress` events).
 //!
 //! Every request is answered by one [`TaskEventKind::Reply`] with its `request_id`
 //! and a [`TaskResult`]. A task started by a request reports under that request's
-//! id ([`TaskEventKind::Flight`], [`TaskEventKind::Poi`]) until a terminal status.
+//! id ([`TaskEventKind::Flight`], [`TaskEventKind::Poi`], [`TaskEventKind::Pano`])
+//! until a terminal status.
 //! The runner commands the vehicle through the arbiter as `source` (the gateway's
 //! own [`crate::CommandSource`]): authority, refusals and acks are the gateway's.
 //!
@@ -37,6 +39,12 @@ wire_enum! {
         PoiSpeed = 6 => "poi_speed",
         /// Brake and end the running orbit.
         PoiExit = 7 => "poi_exit",
+        /// Sweep the gimbal from where it points through `pano_stations` stations
+        /// at `pano_pitch_deg`, one photo each, then back (payload authority only:
+        /// the aircraft does not move).
+        PanoStart = 8 => "pano_start",
+        /// End the running panorama (status `Stopped`; the gimbal goes back).
+        PanoStop = 9 => "pano_stop",
     }
 }
 
@@ -76,6 +84,8 @@ wire_enum! {
         Flight = 2 => "flight",
         /// Status of the orbit started by `request_id`.
         Poi = 3 => "poi",
+        /// Progress of the panorama started by `request_id`.
+        Pano = 4 => "pano",
     }
 }
 
@@ -126,6 +136,21 @@ wire_enum! {
     }
 }
 
+wire_enum! {
+    /// `status` of a [`TaskEventKind::Pano`] event.
+    pub enum PanoTaskStatus: u8 {
+        /// Started (0 photos), and after each photo.
+        InProgress = 1 => "in_progress",
+        /// Every photo taken and the gimbal back at its start (terminal; also when
+        /// the gimbal did not get back: the photos exist).
+        Done = 2 => "done",
+        /// Ended early (`result` says why; terminal).
+        Failed = 3 => "failed",
+        /// Ended by a `PanoStop` (terminal; not an error).
+        Stopped = 4 => "stopped",
+    }
+}
+
 /// A point: WGS-84 latitude/longitude, metres above home.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
@@ -141,7 +166,7 @@ crate::assert_layout!(TaskPoint, size = 24, align = 8);
 ///
 /// Topic: [`crate::topics::task_request`] (gateways write, the shot engine reads).
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.TaskRequest.v1")]
+#[type_name("skymesh.TaskRequest.v2")]
 #[repr(C)]
 pub struct TaskRequest {
     pub header: SampleHeader,
@@ -171,9 +196,17 @@ pub struct TaskRequest {
     /// How long the runner waits for each command's acknowledgement, ms (the
     /// requester's own command timeout: its refusals read the same).
     pub ack_timeout_ms: u32,
-    pub reserved2: u32,
+    /// PanoStart: the stations' gimbal pitch, degrees (down negative).
+    pub pano_pitch_deg: f32,
+    /// PanoStart: the gimbal must reach each station within this, ms.
+    pub pano_settle_timeout_ms: u32,
+    /// PanoStart: photos per full circle (stations `360/n`° apart in yaw).
+    pub pano_stations: u8,
+    /// PanoStart: 1 to send `ClearRoi` first (an ROI would hold the gimbal).
+    pub pano_clear_roi: u8,
+    pub reserved2: [u8; 2],
 }
-crate::assert_layout!(TaskRequest, size = 24 + 8 + 24 + 32, align = 8);
+crate::assert_layout!(TaskRequest, size = 24 + 8 + 24 + 40, align = 8);
 
 impl TaskRequest {
     pub fn kind(&self) -> Result<TaskRequestKind, crate::UnknownValue> {
@@ -205,7 +238,7 @@ pub const TASK_MAX_POINTS: usize = 2;
 /// Topic: [`crate::topics::task_event`]. A requester keeps the events whose
 /// `source` is its own and matches `request_id`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("skymesh.TaskEvent.v1")]
+#[type_name("skymesh.TaskEvent.v2")]
 #[repr(C)]
 pub struct TaskEvent {
     pub header: SampleHeader,
@@ -218,7 +251,8 @@ pub struct TaskEvent {
     pub source: u8,
     /// [`TaskResult`] as stored on the wire.
     pub result: u8,
-    /// [`FlightTaskStatus`] or [`PoiTaskStatus`] as stored on the wire; 0 for a reply.
+    /// [`FlightTaskStatus`], [`PoiTaskStatus`] or [`PanoTaskStatus`] as stored on
+    /// the wire; 0 for a reply.
     pub status: u8,
     /// Poi: [`PoiReason`] as stored on the wire.
     pub reason: u8,
@@ -226,7 +260,14 @@ pub struct TaskEvent {
     pub way_point_index: u8,
     /// Flight: how many of `points` hold values.
     pub point_count: u8,
-    pub reserved: u32,
+    /// Pano: photos taken so far, of `pano_stations`.
+    pub pano_photos: u8,
+    /// Pano: the panorama's photos (stations).
+    pub pano_stations: u8,
+    /// Pano: percent done; 100 only at `Done` (the return to the start is the
+    /// last step).
+    pub pano_percent: u8,
+    pub reserved: u8,
     /// Flight: metres still to fly, and at the present speed seconds.
     pub remaining_distance_m: f32,
     pub remaining_time_s: f32,
@@ -267,6 +308,10 @@ impl TaskEvent {
 
     pub fn poi_status(&self) -> Result<PoiTaskStatus, crate::UnknownValue> {
         PoiTaskStatus::try_from(self.status)
+    }
+
+    pub fn pano_status(&self) -> Result<PanoTaskStatus, crate::UnknownValue> {
+        PanoTaskStatus::try_from(self.status)
     }
 
     pub fn poi_reason(&self) -> Result<PoiReason, crate::UnknownValue> {
@@ -337,6 +382,42 @@ mod tests {
             ..Default::default()
         };
         assert!(e.flight_status().is_err() && e.poi_status().is_err() && e.poi_reason().is_err());
+        assert!(e.pano_status().is_err());
         assert_eq!(PoiReason::try_from(5), Ok(PoiReason::LinkLost));
+        assert!(TaskRequestKind::try_from(10).is_err());
+        assert!(TaskEventKind::try_from(5).is_err());
+    }
+
+    #[test]
+    fn a_panorama_request_and_its_progress() {
+        let req = TaskRequest {
+            request_id: 3,
+            vehicle_id: 1,
+            kind: TaskRequestKind::PanoStart.to_wire(),
+            source: CommandSource::DjiDrc.to_wire(),
+            pano_pitch_deg: -10.0,
+            pano_settle_timeout_ms: 4000,
+            pano_stations: 8,
+            pano_clear_roi: 1,
+            ..Default::default()
+        };
+        assert_eq!(req.kind(), Ok(TaskRequestKind::PanoStart));
+        assert_eq!(
+            TaskRequestKind::try_from(9),
+            Ok(TaskRequestKind::PanoStop),
+            "the wire values of the panorama kinds"
+        );
+        let e = TaskEvent {
+            kind: TaskEventKind::Pano.to_wire(),
+            status: PanoTaskStatus::Stopped.to_wire(),
+            pano_photos: 2,
+            pano_stations: 8,
+            pano_percent: 22,
+            ..TaskEvent::reply(&req, TaskResult::Ok)
+        };
+        assert_eq!(e.kind(), Ok(TaskEventKind::Pano));
+        assert_eq!(e.pano_status(), Ok(PanoTaskStatus::Stopped));
+        assert_eq!((e.request_id, e.source), (3, req.source));
+        assert_eq!(PanoTaskStatus::try_from(2), Ok(PanoTaskStatus::Done));
     }
 }
