@@ -37,20 +37,48 @@ wire_enum! {
 ///
 /// Topic: [`crate::topics::vehicle_authority`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.AuthorityState.v2")]
 #[repr(C)]
 pub struct AuthorityState {
     pub header: SampleHeader,
     pub vehicle_id: u8,
     /// [`CommandSource`] holding flight authority, or [`NO_HOLDER`].
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub flight_holder: u8,
     /// [`CommandSource`] that held flight authority before the last change, or [`NO_HOLDER`].
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub flight_previous: u8,
     /// [`AuthorityChange`] of the last flight-authority change.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::AuthorityChange>")
+    )]
     pub flight_change: u8,
     /// [`CommandSource`] holding payload authority, or [`NO_HOLDER`].
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub payload_holder: u8,
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub payload_previous: u8,
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::AuthorityChange>")
+    )]
     pub payload_change: u8,
     /// 1 while an emergency stop holds the vehicle (safety keeps flight authority until
     /// every engager has released it or an operator/safety `ClearEmergency`).
@@ -61,6 +89,7 @@ pub struct AuthorityState {
     pub payload_since_ns: u64,
     /// The sources whose emergency stop is in force: bit `1 << source.to_wire()`.
     pub emergency_sources: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 7],
 }
 crate::assert_layout!(AuthorityState, size = 56, align = 8);
@@ -134,15 +163,28 @@ wire_enum! {
 ///
 /// Topic: [`crate::topics::vehicle_arbiter_events`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.ArbiterEvent.v2")]
 #[repr(C)]
 pub struct ArbiterEvent {
     pub header: SampleHeader,
     pub vehicle_id: u8,
     /// [`ArbiterEventKind`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::ArbiterEventKind>")
+    )]
     pub kind: u8,
     /// The [`CommandSource`] concerned, or [`NO_HOLDER`].
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub source: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u8,
     /// For geofence decisions: the [`GeofenceSet::request_id`] decided (0 = none), so
     /// the gateway that asked answers its client from the arbiter's decision.
@@ -172,12 +214,21 @@ wire_enum! {
 
 /// One fence polygon, vertices in order (either winding), implicitly closed.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct FencePolygon {
     /// [`FenceKind`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::FenceKind>")
+    )]
     pub kind: u8,
     /// Valid entries of `vertices` (3..=MAX_FENCE_VERTICES).
     pub vertex_count: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 6],
     /// Latitude, longitude in degrees.
     pub vertices: [[f64; 2]; MAX_FENCE_VERTICES],
@@ -206,6 +257,10 @@ impl Default for FencePolygon {
 ///
 /// Topic: [`crate::topics::vehicle_geofence`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.GeofenceSet.v2")]
 #[repr(C)]
 pub struct GeofenceSet {
@@ -216,6 +271,10 @@ pub struct GeofenceSet {
     /// Valid entries of `polygons`.
     pub polygon_count: u8,
     /// [`CommandSource`] that set it: the fence belongs to this source.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub source: u8,
     /// Chosen by the sender, echoed in the arbiter's decision event.
     pub request_id: u32,
@@ -224,7 +283,12 @@ pub struct GeofenceSet {
     /// Altitude floor above home, m (usually 0 or below).
     pub floor_m: f32,
     /// For `enabled = 0`: whose fence to clear ([`NO_HOLDER`] = the sender's own).
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub target_source: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 7],
     pub polygons: [FencePolygon; MAX_FENCE_POLYGONS],
 }

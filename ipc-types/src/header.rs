@@ -32,6 +32,10 @@ wire_enum! {
 /// `stamp_ns` is `CLOCK_MONOTONIC` at publish, comparable across the processes of
 /// one machine, so any consumer can compute a sample's age.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct SampleHeader {
     /// Per-publisher sequence number, starting at 1 (0 = never published).
@@ -39,10 +43,15 @@ pub struct SampleHeader {
     /// `CLOCK_MONOTONIC` nanoseconds when the sample was published.
     pub stamp_ns: u64,
     /// [`ServiceId`] of the publishing process, as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::ServiceId>")
+    )]
     pub service: u16,
     /// Instance of that service (e.g. the vehicle-sim index in a swarm), 0 if single.
     pub instance: u16,
     /// Reserved, zero.
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u32,
 }
 crate::assert_layout!(SampleHeader, size = 24, align = 8);

@@ -18,6 +18,8 @@ pub mod fixed;
 pub mod frame;
 pub mod hardware;
 pub mod header;
+#[cfg(feature = "serde")]
+pub mod json;
 pub mod payload;
 pub mod service;
 pub mod shot;
@@ -110,12 +112,41 @@ macro_rules! wire_enum {
             }
         }
 
+        impl $crate::WireEnum for $name {
+            type Repr = $repr;
+            const TYPE_NAME: &'static str = stringify!($name);
+            fn name_of(raw: $repr) -> Option<&'static str> {
+                <$name>::try_from(raw).ok().map(<$name>::as_str)
+            }
+            fn from_name(name: &str) -> Option<$repr> {
+                <$name>::ALL.iter().find(|v| v.as_str() == name).map(|v| v.to_wire())
+            }
+            fn names() -> Vec<&'static str> {
+                <$name>::ALL.iter().map(|v| v.as_str()).collect()
+            }
+        }
+
         impl core::fmt::Display for $name {
             fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
                 f.write_str(self.as_str())
             }
         }
     };
+}
+
+/// An enum declared with [`wire_enum!`], seen through the integer stored on the wire:
+/// what JSON (feature `serde`) needs to write such a field as a name.
+pub trait WireEnum: Copy + 'static {
+    /// The integer type on the wire.
+    type Repr: Copy + Into<i64> + TryFrom<i64>;
+    /// The enum's Rust name.
+    const TYPE_NAME: &'static str;
+    /// The stable name of the variant stored as `raw`, if there is one.
+    fn name_of(raw: Self::Repr) -> Option<&'static str>;
+    /// The integer of the variant named `name`.
+    fn from_name(name: &str) -> Option<Self::Repr>;
+    /// Every variant's name, in declaration order.
+    fn names() -> Vec<&'static str>;
 }
 
 /// An integer on the wire that names no variant of the enum it should hold.

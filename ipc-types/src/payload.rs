@@ -25,6 +25,10 @@ wire_enum! {
 ///
 /// Topic: [`crate::topics::vehicle_payload`] (latest value).
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.PayloadState.v1")]
 #[repr(C)]
 pub struct PayloadState {
@@ -33,18 +37,24 @@ pub struct PayloadState {
     /// 1 once a gimbal attitude has been received (and not older than 2 s).
     pub gimbal_valid: u8,
     /// [`GoProStatus`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::GoProStatus>")
+    )]
     pub gopro_status: u8,
     /// `GOPRO_HEARTBEAT.capture_mode` (MAVLink GOPRO_CAPTURE_MODE: 0 video, 1 photo,
     /// 2 burst, 3 time lapse, 4 multi shot, 5 playback, 6 setup, 255 unknown).
     pub gopro_capture_mode: u8,
     /// 1 while the GoPro records (`GOPRO_FLAG_RECORDING`).
     pub gopro_recording: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 3],
     /// Camera pitch, degrees, down negative (horizon 0, straight down −90).
     pub gimbal_pitch_deg: f32,
     pub gimbal_roll_deg: f32,
     /// Camera yaw relative to the vehicle's nose, degrees, clockwise positive.
     pub gimbal_yaw_deg: f32,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved2: u32,
     /// `CLOCK_MONOTONIC` ns of the last gimbal attitude (0 = never).
     pub gimbal_stamp_ns: u64,

@@ -465,6 +465,10 @@ pub mod drone_flags {
 
 /// One drone in a [`SwarmState`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct SwarmDrone {
     /// GroundControl drone id.
@@ -472,11 +476,20 @@ pub struct SwarmDrone {
     /// MAVLink system id of the vehicle.
     pub vehicle_id: u8,
     /// [`DroneState`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::DroneState>")
+    )]
     pub drone_state: u8,
     /// See [`drone_flags`].
     pub flags: u32,
     /// [`SwarmCommandKind`] of the current command, 0 if none.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::SwarmCommandKind>")
+    )]
     pub current: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u8,
     /// Commands waiting behind the current one.
     pub queue_depth: u16,
@@ -502,15 +515,21 @@ crate::assert_layout!(SwarmDrone, size = 80, align = 4);
 ///
 /// Topic: [`crate::topics::swarm_state`] (latest value).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.SwarmState.v1")]
 #[repr(C)]
 pub struct SwarmState {
     pub header: SampleHeader,
     /// Drones in `drones` (the first `count` entries).
     pub count: u16,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 6],
     /// Seconds since the swarm-queue started (the broadcast's timestamp).
     pub time_s: f64,
+    #[cfg_attr(feature = "serde", serde(with = "crate::json::big_array"), schemars(with = "crate::json::BigArray<SwarmDrone, SWARM_MAX_DRONES>"))]
     pub drones: [SwarmDrone; SWARM_MAX_DRONES],
 }
 crate::assert_layout!(

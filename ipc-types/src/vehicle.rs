@@ -88,6 +88,10 @@ wire_enum! {
 /// GLOBAL_POSITION_INT (their own stamp in `position_stamp_ns`); attitude from ATTITUDE;
 /// the ellipsoid height from the latest GPS_RAW_INT.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.VehicleState.v2")]
 #[repr(C)]
 pub struct VehicleState {
@@ -141,12 +145,20 @@ crate::assert_layout!(VehicleState, size = 128, align = 8);
 ///
 /// Topic: [`crate::topics::vehicle_status`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.VehicleStatus.v1")]
 #[repr(C)]
 pub struct VehicleStatus {
     pub header: SampleHeader,
     pub vehicle_id: u8,
     /// [`FlightMode`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::FlightMode>")
+    )]
     pub mode: u8,
     /// 1 when the motors are armed.
     pub armed: u8,
@@ -155,6 +167,7 @@ pub struct VehicleStatus {
     /// 1 when the EKF reports a usable attitude, velocity and position solution.
     pub ekf_healthy: u8,
     /// [`GpsFix`] as stored on the wire.
+    #[cfg_attr(feature = "serde", serde(with = "crate::json::Wire::<crate::GpsFix>"))]
     pub gps_fix: u8,
     pub satellites: u8,
     /// 1 while autopilot heartbeats arrive (none for the link timeout → 0).
@@ -177,11 +190,13 @@ pub struct VehicleStatus {
     pub autopilot: u8,
     /// MAVLink `MAV_TYPE` of the vehicle.
     pub vehicle_type: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u16,
     /// The last STATUSTEXT from the autopilot (e.g. why arming was refused).
     pub status_text: FixedStr<56>,
     /// MAVLink severity of `status_text` (0 emergency … 7 debug).
     pub status_severity: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved2: [u8; 7],
 }
 crate::assert_layout!(VehicleStatus, size = 136, align = 8);

@@ -91,15 +91,27 @@ pub const LOCK_ROLL: u8 = 0b100;
 
 /// One virtual camera: what it was told and where it looks now.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct VirtualCamState {
     /// [`TargetingMode`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::TargetingMode>")
+    )]
     pub targeting_mode: u8,
     /// 1 if the last CAM_TARGETING SET was a delta.
     pub euler_delta: u8,
     /// `LOCK_*` bits.
     pub lock_flags: u8,
     /// [`CropMode`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CropMode>")
+    )]
     pub crop_mode: u8,
     /// DigiView zoom, −127..127 (0 none, positive in).
     pub zoom: i8,
@@ -139,9 +151,14 @@ crate::assert_layout!(VirtualCamState, size = 8 + 32 + 16 + 16 + 8 + 8, align = 
 
 /// The single-target tracker of one stream.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct SttState {
     /// [`SttMode`] as stored on the wire.
+    #[cfg_attr(feature = "serde", serde(with = "crate::json::Wire::<crate::SttMode>"))]
     pub mode: u8,
     /// The virtual camera the command named.
     pub cam: u8,
@@ -151,6 +168,7 @@ pub struct SttState {
     pub locked: u8,
     /// DigiView `rel_frame_of_reference` of the last command (0 global, 1 heading, 2 camera).
     pub rel_frame: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u8,
     /// Zoom level 0–10 (0 largest tracking box).
     pub zoom_level: u16,
@@ -171,6 +189,10 @@ crate::assert_layout!(SttState, size = 44, align = 4);
 
 /// One stream: output layout, capture counters, virtual cameras, tracker.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct VisionStreamState {
     pub name: StreamName,
@@ -186,6 +208,7 @@ pub struct VisionStreamState {
     pub num_views: u8,
     /// 1 while a video is being recorded.
     pub recording: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 2],
     /// Output resolution.
     pub out_width: u16,
@@ -195,12 +218,14 @@ pub struct VisionStreamState {
     pub single_detection_size: u16,
     pub images_captured: u16,
     pub videos_captured: u16,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved2: u16,
     /// The source (physical camera) frame size.
     pub source_width: u32,
     pub source_height: u32,
     /// Vehicle heading at the last frame, radians from true north.
     pub vehicle_heading_rad: f32,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved3: u32,
     pub frames_processed: u64,
     pub frames_dropped: u64,
@@ -211,6 +236,7 @@ pub struct VisionStreamState {
     pub last_processed_mono_ns: u64,
     pub cams: [VirtualCamState; VISION_MAX_CAMS],
     pub stt: SttState,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved4: u32,
 }
 crate::assert_layout!(
@@ -221,6 +247,10 @@ crate::assert_layout!(
 
 /// One tracked detection.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[repr(C)]
 pub struct VisionDetection {
     /// Stable id for the object's lifetime (0–253, reused only after it is gone).
@@ -261,6 +291,10 @@ crate::assert_layout!(VisionDetection, size = 8 + 8 + 8 + 24 + 16 + 8, align = 8
 
 /// Everything the pipeline knows, after every processed frame and at 1 Hz.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.VisionState.v1")]
 #[repr(C)]
 pub struct VisionState {
@@ -290,6 +324,7 @@ pub struct VisionState {
     pub bonus_redetection: u8,
     pub missed_detection_penalty: u8,
     pub missed_redetection_penalty: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: [u8; 7],
     pub track_model: ModelName,
     pub scan_model: ModelName,

@@ -66,24 +66,45 @@ wire_enum! {
 /// Topic: [`crate::topics::vehicle_command_ack`]. Matched to its command by
 /// `(source, command_id)`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.CommandAck.v2")]
 #[repr(C)]
 pub struct CommandAck {
     pub header: SampleHeader,
     pub vehicle_id: u8,
     /// [`CommandSource`](super::CommandSource) of the command answered.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub source: u8,
     /// [`CommandKind`](super::CommandKind) of the command answered (raw: may be an unknown
     /// value that was refused).
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandKind>")
+    )]
     pub kind: u8,
     /// [`AckResult`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::AckResult>")
+    )]
     pub result: u8,
     /// `command_id` of the command answered.
     pub command_id: u32,
     /// [`RefusalReason`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::RefusalReason>")
+    )]
     pub reason: u16,
     /// The MAVLink `MAV_RESULT` when the autopilot answered, 255 otherwise.
     pub mav_result: u8,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u8,
     /// Sequence number of the command sample answered.
     pub command_seq: u32,

@@ -23,6 +23,10 @@ use crate::vehicle::FlightMode;
 /// camera; `GimbalRate`: `f[0]` pitch rate, `f[1]` yaw rate; `CameraFocus`: `i[0]`
 /// camera, `i[1]` [`FocusMode`], `f[0]` value.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
+)]
 #[type_name("skymesh.VehicleCommand.v2")]
 #[repr(C)]
 pub struct VehicleCommand {
@@ -30,8 +34,16 @@ pub struct VehicleCommand {
     /// MAVLink system id of the target vehicle.
     pub vehicle_id: u8,
     /// [`CommandSource`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandSource>")
+    )]
     pub source: u8,
     /// [`CommandKind`] as stored on the wire.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::Wire::<crate::CommandKind>")
+    )]
     pub kind: u8,
     /// See [`flags`].
     pub flags: u8,
@@ -43,6 +55,7 @@ pub struct VehicleCommand {
     pub i: [i32; 2],
     /// Maximum age at arrival for setpoints, ms; 0 = the arbiter's default for the source.
     pub max_age_ms: u32,
+    #[cfg_attr(feature = "serde", serde(skip))]
     pub reserved: u32,
 }
 crate::assert_layout!(VehicleCommand, size = 96, align = 8);
