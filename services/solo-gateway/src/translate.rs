@@ -2,99 +2,124 @@
 //! (pure). The engine knows no Solo id or byte: this is where the Solo app
 //! protocol's vocabulary meets the engine's, one message for one request or event.
 //! Shot indices pass through unchanged (the bus numbers shots as Solo does).
+//!
+//! Where both sides carry the same fields under the same names, the pairing is
+//! listed once (`Solo = Engine { fields };` in `shot_options!`, `request_fields!`,
+//! `event_fields!`) and `to_engine!` / `to_solo!` write the `match` arms of
+//! either direction from it; the arms that differ are written out by hand.
 
 use skymesh_ipc_types::shot_api as api;
 use skymesh_ipc_types::{ShotEvent, ShotRequest};
 use solo_proto::SoloMessage;
 
-fn location(l: &solo_proto::Location) -> api::Location {
-    api::Location {
-        lat_deg: l.lat_deg,
-        lon_deg: l.lon_deg,
-        alt_m: l.alt_m,
-    }
+/// `fn name(&From) -> To`, copying the listed fields by name.
+macro_rules! copy_fields {
+    (fn $name:ident(&$From:path) -> $To:path { $($f:ident),* $(,)? }) => {
+        fn $name(v: &$From) -> $To {
+            $To { $($f: v.$f),* }
+        }
+    };
 }
 
-fn solo_location(l: &api::Location) -> solo_proto::Location {
-    solo_proto::Location {
-        lat_deg: l.lat_deg,
-        lon_deg: l.lon_deg,
-        alt_m: l.alt_m,
-    }
+/// Both directions between a Solo struct and its engine twin.
+macro_rules! twin_structs {
+    ($to_api:ident, $to_solo:ident: $Solo:path, $Api:path { $($f:ident),* $(,)? }) => {
+        copy_fields!(fn $to_api(&$Solo) -> $Api { $($f),* });
+        copy_fields!(fn $to_solo(&$Api) -> $Solo { $($f),* });
+    };
 }
 
-fn button(b: &solo_proto::ButtonSetting) -> api::ButtonSetting {
-    api::ButtonSetting {
-        button: b.button,
-        event: b.event,
-        shot: b.shot,
-        mode: b.mode,
-    }
+twin_structs!(location, solo_location: solo_proto::Location, api::Location {
+    lat_deg, lon_deg, alt_m
+});
+
+twin_structs!(button, solo_button: solo_proto::ButtonSetting, api::ButtonSetting {
+    button, event, shot, mode
+});
+
+twin_structs!(point, solo_point: solo_proto::SplinePoint, api::SplinePoint {
+    version, abs_alt_ref_m, index, lat_deg, lon_deg, alt_m, pitch_deg, yaw_deg, u_position,
+    status
+});
+
+copy_fields!(fn solo_gopro(&api::GoProState) -> solo_proto::GoProState {
+    version, model, status, recording, capture_mode, ntsc_pal, video_resolution, video_fps,
+    video_fov, video_low_light, photo_resolution, photo_burst_rate, video_protune,
+    video_white_balance, video_color, video_gain, video_sharpness, video_exposure,
+    gimbal_enabled, extra_u8, extra_u16
+});
+
+/// The shot options, which travel both ways: the app sets them (requests) and
+/// the engine reports them (events). `list!(then!(args))` calls `then!` with the
+/// list appended to `args` (lists chain: `a!(b!(then!(args)))`).
+macro_rules! shot_options {
+    ($then:ident!($($args:tt)*) $($more:tt)*) => {
+        $then!($($args)* $($more)*
+            CableCamOptions = CableOptions { cam_interpolation, yaw_direction_cw, cruise_speed };
+            FollowOptions = FollowOptions { cruise_speed, look_at };
+            FollowOptionsV2 = FollowOptionsV2 { cruise_speed, look_at, follow_preference };
+            ShotOptions = ShotOptions { cruise_speed };
+            ZiplineOptions = ZiplineOptions { cruise_speed, is_3d, cam_pointing };
+            PanoOptions = PanoOptions {
+                pano_type, run_state, cylinder_fov, deg_second_yaw, lens_fov
+            };
+            RewindOptions = RewindOptions { enabled, hover, rewind_distance };
+        )
+    };
 }
 
-fn solo_button(b: &api::ButtonSetting) -> solo_proto::ButtonSetting {
-    solo_proto::ButtonSetting {
-        button: b.button,
-        event: b.event,
-        shot: b.shot,
-        mode: b.mode,
-    }
+/// What only the app asks, with the same fields on both sides.
+macro_rules! request_fields {
+    ($then:ident!($($args:tt)*) $($more:tt)*) => {
+        $then!($($args)* $($more)*
+            GoProSetRequest = GoProSetRequest { command, value };
+            GoProSetExtendedRequest = GoProSetExtendedRequest { command, value };
+            GeofenceUpdatePoly = GeofenceUpdatePoly {
+                action, polygon_index, vertex_index, lat_deg, lon_deg, sub_lat_deg, sub_lon_deg
+            };
+            SplineSeek = SplineSeek { u_position, cruise_state };
+            SplinePathSettings = SplinePathSettings { camera_control, desired_time_s };
+            InspectStart = InspectStart { takeoff_alt_m };
+            InspectSetWaypoint = InspectSetWaypoint { lat_deg, lon_deg, alt_m };
+            InspectMoveGimbal = InspectMoveGimbal { pitch_deg, roll_deg, yaw_deg };
+            InspectMoveVehicle = InspectMoveVehicle { vx, vy, vz };
+        )
+    };
 }
 
-fn point(p: &solo_proto::SplinePoint) -> api::SplinePoint {
-    api::SplinePoint {
-        version: p.version,
-        abs_alt_ref_m: p.abs_alt_ref_m,
-        index: p.index,
-        lat_deg: p.lat_deg,
-        lon_deg: p.lon_deg,
-        alt_m: p.alt_m,
-        pitch_deg: p.pitch_deg,
-        yaw_deg: p.yaw_deg,
-        u_position: p.u_position,
-        status: p.status,
-    }
+/// What only the engine tells, with the same fields on both sides.
+macro_rules! event_fields {
+    ($then:ident!($($args:tt)*) $($more:tt)*) => {
+        $then!($($args)* $($more)*
+            PanoState = PanoState { index, total };
+            GeofenceSetAck = GeofenceSetAck { count, valid };
+            CableCamWaypoint = CableCamWaypoint { lat_deg, lon_deg, alt_m, yaw_deg, pitch_deg };
+            SplinePlaybackStatus = SplinePlaybackStatus { u_position, cruise_state };
+            SplineDurations = SplineDurations { min_time_s, max_time_s };
+        )
+    };
 }
 
-fn solo_point(p: &api::SplinePoint) -> solo_proto::SplinePoint {
-    solo_proto::SplinePoint {
-        version: p.version,
-        abs_alt_ref_m: p.abs_alt_ref_m,
-        index: p.index,
-        lat_deg: p.lat_deg,
-        lon_deg: p.lon_deg,
-        alt_m: p.alt_m,
-        pitch_deg: p.pitch_deg,
-        yaw_deg: p.yaw_deg,
-        u_position: p.u_position,
-        status: p.status,
-    }
+/// `match msg { listed Solo variants => the engine's, hand arms }`.
+macro_rules! to_engine {
+    ($msg:expr => $To:ident { $($arms:tt)* }
+     $($solo:ident = $eng:ident { $($f:ident),* $(,)? };)*) => {
+        match $msg {
+            $(SoloMessage::$solo { $($f),* } => $To::$eng { $($f: *$f),* },)*
+            $($arms)*
+        }
+    };
 }
 
-fn solo_gopro(s: &api::GoProState) -> solo_proto::GoProState {
-    solo_proto::GoProState {
-        version: s.version,
-        model: s.model,
-        status: s.status,
-        recording: s.recording,
-        capture_mode: s.capture_mode,
-        ntsc_pal: s.ntsc_pal,
-        video_resolution: s.video_resolution,
-        video_fps: s.video_fps,
-        video_fov: s.video_fov,
-        video_low_light: s.video_low_light,
-        photo_resolution: s.photo_resolution,
-        photo_burst_rate: s.photo_burst_rate,
-        video_protune: s.video_protune,
-        video_white_balance: s.video_white_balance,
-        video_color: s.video_color,
-        video_gain: s.video_gain,
-        video_sharpness: s.video_sharpness,
-        video_exposure: s.video_exposure,
-        gimbal_enabled: s.gimbal_enabled,
-        extra_u8: s.extra_u8,
-        extra_u16: s.extra_u16,
-    }
+/// `match value { listed engine variants => the Solo ones, hand arms }`.
+macro_rules! to_solo {
+    ($value:expr => $From:ident { $($arms:tt)* }
+     $($solo:ident = $eng:ident { $($f:ident),* $(,)? };)*) => {
+        match $value {
+            $($From::$eng { $($f),* } => SoloMessage::$solo { $($f: *$f),* },)*
+            $($arms)*
+        }
+    };
 }
 
 /// The engine's request for a message the app sent; `None` for what the app does
@@ -104,147 +129,23 @@ fn solo_gopro(s: &api::GoProState) -> solo_proto::GoProState {
 pub fn request(msg: &SoloMessage) -> Option<ShotRequest> {
     use ShotRequest as R;
     use SoloMessage as M;
-    Some(match msg {
+    Some(shot_options!(request_fields!(to_engine!(msg => R {
         M::SetCurrentShot(shot) => R::StartShot(*shot),
         M::Location(l) => R::Location(location(l)),
         M::RecordPosition => R::RecordPosition,
-        M::CableCamOptions {
-            cam_interpolation,
-            yaw_direction_cw,
-            cruise_speed,
-        } => R::CableOptions {
-            cam_interpolation: *cam_interpolation,
-            yaw_direction_cw: *yaw_direction_cw,
-            cruise_speed: *cruise_speed,
-        },
         M::GetButtonSetting(b) => R::GetButtonSetting(button(b)),
         M::SetButtonSetting(b) => R::SetButtonSetting(button(b)),
         M::Pause => R::Pause,
-        M::FollowOptions {
-            cruise_speed,
-            look_at,
-        } => R::FollowOptions {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-        },
-        M::FollowOptionsV2 {
-            cruise_speed,
-            look_at,
-            follow_preference,
-        } => R::FollowOptionsV2 {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-            follow_preference: *follow_preference,
-        },
-        M::ShotOptions { cruise_speed } => R::ShotOptions {
-            cruise_speed: *cruise_speed,
-        },
         M::GoProSetEnabled(v) => R::GoProSetEnabled(*v),
-        M::GoProSetRequest { command, value } => R::GoProSetRequest {
-            command: *command,
-            value: *value,
-        },
-        M::GoProSetExtendedRequest { command, value } => R::GoProSetExtendedRequest {
-            command: *command,
-            value: *value,
-        },
         M::GoProRecord(v) => R::GoProRecord(*v),
         M::GoProRequestState => R::GoProRequestState,
         M::SplinePoint(p) => R::SplinePoint(point(p)),
-        M::GeofenceUpdatePoly {
-            action,
-            polygon_index,
-            vertex_index,
-            lat_deg,
-            lon_deg,
-            sub_lat_deg,
-            sub_lon_deg,
-        } => R::GeofenceUpdatePoly {
-            action: *action,
-            polygon_index: *polygon_index,
-            vertex_index: *vertex_index,
-            lat_deg: *lat_deg,
-            lon_deg: *lon_deg,
-            sub_lat_deg: *sub_lat_deg,
-            sub_lon_deg: *sub_lon_deg,
-        },
         M::GeofenceClear => R::GeofenceClear,
         M::SplineRecord => R::SplineRecord,
         M::SplinePlay => R::SplinePlay,
-        M::SplineSeek {
-            u_position,
-            cruise_state,
-        } => R::SplineSeek {
-            u_position: *u_position,
-            cruise_state: *cruise_state,
-        },
-        M::SplinePathSettings {
-            camera_control,
-            desired_time_s,
-        } => R::SplinePathSettings {
-            camera_control: *camera_control,
-            desired_time_s: *desired_time_s,
-        },
         M::SplineAttach(i) => R::SplineAttach(*i),
-        M::ZiplineOptions {
-            cruise_speed,
-            is_3d,
-            cam_pointing,
-        } => R::ZiplineOptions {
-            cruise_speed: *cruise_speed,
-            is_3d: *is_3d,
-            cam_pointing: *cam_pointing,
-        },
         M::ZiplineLock => R::ZiplineLock,
-        M::PanoOptions {
-            pano_type,
-            run_state,
-            cylinder_fov,
-            deg_second_yaw,
-            lens_fov,
-        } => R::PanoOptions {
-            pano_type: *pano_type,
-            run_state: *run_state,
-            cylinder_fov: *cylinder_fov,
-            deg_second_yaw: *deg_second_yaw,
-            lens_fov: *lens_fov,
-        },
-        M::RewindOptions {
-            enabled,
-            hover,
-            rewind_distance,
-        } => R::RewindOptions {
-            enabled: *enabled,
-            hover: *hover,
-            rewind_distance: *rewind_distance,
-        },
         M::HomeLocation(l) => R::HomeLocation(location(l)),
-        M::InspectStart { takeoff_alt_m } => R::InspectStart {
-            takeoff_alt_m: *takeoff_alt_m,
-        },
-        M::InspectSetWaypoint {
-            lat_deg,
-            lon_deg,
-            alt_m,
-        } => R::InspectSetWaypoint {
-            lat_deg: *lat_deg,
-            lon_deg: *lon_deg,
-            alt_m: *alt_m,
-        },
-        M::InspectMoveGimbal {
-            pitch_deg,
-            roll_deg,
-            yaw_deg,
-        } => R::InspectMoveGimbal {
-            pitch_deg: *pitch_deg,
-            roll_deg: *roll_deg,
-            yaw_deg: *yaw_deg,
-        },
-        M::InspectMoveVehicle { vx, vy, vz } => R::InspectMoveVehicle {
-            vx: *vx,
-            vy: *vy,
-            vz: *vz,
-        },
         M::ScanStart => R::ScanStart,
         M::SurveyStart => R::SurveyStart,
         M::GeofenceSetData(_)
@@ -261,7 +162,7 @@ pub fn request(msg: &SoloMessage) -> Option<ShotRequest> {
         | M::PanoState { .. }
         | M::SplinePlaybackStatus { .. }
         | M::SplineDurations { .. } => return None,
-    })
+    }))))
 }
 
 /// The Solo message that carries `request`: the inverse of [`request`], for tools
@@ -269,157 +170,33 @@ pub fn request(msg: &SoloMessage) -> Option<ShotRequest> {
 pub fn solo_request(request: &ShotRequest) -> SoloMessage {
     use ShotRequest as R;
     use SoloMessage as M;
-    match request {
+    shot_options!(request_fields!(to_solo!(request => R {
         R::StartShot(shot) => M::SetCurrentShot(*shot),
         R::Location(l) => M::Location(solo_location(l)),
         R::RecordPosition => M::RecordPosition,
-        R::CableOptions {
-            cam_interpolation,
-            yaw_direction_cw,
-            cruise_speed,
-        } => M::CableCamOptions {
-            cam_interpolation: *cam_interpolation,
-            yaw_direction_cw: *yaw_direction_cw,
-            cruise_speed: *cruise_speed,
-        },
         R::GetButtonSetting(b) => M::GetButtonSetting(solo_button(b)),
         R::SetButtonSetting(b) => M::SetButtonSetting(solo_button(b)),
         R::Pause => M::Pause,
-        R::FollowOptions {
-            cruise_speed,
-            look_at,
-        } => M::FollowOptions {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-        },
-        R::FollowOptionsV2 {
-            cruise_speed,
-            look_at,
-            follow_preference,
-        } => M::FollowOptionsV2 {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-            follow_preference: *follow_preference,
-        },
-        R::ShotOptions { cruise_speed } => M::ShotOptions {
-            cruise_speed: *cruise_speed,
-        },
         R::GoProSetEnabled(v) => M::GoProSetEnabled(*v),
-        R::GoProSetRequest { command, value } => M::GoProSetRequest {
-            command: *command,
-            value: *value,
-        },
-        R::GoProSetExtendedRequest { command, value } => M::GoProSetExtendedRequest {
-            command: *command,
-            value: *value,
-        },
         R::GoProRecord(v) => M::GoProRecord(*v),
         R::GoProRequestState => M::GoProRequestState,
         R::SplinePoint(p) => M::SplinePoint(solo_point(p)),
-        R::GeofenceUpdatePoly {
-            action,
-            polygon_index,
-            vertex_index,
-            lat_deg,
-            lon_deg,
-            sub_lat_deg,
-            sub_lon_deg,
-        } => M::GeofenceUpdatePoly {
-            action: *action,
-            polygon_index: *polygon_index,
-            vertex_index: *vertex_index,
-            lat_deg: *lat_deg,
-            lon_deg: *lon_deg,
-            sub_lat_deg: *sub_lat_deg,
-            sub_lon_deg: *sub_lon_deg,
-        },
         R::GeofenceClear => M::GeofenceClear,
         R::SplineRecord => M::SplineRecord,
         R::SplinePlay => M::SplinePlay,
-        R::SplineSeek {
-            u_position,
-            cruise_state,
-        } => M::SplineSeek {
-            u_position: *u_position,
-            cruise_state: *cruise_state,
-        },
-        R::SplinePathSettings {
-            camera_control,
-            desired_time_s,
-        } => M::SplinePathSettings {
-            camera_control: *camera_control,
-            desired_time_s: *desired_time_s,
-        },
         R::SplineAttach(i) => M::SplineAttach(*i),
-        R::ZiplineOptions {
-            cruise_speed,
-            is_3d,
-            cam_pointing,
-        } => M::ZiplineOptions {
-            cruise_speed: *cruise_speed,
-            is_3d: *is_3d,
-            cam_pointing: *cam_pointing,
-        },
         R::ZiplineLock => M::ZiplineLock,
-        R::PanoOptions {
-            pano_type,
-            run_state,
-            cylinder_fov,
-            deg_second_yaw,
-            lens_fov,
-        } => M::PanoOptions {
-            pano_type: *pano_type,
-            run_state: *run_state,
-            cylinder_fov: *cylinder_fov,
-            deg_second_yaw: *deg_second_yaw,
-            lens_fov: *lens_fov,
-        },
-        R::RewindOptions {
-            enabled,
-            hover,
-            rewind_distance,
-        } => M::RewindOptions {
-            enabled: *enabled,
-            hover: *hover,
-            rewind_distance: *rewind_distance,
-        },
         R::HomeLocation(l) => M::HomeLocation(solo_location(l)),
-        R::InspectStart { takeoff_alt_m } => M::InspectStart {
-            takeoff_alt_m: *takeoff_alt_m,
-        },
-        R::InspectSetWaypoint {
-            lat_deg,
-            lon_deg,
-            alt_m,
-        } => M::InspectSetWaypoint {
-            lat_deg: *lat_deg,
-            lon_deg: *lon_deg,
-            alt_m: *alt_m,
-        },
-        R::InspectMoveGimbal {
-            pitch_deg,
-            roll_deg,
-            yaw_deg,
-        } => M::InspectMoveGimbal {
-            pitch_deg: *pitch_deg,
-            roll_deg: *roll_deg,
-            yaw_deg: *yaw_deg,
-        },
-        R::InspectMoveVehicle { vx, vy, vz } => M::InspectMoveVehicle {
-            vx: *vx,
-            vy: *vy,
-            vz: *vz,
-        },
         R::ScanStart => M::ScanStart,
         R::SurveyStart => M::SurveyStart,
-    }
+    })))
 }
 
 /// The Solo message that tells the app an engine event.
 pub fn event(ev: &ShotEvent) -> SoloMessage {
     use ShotEvent as E;
     use SoloMessage as M;
-    match ev {
+    shot_options!(event_fields!(to_solo!(ev => E {
         E::CurrentShot(shot) => M::GetCurrentShot(*shot),
         E::Refused(code) => M::ShotError(*code),
         E::Error(text) => M::ShotManagerError(text.clone()),
@@ -427,108 +204,14 @@ pub fn event(ev: &ShotEvent) -> SoloMessage {
         E::HomeLocation(l) => M::HomeLocation(solo_location(l)),
         E::ButtonSetting(b) => M::GetButtonSetting(solo_button(b)),
         E::Pause => M::Pause,
-        E::CableOptions {
-            cam_interpolation,
-            yaw_direction_cw,
-            cruise_speed,
-        } => M::CableCamOptions {
-            cam_interpolation: *cam_interpolation,
-            yaw_direction_cw: *yaw_direction_cw,
-            cruise_speed: *cruise_speed,
-        },
-        E::FollowOptions {
-            cruise_speed,
-            look_at,
-        } => M::FollowOptions {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-        },
-        E::FollowOptionsV2 {
-            cruise_speed,
-            look_at,
-            follow_preference,
-        } => M::FollowOptionsV2 {
-            cruise_speed: *cruise_speed,
-            look_at: *look_at,
-            follow_preference: *follow_preference,
-        },
-        E::ShotOptions { cruise_speed } => M::ShotOptions {
-            cruise_speed: *cruise_speed,
-        },
-        E::PanoOptions {
-            pano_type,
-            run_state,
-            cylinder_fov,
-            deg_second_yaw,
-            lens_fov,
-        } => M::PanoOptions {
-            pano_type: *pano_type,
-            run_state: *run_state,
-            cylinder_fov: *cylinder_fov,
-            deg_second_yaw: *deg_second_yaw,
-            lens_fov: *lens_fov,
-        },
-        E::ZiplineOptions {
-            cruise_speed,
-            is_3d,
-            cam_pointing,
-        } => M::ZiplineOptions {
-            cruise_speed: *cruise_speed,
-            is_3d: *is_3d,
-            cam_pointing: *cam_pointing,
-        },
-        E::RewindOptions {
-            enabled,
-            hover,
-            rewind_distance,
-        } => M::RewindOptions {
-            enabled: *enabled,
-            hover: *hover,
-            rewind_distance: *rewind_distance,
-        },
-        E::PanoState { index, total } => M::PanoState {
-            index: *index,
-            total: *total,
-        },
         E::GoProV1State(s) => M::GoProV1State(solo_gopro(s)),
         E::GoProV2State(s) => M::GoProV2State(solo_gopro(s)),
-        E::GeofenceSetAck { count, valid } => M::GeofenceSetAck {
-            count: *count,
-            valid: *valid,
-        },
         E::GeofenceActivated => M::GeofenceActivated,
         E::GeofenceClear => M::GeofenceClear,
-        E::CableCamWaypoint {
-            lat_deg,
-            lon_deg,
-            alt_m,
-            yaw_deg,
-            pitch_deg,
-        } => M::CableCamWaypoint {
-            lat_deg: *lat_deg,
-            lon_deg: *lon_deg,
-            alt_m: *alt_m,
-            yaw_deg: *yaw_deg,
-            pitch_deg: *pitch_deg,
-        },
         E::SplinePoint(p) => M::SplinePoint(solo_point(p)),
         E::SplinePlay => M::SplinePlay,
-        E::SplinePlaybackStatus {
-            u_position,
-            cruise_state,
-        } => M::SplinePlaybackStatus {
-            u_position: *u_position,
-            cruise_state: *cruise_state,
-        },
-        E::SplineDurations {
-            min_time_s,
-            max_time_s,
-        } => M::SplineDurations {
-            min_time_s: *min_time_s,
-            max_time_s: *max_time_s,
-        },
         E::SplineAttach(i) => M::SplineAttach(*i),
-    }
+    })))
 }
 
 #[cfg(test)]
