@@ -18,7 +18,7 @@
 //! | [`metrics`] | the exported `skymesh_shot_*` series |
 //! | [`ipc`] | the bus ports |
 //! | `service` | the event loop tying them together |
-//! | [`tasks`] | the task runner: gateways' flight tasks (takeoff, fly-to, POI orbit) over the bus |
+//! | [`tasks`] | the task runner: gateways' tasks (takeoff, fly-to, POI orbit, panorama sweep) over the bus |
 //!
 //! A restarted engine never resumes a shot: the arbiter's freshness brake stopped
 //! the vehicle when the setpoints stopped, and the engine only tells the app.
@@ -69,7 +69,7 @@ pub async fn run_with(
         "shot-engine starting"
     );
     let period = settings.loop_period;
-    // Flight tasks asked by gateways (the DJI gateway's takeoff, fly-to and POI).
+    // Tasks asked by gateways (the DJI gateway's takeoff, fly-to, POI and panorama).
     tasks::spawn(&bus, settings.vehicle_id, shutdown.clone())?;
     let engine = Engine::open(settings, metrics);
     ready();

@@ -57,6 +57,11 @@ impl Snapshot {
     pub fn holds_flight(&self) -> bool {
         self.authority.and_then(|a| a.flight()) == Some(self.source)
     }
+
+    /// True when the arbiter says `source` holds payload authority.
+    pub fn holds_payload(&self) -> bool {
+        self.authority.and_then(|a| a.payload()) == Some(self.source)
+    }
 }
 
 /// Why a command did not succeed.

@@ -1,17 +1,20 @@
-//! The task runner: flight tasks a gateway asks for over the bus
+//! The task runner: flight and payload tasks a gateway asks for over the bus
 //! ([`skymesh_ipc_types::TaskRequest`]), flown here and reported back as
 //! [`skymesh_ipc_types::TaskEvent`]s. The DJI gateway's takeoff_to_point,
-//! fly_to_point and POI mode are these tasks: the POI is the engine's own
-//! [`crate::shots::Orbit`].
+//! fly_to_point, POI mode and panorama capture are these tasks: the POI is the
+//! engine's own [`crate::shots::Orbit`].
 //!
 //! | module | role |
 //! |---|---|
 //! | [`link`] | vehicle samples; commands as the requester's source, with their acks |
 //! | [`progress`], [`flight`] | take off / fly to a point: pure progress rules, and the running task |
 //! | [`poi`], [`poi_task`] | orbit a point: pure rules, and the 25 Hz task |
+//! | [`pano`], [`pano_task`] | panorama sweep of the gimbal: pure station plan and progress, and the running sweep |
 //!
 //! One task at a time flies: a new takeoff, fly-to or orbit pre-empts the running
-//! one (it reports `Cancelled` / `Ended`). Every request gets one reply.
+//! one (it reports `Cancelled` / `Ended`). A panorama only turns the gimbal: it
+//! runs beside them, one at a time (a second PanoStart while one runs is
+//! `WrongState`). Every request gets one reply.
 //!
 //! | topic | direction | type |
 //! |---|---|---|
@@ -20,6 +23,8 @@
 
 pub mod flight;
 pub mod link;
+pub mod pano;
+pub mod pano_task;
 pub mod poi;
 pub mod poi_task;
 pub mod progress;
@@ -36,6 +41,7 @@ use skymesh_runtime::{Bus, CancellationToken, Publisher, Subscriber};
 
 use flight::{Control, TaskHandle, TaskSpec};
 use link::{TaskLink, VehicleLink};
+use pano_task::{PanoControl, PanoHandle, PanoSpec};
 use poi_task::{PoiControl, PoiHandle};
 
 /// Publishes the runner's events. Cheap to clone.
@@ -71,6 +77,7 @@ pub fn spawn(bus: &Bus, vehicle_id: u8, shutdown: CancellationToken) -> anyhow::
         events: Events(Arc::new(Mutex::new(events))),
         task: None,
         poi: None,
+        pano: None,
     };
     tokio::spawn(runner.run(requests, shutdown));
     Ok(())
@@ -82,6 +89,7 @@ struct Runner {
     events: Events,
     task: Option<TaskHandle>,
     poi: Option<PoiHandle>,
+    pano: Option<PanoHandle>,
 }
 
 impl Runner {
@@ -193,7 +201,46 @@ impl Runner {
                 }
                 None => self.events.reply(&req, TaskResult::WrongState),
             },
+            TaskRequestKind::PanoStart => self.pano_start(link, req),
+            TaskRequestKind::PanoStop => match self.pano.as_ref().filter(|p| p.is_running()) {
+                Some(p) => {
+                    if let Err(e) = p.control.send(PanoControl::Stop { request: req }) {
+                        let PanoControl::Stop { request } = e.0;
+                        self.events.reply(&request, TaskResult::NoTask);
+                    }
+                }
+                None => self.events.reply(&req, TaskResult::NoTask),
+            },
         }
+    }
+
+    /// A panorama from where the gimbal points now, unless one runs.
+    fn pano_start(&mut self, link: TaskLink, req: TaskRequest) {
+        if self.pano.as_ref().is_some_and(PanoHandle::is_running) {
+            tracing::info!("panorama refused: one is running");
+            return self.events.reply(&req, TaskResult::WrongState);
+        }
+        let Some(spec) = PanoSpec::from_request(&req) else {
+            tracing::warn!(
+                stations = req.pano_stations,
+                pitch = req.pano_pitch_deg,
+                "panorama refused: no stations"
+            );
+            return self.events.reply(&req, TaskResult::InvalidParameter);
+        };
+        let Some(start) = pano_task::gimbal(&link.snapshot()) else {
+            tracing::info!(
+                "panorama refused: the gimbal attitude is unknown, its stations cannot be checked"
+            );
+            return self.events.reply(&req, TaskResult::WrongState);
+        };
+        self.pano = Some(pano_task::spawn(
+            link,
+            self.events.clone(),
+            start,
+            spec,
+            req,
+        ));
     }
 
     /// A control the task ended before reading: the request's reply.
