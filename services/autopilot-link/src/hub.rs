@@ -195,6 +195,8 @@ pub struct Hub {
     /// The virtual gimbals' inbox (the service's event loop drains it), once attached.
     local: Mutex<Option<mpsc::Sender<RawFrame>>>,
     local_metrics: EndpointMetrics,
+    /// The flight log's tap on the autopilot link ([`crate::tlog`]), if `[tlog]` is on.
+    tlog: OnceLock<crate::tlog::Tap>,
 }
 
 /// Messages addressed to a whole system (or broadcast) that the virtual gimbals
@@ -226,7 +228,13 @@ impl Hub {
             autopilot_metrics: EndpointMetrics::new(stats, "autopilot".to_string()),
             local: Mutex::new(None),
             local_metrics: EndpointMetrics::new(stats, "gimbal_v2".to_string()),
+            tlog: OnceLock::new(),
         }
+    }
+
+    /// Records the autopilot link's traffic into a flight log from now on.
+    pub(crate) fn set_tlog(&self, tap: crate::tlog::Tap) {
+        let _ = self.tlog.set(tap);
     }
 
     /// Serves `components` of our system locally: frames from endpoints addressed to
@@ -265,15 +273,24 @@ impl Hub {
     /// The link opened a connection: forward endpoint traffic into `outbox`.
     pub fn attach(&self, outbox: Arc<Outbox>) {
         *lock(&self.autopilot) = Some(outbox);
+        if let Some(tlog) = self.tlog.get() {
+            tlog.connected();
+        }
     }
 
     /// The connection closed.
     pub fn detach(&self) {
         *lock(&self.autopilot) = None;
+        if let Some(tlog) = self.tlog.get() {
+            tlog.disconnected();
+        }
     }
 
     /// A frame read from the autopilot: to every endpoint.
     pub fn from_autopilot(&self, frame: &RawFrame) {
+        if let Some(tlog) = self.tlog.get() {
+            tlog.from_autopilot(frame);
+        }
         if self.ports.is_empty() {
             return;
         }
@@ -290,6 +307,11 @@ impl Hub {
     /// Our own frame (the heartbeat of component 191 after it went to the autopilot,
     /// or a virtual gimbal's traffic): to every endpoint.
     pub fn from_local(&self, frame: &RawFrame) {
+        if frame.component_id() == crate::requests::OWN_COMPONENT {
+            if let Some(tlog) = self.tlog.get() {
+                tlog.to_autopilot(frame);
+            }
+        }
         if self.ports.is_empty() {
             return;
         }
@@ -365,7 +387,11 @@ impl Hub {
             None => Err(WriteError::Closed),
         };
         match result {
-            Ok(()) => {}
+            Ok(()) => {
+                if let Some(tlog) = self.tlog.get() {
+                    tlog.to_autopilot(frame);
+                }
+            }
             Err(WriteError::Congested) => self.autopilot_metrics.dropped(DropReason::QueueFull, 1),
             Err(WriteError::Closed) => self.autopilot_metrics.dropped(DropReason::LinkDown, 1),
         }

@@ -25,6 +25,7 @@
 //! | [`arbiter`] | authority, freshness, geofence envelope, audit: decides every command (pure) |
 //! | [`requests`] | our heartbeat, stream-rate and home requests (pure) |
 //! | [`gimbal_v2`] | the vision pipeline's virtual cameras as MAVLink gimbals (pure) |
+//! | [`tlog`] | flight logs (`.tlog`) of the autopilot link, rotation and retention |
 //! | [`metrics`] | the exported series |
 //! | `service` | the event loop tying them together |
 #![forbid(unsafe_code)]
@@ -44,6 +45,7 @@ pub mod router;
 mod service;
 pub mod signing;
 pub mod telemetry;
+pub mod tlog;
 mod transport;
 
 use anyhow::Context as _;
@@ -159,6 +161,7 @@ pub async fn run_with_endpoints(
         endpoints,
         (settings.system_id, requests::OWN_COMPONENT),
         settings.signing.as_ref(),
+        settings.tlog.as_ref(),
         &stats,
         router_stop.clone(),
     );

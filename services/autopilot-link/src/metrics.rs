@@ -140,6 +140,43 @@ impl Metrics {
     }
 }
 
+/// The flight log's series (`[tlog]`), registered only when it is configured.
+#[derive(Debug, Clone)]
+pub struct TlogMetrics {
+    /// `skymesh_autopilot_tlog_recording`: 1 while a log is being written.
+    pub recording: Gauge,
+    /// `skymesh_autopilot_tlog_frames_total`: frames written to logs.
+    pub frames: Counter,
+    /// `skymesh_autopilot_tlog_bytes_total`: bytes written to logs (stamps included).
+    pub bytes: Counter,
+    /// `skymesh_autopilot_tlog_dropped_frames_total`: frames not recorded because
+    /// the writer's queue was full (the link never waits for the disk).
+    pub dropped: Counter,
+    /// `skymesh_autopilot_tlog_errors_total{reason="io"}`: I/O errors (each ends
+    /// the recording it hit).
+    pub errors: Counter,
+    /// `skymesh_autopilot_tlog_errors_total{reason="no_room"}`: recordings not
+    /// started or ended because the limits could not hold.
+    pub no_room: Counter,
+    /// `skymesh_autopilot_tlog_files_deleted_total`: old logs deleted by retention.
+    pub deleted: Counter,
+}
+
+impl TlogMetrics {
+    pub fn new(stats: &Stats) -> Self {
+        const ERRORS: &str = "skymesh_autopilot_tlog_errors_total";
+        TlogMetrics {
+            recording: stats.gauge("skymesh_autopilot_tlog_recording", &[]),
+            frames: stats.counter("skymesh_autopilot_tlog_frames_total", &[]),
+            bytes: stats.counter("skymesh_autopilot_tlog_bytes_total", &[]),
+            dropped: stats.counter("skymesh_autopilot_tlog_dropped_frames_total", &[]),
+            errors: stats.counter(ERRORS, &[("reason", "io")]),
+            no_room: stats.counter(ERRORS, &[("reason", "no_room")]),
+            deleted: stats.counter("skymesh_autopilot_tlog_files_deleted_total", &[]),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

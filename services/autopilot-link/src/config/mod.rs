@@ -11,12 +11,14 @@
 //! | `arbiter.rs` | the `[arbiter]` table |
 //! | `signing.rs` | the `[signing]` table |
 //! | `vision.rs` | the `[vision]` table |
+//! | `tlog.rs` | the `[tlog]` table (flight logs) |
 
 mod arbiter;
 mod endpoint;
 mod signing;
 #[cfg(test)]
 mod tests;
+mod tlog;
 mod vision;
 
 use std::path::{Path, PathBuf};
@@ -30,11 +32,13 @@ use skymesh_runtime::{ConfigError, ServiceConfig};
 use crate::arbiter::ArbiterSettings;
 use crate::gimbal_v2::VisionSettings;
 use crate::signing::SigningSettings;
+use crate::tlog::TlogSettings;
 
 pub use arbiter::RawArbiter;
 use endpoint::router_endpoints;
 pub use endpoint::Endpoint;
 pub use signing::RawSigning;
+pub use tlog::{default_dir as default_tlog_dir, RawTlog};
 pub use vision::RawVision;
 
 /// Telemetry rates requested from the autopilot, Hz.
@@ -96,6 +100,8 @@ pub struct Settings {
     pub vision: VisionSettings,
     /// MAVLink 2 message signing on some endpoints; `None` = no signing.
     pub signing: Option<SigningSettings>,
+    /// Flight logs of the autopilot link; `None` = none (no `[tlog]` table).
+    pub tlog: Option<TlogSettings>,
 }
 
 /// The configuration file as written. Unknown keys are an error (exit code 64).
@@ -140,6 +146,8 @@ pub struct RawConfig {
     pub vision: RawVision,
     /// `[signing]`: MAVLink 2 message signing on router endpoints.
     pub signing: RawSigning,
+    /// `[tlog]`: flight logs; absent = off.
+    pub tlog: Option<RawTlog>,
 }
 
 impl Default for RawConfig {
@@ -172,6 +180,7 @@ impl Default for RawConfig {
             arbiter: RawArbiter::default(),
             vision: RawVision::default(),
             signing: RawSigning::default(),
+            tlog: None,
         }
     }
 }
@@ -314,6 +323,7 @@ impl ServiceConfig for RawConfig {
             state_file: state_file(&self.state_file, vehicle_id)?,
             vision: self.vision.validate()?,
             signing,
+            tlog: self.tlog.map(|t| t.validate(vehicle_id)).transpose()?,
         })
     }
 }

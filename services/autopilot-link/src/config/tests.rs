@@ -359,3 +359,57 @@ fn the_state_file_defaults_per_vehicle_under_the_state_directory_or_tmp() {
         "{e}"
     );
 }
+
+#[test]
+fn flight_logs_are_off_unless_a_tlog_table_is_given_and_its_values_are_checked() {
+    assert_eq!(parse_str("").unwrap().tlog, None);
+    assert_eq!(parse_str(RawConfig::DEFAULT_TOML).unwrap().tlog, None);
+    let s = parse_str("vehicle_id = 4\n[tlog]\ndir = \"/var/log/skymesh/tlog\"")
+        .unwrap()
+        .tlog
+        .unwrap();
+    assert_eq!(s.dir, PathBuf::from("/var/log/skymesh/tlog"));
+    assert_eq!(s.mode, crate::tlog::TlogMode::Arming);
+    assert_eq!(s.vehicle_id, 4);
+    assert_eq!(s.limits.max_files, 100);
+    assert_eq!(s.limits.max_total, 2_000_000_000);
+    assert_eq!(s.limits.min_free, 500_000_000);
+    assert_eq!(s.max_file_bytes, 500_000_000);
+    assert_eq!(s.queue_frames, 4096);
+    assert_eq!(s.flush_interval, Duration::from_secs(1));
+    let s = parse_str("[tlog]\nmode = \"connection\"\nmax_files = 3\nmin_free_mb = 0")
+        .unwrap()
+        .tlog
+        .unwrap();
+    assert_eq!(s.mode, crate::tlog::TlogMode::Connection);
+    assert_eq!((s.limits.max_files, s.limits.min_free), (3, 0));
+    assert_eq!(
+        default_tlog_dir(Some("/var/log/skymesh:/x"), Some("d")),
+        PathBuf::from("/var/log/skymesh/tlog")
+    );
+    assert_eq!(
+        default_tlog_dir(None, Some("e2e7")),
+        PathBuf::from("/tmp/skymesh-e2e7/tlog")
+    );
+    let file = tempfile::NamedTempFile::new().unwrap();
+    let not_a_dir = format!("[tlog]\ndir = \"{}\"", file.path().display());
+    for (bad, field) in [
+        ("[tlog]\nmode = \"always\"", "tlog.mode"),
+        ("[tlog]\ndir = \"relative/logs\"", "tlog.dir"),
+        (not_a_dir.as_str(), "tlog.dir"),
+        ("[tlog]\nmax_files = 0", "tlog.max_files"),
+        ("[tlog]\nmax_total_mb = 0", "tlog.max_total_mb"),
+        (
+            "[tlog]\nmax_total_mb = 10\nmax_file_mb = 11",
+            "tlog.max_file_mb",
+        ),
+        ("[tlog]\nmin_free_mb = -1", "tlog.min_free_mb"),
+        ("[tlog]\nqueue_frames = 8", "tlog.queue_frames"),
+        ("[tlog]\nflush_s = 0", "tlog.flush_s"),
+        ("[tlog]\nflush_s = nan", "tlog.flush_s"),
+        ("[tlog]\nrotate = true", "rotate"),
+    ] {
+        let e = parse_str(bad).unwrap_err();
+        assert!(e.to_string().contains(field), "{bad}: {e}");
+    }
+}

@@ -63,6 +63,7 @@ use crate::config::Endpoint;
 use crate::hub::{label, DropReason, EndpointMetrics, Hub};
 use crate::router::MAX_ENDPOINTS;
 use crate::signing::{EndpointSigning, Signing, SigningSettings};
+use crate::tlog::TlogSettings;
 use mavlink_frame::{FrameParser, RawFrame};
 
 use tcp::{tcp_in, tcp_out};
@@ -163,13 +164,15 @@ impl Bound {
 }
 
 /// Starts every endpoint; `signing` says which of them (indices into the bound
-/// endpoints, in configuration order) require MAVLink 2 signing, with which key.
-/// The returned task ends once `shutdown` fires and every endpoint task has closed
-/// its sockets.
+/// endpoints, in configuration order) require MAVLink 2 signing, with which key;
+/// with `tlog`, the autopilot link's traffic is recorded ([`crate::tlog`]). The
+/// returned task ends once `shutdown` fires, every endpoint task has closed its
+/// sockets and the flight log being written is closed.
 pub fn start(
     bound: Bound,
     local: (u8, u8),
     signing: Option<&SigningSettings>,
+    tlog: Option<&TlogSettings>,
     stats: &Stats,
     shutdown: CancellationToken,
 ) -> (Arc<Hub>, JoinHandle<()>) {
@@ -201,6 +204,17 @@ pub fn start(
         receivers.push(rx);
     }
     let hub = Arc::new(Hub::new(local, ports, stats));
+    let recorder = tlog.and_then(|settings| match crate::tlog::start(settings, stats) {
+        Ok((tap, recorder)) => {
+            hub.set_tlog(tap);
+            Some(recorder)
+        }
+        Err(e) => {
+            // The link runs without flight logs rather than not at all.
+            tracing::error!(error = %e, "tlog: cannot start the writer thread: no flight logs");
+            None
+        }
+    });
     let mut tasks = JoinSet::new();
     let all = bound.endpoints.into_iter().zip(receivers).zip(signers);
     for (i, (((endpoint, socket), rx), sig)) in all.enumerate() {
@@ -234,6 +248,13 @@ pub fn start(
         while let Some(r) = tasks.join_next().await {
             if let Err(e) = r {
                 tracing::warn!(error = %e, "router endpoint task failed");
+            }
+        }
+        if let Some(recorder) = recorder {
+            // Cancelled once the link has stopped: no frame comes after this.
+            shutdown.cancelled().await;
+            if let Err(e) = tokio::task::spawn_blocking(move || recorder.finish()).await {
+                tracing::warn!(error = %e, "tlog: closing the flight log failed");
             }
         }
     });

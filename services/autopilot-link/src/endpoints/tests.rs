@@ -77,7 +77,14 @@ fn udp_endpoints_are_sent_to_by_the_routing_thread() {
     let (hub, task) = rt.block_on(async {
         let bound = Bound::bind(&endpoints).await.unwrap();
         let udpin = bound.local_addrs()[2].unwrap();
-        let (hub, task) = start(bound, (1, 191), Some(&signing), &stats, shutdown.clone());
+        let (hub, task) = start(
+            bound,
+            (1, 191),
+            Some(&signing),
+            None,
+            &stats,
+            shutdown.clone(),
+        );
         // The udpin endpoint learns its peer from what it sends; the udpout
         // ones open their sockets: wait (driving the runtime) until all three
         // receive what the hub routes.
@@ -190,7 +197,7 @@ fn a_udpout_destination_nobody_listens_at_gets_a_frame_a_second_until_it_listens
     let shutdown = CancellationToken::new();
     let (hub, _task) = rt.block_on(async {
         let bound = Bound::bind(&[endpoint]).await.unwrap();
-        let started = start(bound, (1, 191), None, &stats, shutdown.clone());
+        let started = start(bound, (1, 191), None, None, &stats, shutdown.clone());
         // Let the endpoint task open its socket and install its sink.
         tokio::time::sleep(Duration::from_millis(200)).await;
         started
