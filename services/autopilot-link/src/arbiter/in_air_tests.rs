@@ -2,7 +2,7 @@
 
 use super::tests::{executed, flying, refusal, sample, settings, S};
 use super::*;
-use skymesh_ipc_types::ZoomMode;
+use skymesh_ipc_types::{AckResult, ZoomMode};
 use CommandSource::*;
 
 fn motor_test() -> Command {

@@ -41,7 +41,10 @@
 
 pub mod audit;
 pub mod authority;
+mod decision;
+mod emergency;
 mod envelope;
+mod failsafe;
 pub mod fence_stack;
 #[cfg(test)]
 mod fence_stack_tests;
@@ -52,26 +55,35 @@ pub mod freshness;
 pub mod geofence;
 #[cfg(test)]
 mod geofence_tests;
+mod home;
 pub mod in_air;
 #[cfg(test)]
 mod in_air_tests;
 pub mod persist;
 #[cfg(test)]
 mod safety_tests;
+mod target;
 #[cfg(test)]
 mod tests;
+mod vehicle;
 
 use std::time::Duration;
 
 use skymesh_ipc_types::{
-    AckResult, ArbiterEventKind, AuthorityChange, AuthorityDomain, Command, CommandKind,
-    CommandSource, FlightMode, RefusalReason, VehicleCommand, VehicleState,
+    ArbiterEventKind, AuthorityChange, AuthorityDomain, Command, CommandKind, CommandSource,
+    RefusalReason, VehicleCommand,
 };
 
-use authority::{Authority, Change, Claim, Released};
+use authority::{Authority, Change, Claim};
+use decision::refused;
+pub use decision::{Decision, Effect, Outcome};
+use failsafe::{failsafe_refusal, in_failsafe};
 use fence_stack::FenceStack;
 use freshness::{Freshness, FreshnessPolicy, Streams};
 use geofence::Envelope;
+pub use home::Home;
+use target::Target;
+pub use vehicle::{Kinematics, VehicleView};
 
 /// The arbiter's configuration (validated in [`crate::config`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -103,175 +115,6 @@ pub struct ArbiterSettings {
     pub max_home_alt_change_m: f32,
 }
 
-/// Position and velocity of the vehicle, as far as the arbiter needs them.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Kinematics {
-    pub lat_deg: f64,
-    pub lon_deg: f64,
-    pub alt_rel_m: f32,
-    pub vel_ned_mps: [f32; 3],
-    /// How old the position fix is when the arbiter decides, s: the geofence adds it
-    /// to the response time and refuses motion toward a boundary beyond
-    /// [`geofence::MAX_FIX_AGE_S`].
-    pub age_s: f32,
-}
-
-/// The autopilot's home (HOME_POSITION), where RTL returns to.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Home {
-    pub lat_deg: f64,
-    pub lon_deg: f64,
-    /// Above mean sea level, m.
-    pub alt_msl_m: f32,
-}
-
-/// What the arbiter knows about the vehicle when it decides.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VehicleView {
-    pub armed: bool,
-    pub mode: FlightMode,
-    /// `None` when no position has been received or it is older than
-    /// [`VehicleView::POSITION_MAX_AGE_NS`].
-    pub position: Option<Kinematics>,
-    /// `None` until the autopilot reported its home.
-    pub home: Option<Home>,
-}
-
-impl Default for VehicleView {
-    /// Disarmed, mode unknown, no position, no home.
-    fn default() -> Self {
-        VehicleView {
-            armed: false,
-            mode: FlightMode::Unknown,
-            position: None,
-            home: None,
-        }
-    }
-}
-
-impl VehicleView {
-    /// An older position is not used for the geofence or the in-air test.
-    pub const POSITION_MAX_AGE_NS: u64 = 2_000_000_000;
-
-    pub fn new(
-        armed: bool,
-        mode: FlightMode,
-        state: Option<&VehicleState>,
-        home: Option<Home>,
-        now_ns: u64,
-    ) -> Self {
-        let position = state
-            .filter(|s| {
-                s.position_valid == 1
-                    && now_ns.saturating_sub(s.position_stamp_ns) <= Self::POSITION_MAX_AGE_NS
-            })
-            .map(|s| Kinematics {
-                lat_deg: s.lat_deg,
-                lon_deg: s.lon_deg,
-                alt_rel_m: s.alt_rel_m,
-                vel_ned_mps: s.vel_ned_mps,
-                age_s: now_ns.saturating_sub(s.position_stamp_ns) as f32 * 1e-9,
-            });
-        VehicleView {
-            armed,
-            mode,
-            position,
-            home,
-        }
-    }
-
-    fn in_air(&self, s: &ArbiterSettings) -> bool {
-        self.armed
-            && self.position.is_none_or(|k| {
-                let [n, e, d] = k.vel_ned_mps;
-                k.alt_rel_m > s.in_air_alt_m
-                    || n.hypot(e) > s.in_air_speed_mps
-                    || d.abs() > s.in_air_speed_mps
-            })
-    }
-}
-
-/// What to do with a command.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Outcome {
-    /// Execute `command` (as the arbiter left it); `limited` says what it reduced.
-    Execute {
-        command: Command,
-        limited: Option<String>,
-    },
-    /// Decided by the arbiter alone (authority requests): answer accepted.
-    Done { detail: String },
-    Refused {
-        reason: RefusalReason,
-        detail: String,
-    },
-}
-
-/// Something the service must publish or do besides answering.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Effect {
-    /// Publish `AuthorityState` (and an `AuthorityChanged` event).
-    Authority(Change),
-    Event {
-        kind: ArbiterEventKind,
-        source: Option<CommandSource>,
-        detail: String,
-    },
-    /// A geofence decision ([`Arbiter::set_geofence`]): an `ArbiterEvent` that echoes
-    /// the `GeofenceSet`'s `request_id`.
-    Fence {
-        kind: ArbiterEventKind,
-        source: Option<CommandSource>,
-        request_id: u32,
-        detail: String,
-    },
-    /// `source`'s setpoint stream stopped while moving: brake to a hover.
-    StaleBrake { source: CommandSource },
-    /// `source` flew to a position target (`GoTo`, `Takeoff`) and lost flight
-    /// authority by timeout or pre-emption: brake to a hover, as for a stopped stream.
-    TargetBrake { source: CommandSource },
-}
-
-/// The arbiter's answer to one command.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Decision {
-    pub outcome: Outcome,
-    pub effects: Vec<Effect>,
-}
-
-impl Decision {
-    pub fn result(&self) -> AckResult {
-        match &self.outcome {
-            Outcome::Execute {
-                limited: Some(_), ..
-            } => AckResult::Limited,
-            Outcome::Execute { .. } | Outcome::Done { .. } => AckResult::Accepted,
-            Outcome::Refused { .. } => AckResult::Refused,
-        }
-    }
-
-    pub fn reason(&self) -> RefusalReason {
-        match &self.outcome {
-            Outcome::Refused { reason, .. } => *reason,
-            _ => RefusalReason::None,
-        }
-    }
-
-    pub fn detail(&self) -> &str {
-        match &self.outcome {
-            Outcome::Execute { limited, .. } => limited.as_deref().unwrap_or(""),
-            Outcome::Done { detail } | Outcome::Refused { detail, .. } => detail,
-        }
-    }
-}
-
-fn refused(reason: RefusalReason, detail: impl Into<String>) -> Outcome {
-    Outcome::Refused {
-        reason,
-        detail: detail.into(),
-    }
-}
-
 fn domain_name(d: AuthorityDomain) -> &'static str {
     match d {
         AuthorityDomain::Flight => "flight",
@@ -294,78 +137,6 @@ fn ends_stream(kind: CommandKind) -> bool {
 }
 
 const NS_PER_MS: u64 = 1_000_000;
-
-/// The autopilot flies its own failsafe (or a pilot's choice of it): RTL, LAND,
-/// SmartRTL.
-fn in_failsafe(mode: FlightMode) -> bool {
-    matches!(
-        mode,
-        FlightMode::Rtl | FlightMode::Land | FlightMode::SmartRtl
-    )
-}
-
-/// Why `command` from `source` may not run while the autopilot flies its failsafe
-/// in `mode`; `None` when it may. Sources below manual RC may not change the mode
-/// or the motion: `SetMode`, `Brake`, `GoTo`, `VelocityNed`, `Takeoff`, `SetYaw`,
-/// `SetHome` (it moves where RTL goes), and RTL during LAND (a LAND failsafe
-/// usually means too little battery to fly back). `Land` stays allowed (it ends the
-/// flight where the vehicle is, as the autopilot's own escalation would); so do the
-/// camera's ROI, payload commands and an emergency stop (which holds the
-/// failsafe's descent rather than overriding it).
-fn failsafe_refusal(mode: FlightMode, source: CommandSource, command: &Command) -> Option<String> {
-    if !in_failsafe(mode) || source.priority() >= CommandSource::ManualRc.priority() {
-        return None;
-    }
-    let refused = match command {
-        Command::SetMode(_)
-        | Command::Brake
-        | Command::GoTo { .. }
-        | Command::VelocityNed { .. }
-        | Command::Takeoff { .. }
-        | Command::SetYaw { .. }
-        | Command::SetHome { .. } => true,
-        Command::ReturnToLaunch => mode != FlightMode::Rtl,
-        _ => false,
-    };
-    refused.then(|| format!("{mode} failsafe held: manual RC only"))
-}
-
-/// `a, b, c`.
-fn names(sources: &[CommandSource]) -> String {
-    sources
-        .iter()
-        .map(|s| s.as_str())
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// A position target in flight: who flies it and where to.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Target {
-    source: CommandSource,
-    /// Latitude, longitude (`GoTo`); `None` for a take-off (altitude only).
-    at: Option<(f64, f64)>,
-    alt_rel_m: f32,
-}
-
-impl Target {
-    const ARRIVED_M: f64 = 1.5;
-    const ARRIVED_ALT_M: f32 = 1.0;
-    const ARRIVED_MPS: f32 = 0.5;
-
-    fn reached(&self, k: &Kinematics) -> bool {
-        let [n, e, d] = k.vel_ned_mps;
-        let slow = n.hypot(e).hypot(d) < Self::ARRIVED_MPS;
-        let level = (k.alt_rel_m - self.alt_rel_m).abs() < Self::ARRIVED_ALT_M;
-        let there = self.at.is_none_or(|(lat, lon)| {
-            geofence::LocalFrame::new(lat, lon)
-                .to_local(k.lat_deg, k.lon_deg)
-                .norm()
-                < Self::ARRIVED_M
-        });
-        slow && level && there
-    }
-}
 
 /// The arbiter of one vehicle. `Clone`: the service decides a retransmission
 /// again on a copy, which changes nothing here.
@@ -651,162 +422,6 @@ impl Arbiter {
             }
         }
         effects.push(Effect::Authority(c));
-    }
-
-    /// An executed flight command of `source`: a `GoTo` or `Takeoff` is now the
-    /// position target; anything else that moves the vehicle replaces it (a velocity
-    /// setpoint, `Brake`, `Land`, RTL, a mode change...). Yaw, ROI and home leave it.
-    fn track_target(&mut self, command: &Command, source: CommandSource) {
-        match *command {
-            Command::GoTo {
-                lat_deg,
-                lon_deg,
-                alt_rel_m,
-                ..
-            } => {
-                self.position_target = Some(Target {
-                    source,
-                    at: Some((lat_deg, lon_deg)),
-                    alt_rel_m,
-                })
-            }
-            Command::Takeoff { alt_rel_m } => {
-                self.position_target = Some(Target {
-                    source,
-                    at: None,
-                    alt_rel_m,
-                })
-            }
-            Command::VelocityNed { .. } => self.position_target = None,
-            ref c if ends_stream(c.kind()) => self.position_target = None,
-            _ => {}
-        }
-    }
-
-    /// A new measurement of the vehicle: a position target it has reached (within
-    /// [`Target::ARRIVED_M`] horizontally and [`Target::ARRIVED_ALT_M`] vertically,
-    /// slower than [`Target::ARRIVED_MPS`]) is over, so its source going quiet
-    /// afterwards is not braked (the autopilot holds the point by itself).
-    pub fn observe(&mut self, vehicle: &VehicleView) {
-        if let (Some(t), Some(k)) = (self.position_target, vehicle.position) {
-            if t.reached(&k) {
-                self.position_target = None;
-            }
-        }
-    }
-
-    /// `source` withdraws its own emergency stop.
-    fn release_emergency(
-        &mut self,
-        now_ns: u64,
-        source: CommandSource,
-        effects: &mut Vec<Effect>,
-    ) -> Outcome {
-        let detail = match self.authority.release_emergency(source, now_ns) {
-            Released::NotEngaged => {
-                return Outcome::Done {
-                    detail: format!("no emergency stop by {source} in force"),
-                }
-            }
-            Released::Remaining(others) => {
-                let detail = format!("{source} released; still held by {}", names(&others));
-                effects.push(Effect::Event {
-                    kind: ArbiterEventKind::EmergencyReleased,
-                    source: Some(source),
-                    detail: detail.clone(),
-                });
-                detail
-            }
-            Released::Ended(change) => {
-                effects.push(Effect::Event {
-                    kind: ArbiterEventKind::EmergencyReleased,
-                    source: Some(source),
-                    detail: format!("{source} released, the last engager"),
-                });
-                effects.push(Effect::Event {
-                    kind: ArbiterEventKind::EmergencyCleared,
-                    source: Some(source),
-                    detail: format!("emergency stop ended: {source} was the last engager"),
-                });
-                effects.push(Effect::Authority(change));
-                "emergency stop ended".to_string()
-            }
-        };
-        Outcome::Done { detail }
-    }
-
-    /// Ends the emergency stop whoever engaged it: operator and safety only.
-    fn clear_emergency(
-        &mut self,
-        now_ns: u64,
-        source: CommandSource,
-        effects: &mut Vec<Effect>,
-    ) -> Outcome {
-        if !matches!(source, CommandSource::Safety | CommandSource::Operator) {
-            return refused(
-                RefusalReason::Denied,
-                "clear_emergency: operator or safety only",
-            );
-        }
-        let Some((was, change)) = self.authority.clear_emergency(now_ns) else {
-            return Outcome::Done {
-                detail: "no emergency stop in force".to_string(),
-            };
-        };
-        let engagers: Vec<CommandSource> = was.iter().map(|e| e.source).collect();
-        let detail = format!("cleared by {source}; engaged by {}", names(&engagers));
-        effects.push(Effect::Event {
-            kind: ArbiterEventKind::EmergencyCleared,
-            source: Some(source),
-            detail: detail.clone(),
-        });
-        effects.push(Effect::Authority(change));
-        Outcome::Done { detail }
-    }
-
-    /// `SetHome` bounds: home is where a failsafe RTL flies, so it stays inside the
-    /// fences, within `max_home_move_m` of the current home and at its altitude
-    /// (± `max_home_alt_change_m`).
-    fn home_check(
-        &self,
-        lat_deg: f64,
-        lon_deg: f64,
-        alt_msl_m: f32,
-        vehicle: &VehicleView,
-    ) -> Result<(), (RefusalReason, String)> {
-        let Some(home) = vehicle.home else {
-            return Err((
-                RefusalReason::WrongState,
-                "home not known yet: cannot bound a new home".to_string(),
-            ));
-        };
-        let frame = geofence::LocalFrame::new(home.lat_deg, home.lon_deg);
-        let moved = frame.to_local(lat_deg, lon_deg).norm();
-        let max = f64::from(self.settings.max_home_move_m);
-        if !moved.is_finite() || moved > max {
-            return Err((
-                RefusalReason::Denied,
-                format!("new home {moved:.0} m from the current one, max {max:.0} m"),
-            ));
-        }
-        let dz = alt_msl_m - home.alt_msl_m;
-        if !dz.is_finite() || dz.abs() > self.settings.max_home_alt_change_m {
-            return Err((
-                RefusalReason::Denied,
-                format!(
-                    "home altitude change {:.1} m, max {:.1} m",
-                    dz.abs(),
-                    self.settings.max_home_alt_change_m
-                ),
-            ));
-        }
-        if !self.fence.contains(lat_deg, lon_deg) {
-            return Err((
-                RefusalReason::Geofence,
-                "new home outside the geofence".to_string(),
-            ));
-        }
-        Ok(())
     }
 
     /// What is due at `now_ns` without a command: quiet holders lose authority, a

@@ -343,7 +343,7 @@ pub fn start(
         effects.push(Effect::Event {
             kind: ArbiterEventKind::EmergencyStop,
             source: Some(by[0]),
-            detail: format!("{why}; engaged by {}", super::names(&by)),
+            detail: format!("{why}; engaged by {}", super::emergency::names(&by)),
         });
     }
     (arbiter, effects)

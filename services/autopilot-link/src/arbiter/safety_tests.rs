@@ -6,7 +6,7 @@ use super::tests::{
     settings, vel, HOME_ALT_MSL, S,
 };
 use super::*;
-use skymesh_ipc_types::AuthorityChange;
+use skymesh_ipc_types::{AckResult, AuthorityChange, FlightMode};
 use CommandSource::*;
 
 fn stop_by(a: &mut Arbiter, source: CommandSource, id: u32, t: u64, v: &VehicleView) -> Decision {

@@ -1,7 +1,7 @@
 //! Decisions of [`super::Arbiter`], with explicit times: no sleeping.
 
 use super::*;
-use skymesh_ipc_types::{AuthorityChange, FenceKind, GeofenceSet};
+use skymesh_ipc_types::{AckResult, AuthorityChange, FenceKind, FlightMode, GeofenceSet};
 use CommandSource::*;
 
 const MS: u64 = 1_000_000;
