@@ -413,3 +413,27 @@ fn flight_logs_are_off_unless_a_tlog_table_is_given_and_its_values_are_checked()
         assert!(e.to_string().contains(field), "{bad}: {e}");
     }
 }
+
+#[test]
+fn the_shipped_commented_tlog_table_parses_to_the_defaults() {
+    let shipped = RawConfig::DEFAULT_TOML;
+    let at = shipped
+        .find("\n# [tlog]\n")
+        .expect("a commented [tlog] table");
+    let mut text = shipped[..at].to_string();
+    text.push_str("\n[tlog]\n");
+    // Its commented `key = value` lines, uncommented.
+    for line in shipped[at..].lines().filter_map(|l| l.strip_prefix("# ")) {
+        if line
+            .split_once(" = ")
+            .is_some_and(|(k, _)| !k.contains(' '))
+        {
+            text.push_str(line);
+            text.push('\n');
+        }
+    }
+    let s = parse_str(&text).unwrap().tlog.unwrap();
+    let mut defaults = RawTlog::default();
+    defaults.dir = "/var/log/skymesh/tlog".into();
+    assert_eq!(s, defaults.validate(1).unwrap());
+}
