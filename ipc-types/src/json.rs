@@ -142,6 +142,25 @@ impl<T: JsonSchema, const N: usize> JsonSchema for BigArray<T, N> {
     }
 }
 
+/// `#[serde(with = "crate::json::nan_as_null")]` for an `f32` field that holds NaN
+/// when unknown: JSON has no NaN, so it is written `null` (schema: number or null)
+/// and `null` reads back as NaN.
+pub mod nan_as_null {
+    use super::*;
+
+    pub fn serialize<S: Serializer>(v: &f32, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f32(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+        Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::NAN))
+    }
+}
+
 /// `#[serde(with = "crate::json::big_array")]` for arrays longer than serde's 32.
 pub mod big_array {
     use super::*;
@@ -252,6 +271,14 @@ mod tests {
             alt_rel_m: 12.5,
             ..Default::default()
         });
+        let unknown = VehicleState {
+            alt_ellipsoid_m: f32::NAN,
+            ..Default::default()
+        };
+        let v = serde_json::to_value(unknown).unwrap();
+        assert!(v["alt_ellipsoid_m"].is_null());
+        let back: VehicleState = serde_json::from_value(v).unwrap();
+        assert!(back.alt_ellipsoid_m.is_nan());
         round_trip(VehicleCommand::default());
         round_trip(CommandAck::default());
         round_trip(AuthorityState::default());

@@ -119,11 +119,21 @@ pub struct VehicleState {
     pub alt_rel_m: f32,
     /// The GPS receiver's height above the WGS-84 ellipsoid, m (GPS_RAW_INT
     /// `alt_ellipsoid`); NaN unless `alt_ellipsoid_valid`.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::nan_as_null"),
+        schemars(with = "Option<f32>")
+    )]
     pub alt_ellipsoid_m: f32,
     /// Height of the geoid (mean sea level) above the WGS-84 ellipsoid where the
     /// vehicle is, m: GPS_RAW_INT `alt_ellipsoid - alt` of the same fix. Add it to an
     /// MSL altitude (`alt_msl_m`, home's) for a height above the ellipsoid. NaN
     /// unless `alt_ellipsoid_valid`.
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::nan_as_null"),
+        schemars(with = "Option<f32>")
+    )]
     pub geoid_undulation_m: f32,
     /// Velocity north, east, down, m/s.
     pub vel_ned_mps: [f32; 3],

@@ -41,6 +41,29 @@ enum Command {
     Status(StatusArgs),
     /// Print the commented default deploy/skymesh.toml.
     PrintDefaultConfig,
+    /// Record bus topics to an MCAP file (JSON samples, JSON schemas; Foxglove opens it) until SIGINT or SIGTERM.
+    Record(RecordArgs),
+    /// Publish an MCAP recording of `skymesh record` onto the mesh at its recorded pace.
+    Replay(ReplayArgs),
+}
+
+#[derive(Debug, Args)]
+struct RecordArgs {
+    /// The MCAP file to write (replaced if it exists).
+    #[arg(long, short = 'o')]
+    output: PathBuf,
+    /// Topic names or globs (`*` within a `/` segment, `**` across, `?` one character), e.g. `skymesh/vehicle/*/state`; globs pick up matching topics that appear later.
+    #[arg(required = true)]
+    topics: Vec<String>,
+}
+
+#[derive(Debug, Args)]
+struct ReplayArgs {
+    /// An MCAP file written by `skymesh record`.
+    input: PathBuf,
+    /// Speed-up: 2 replays twice as fast as recorded.
+    #[arg(long, default_value_t = 1.0)]
+    rate: f64,
 }
 
 #[derive(Debug, Args)]
@@ -118,6 +141,7 @@ fn up(args: UpArgs, log_format: &str, explicit_log_format: Option<String>) -> Ex
             let exe_dir = exe.parent().unwrap_or(Path::new("/")).to_path_buf();
             settings.locate_files(&exe_dir)?
         };
+        let settings = settings.read_console_token()?;
         let domain = Domain::from_env(settings.ipc_config.as_deref())?;
         Ok((settings, domain))
     });
@@ -251,6 +275,74 @@ fn status(args: StatusArgs) -> ExitCode {
     ExitCode::from(status_cmd::exit_code(&outcome))
 }
 
+/// Runs a bus tool (record, replay) in the mesh's domain until it ends or SIGINT/SIGTERM.
+fn bus_tool<T>(
+    what: &str,
+    run: impl AsyncFnOnce(Domain, CancellationToken) -> anyhow::Result<T>,
+) -> Result<T, ExitCode> {
+    let domain = match Domain::from_env(None) {
+        Ok(d) => d,
+        Err(e) => return Err(config_error(&e)),
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| {
+            eprintln!("skymesh: cannot start the async runtime: {e}");
+            ExitCode::from(exit::FAILURE)
+        })?;
+    rt.block_on(async move {
+        let stop = CancellationToken::new();
+        signals::spawn_shutdown_on_signal(stop.clone())?;
+        run(domain, stop).await
+    })
+    .map_err(|e| {
+        eprintln!("skymesh {what}: {e:#}");
+        ExitCode::from(exit::FAILURE)
+    })
+}
+
+fn record(args: RecordArgs) -> ExitCode {
+    let req = skymesh_record::RecordRequest {
+        output: args.output,
+        patterns: args.topics,
+    };
+    match bus_tool("record", async |domain, stop| {
+        skymesh_record::record(&domain, &req, stop).await
+    }) {
+        Ok(s) => {
+            eprintln!(
+                "skymesh record: wrote {} messages of {} topics, {} bytes, to {}",
+                s.messages,
+                s.topics.len(),
+                s.bytes,
+                req.output.display()
+            );
+            ExitCode::from(exit::OK)
+        }
+        Err(code) => code,
+    }
+}
+
+fn replay(args: ReplayArgs) -> ExitCode {
+    let req = skymesh_record::replay::ReplayRequest {
+        input: args.input,
+        rate: args.rate,
+    };
+    match bus_tool("replay", async |domain, stop| {
+        skymesh_record::replay::replay(&domain, &req, stop).await
+    }) {
+        Ok(s) => {
+            eprintln!(
+                "skymesh replay: published {} messages of {} topics ({} skipped: not decodable)",
+                s.messages, s.channels, s.skipped
+            );
+            ExitCode::from(exit::OK)
+        }
+        Err(code) => code,
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let log_format = cli
@@ -276,10 +368,18 @@ fn main() -> ExitCode {
             init_tracing(&log_format, None);
             status(args)
         }
+        Some(Command::Record(args)) => {
+            init_tracing(&log_format, None);
+            record(args)
+        }
+        Some(Command::Replay(args)) => {
+            init_tracing(&log_format, None);
+            replay(args)
+        }
         // `arg_required_else_help` prints the help when nothing is given.
         None => {
             eprintln!(
-                "skymesh: a command is needed (up, status, print-default-config); see --help"
+                "skymesh: a command is needed (up, status, record, replay, print-default-config); see --help"
             );
             ExitCode::from(2)
         }
