@@ -241,3 +241,92 @@ fn pymavlink_check(path: &Path, recs: &[Record], mesh: &Mesh) {
         alts[0]
     );
 }
+
+/// CPU time of every live thread of `pid` (`/proc/<pid>/task/*/schedstat`), ns.
+fn cpu_ns(pid: u32) -> u64 {
+    std::fs::read_dir(format!("/proc/{pid}/task"))
+        .unwrap()
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .sum()
+}
+
+/// One mesh with ATTITUDE at 50 Hz on the ground, recording (`connection` mode) or
+/// not: autopilot-link's CPU over `window` (after the rates settled), and the
+/// frames recorded in it.
+fn recording_cost(tlog: bool, window: Duration) -> (f64, usize) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut extra = "ground_attitude_hz = 50.0\n".to_string();
+    if tlog {
+        extra += &format!(
+            "[tlog]\ndir = \"{}\"\nmode = \"connection\"\n",
+            dir.path().display()
+        );
+    }
+    let opts = MeshOptions {
+        autopilot_link_extra: extra,
+        attitude_hz: 50.0,
+        ..MeshOptions::default()
+    };
+    let mut mesh = Mesh::start(opts).unwrap();
+    let pid = mesh.wait_running("autopilot-link", PATIENCE).unwrap();
+    runtime().block_on(async {
+        let mut g = Ground::new(&mesh, "tlog-bench");
+        g.wait_status("EKF healthy", |s| s.ekf_healthy != 0).await;
+    });
+    std::thread::sleep(Duration::from_secs(3));
+    let (t0, cpu0) = (micros_now(), cpu_ns(pid));
+    std::thread::sleep(window);
+    let (t1, cpu1) = (micros_now(), cpu_ns(pid));
+    mesh.stop(Duration::from_secs(20)).unwrap();
+    let frames = logs(dir.path())
+        .iter()
+        .flat_map(|p| records(&std::fs::read(p).unwrap()))
+        .filter(|r| (t0..t1).contains(&r.stamp_us))
+        .count();
+    let share = (cpu1 - cpu0) as f64 / ((t1 - t0) as f64 * 1e3);
+    (share, frames)
+}
+
+/// Recording cost at 50 Hz ATTITUDE (docs/benchmarks.md): autopilot-link's CPU
+/// with and without `[tlog]`, alternating, over the same window.
+/// `cargo test -p skymesh-e2e --test tlog -- --ignored --nocapture`
+/// (`TLOG_BENCH_S`: the window, seconds, default 20; `TLOG_BENCH_ROUNDS`, default 2).
+#[test]
+#[ignore = "benchmark: prints numbers, asserts nothing about them"]
+fn tlog_recording_cost_at_50_hz_attitude() {
+    let env = |k: &str, d: u64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let window = Duration::from_secs(env("TLOG_BENCH_S", 20));
+    let rounds = env("TLOG_BENCH_ROUNDS", 2);
+    let (mut off, mut on, mut frames) = (Vec::new(), Vec::new(), 0);
+    for round in 1..=rounds {
+        let (cpu_off, _) = recording_cost(false, window);
+        let (cpu_on, n) = recording_cost(true, window);
+        println!(
+            "round {round}: autopilot-link CPU {:.2} % without tlog, {:.2} % recording \
+             ({:.1} frames/s recorded)",
+            cpu_off * 100.0,
+            cpu_on * 100.0,
+            n as f64 / window.as_secs_f64()
+        );
+        off.push(cpu_off);
+        on.push(cpu_on);
+        frames += n;
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let fps = frames as f64 / (window.as_secs_f64() * rounds as f64);
+    let extra = mean(&on) - mean(&off);
+    println!(
+        "tlog recording cost: {:.2} % → {:.2} % of a core (+{:.2} points, {:.1} µs per recorded \
+         frame at {fps:.1} frames/s)",
+        mean(&off) * 100.0,
+        mean(&on) * 100.0,
+        extra * 100.0,
+        extra * 1e6 / fps
+    );
+}
