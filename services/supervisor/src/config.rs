@@ -14,6 +14,7 @@ use skymesh_ipc_types::topics;
 use skymesh_runtime::config::{in_range, socket_addr};
 use skymesh_runtime::{realtime, ConfigError};
 
+use crate::console::ConsoleSettings;
 use crate::policy::{RestartMode, RestartPolicy};
 
 /// The commented default mesh (`deploy/skymesh.toml`), printed by `print-default-config`.
@@ -61,6 +62,9 @@ struct RawSupervisor {
     ipc_config: Option<String>,
     log_dir: Option<String>,
     vehicles: Vec<i64>,
+    console_token: Option<String>,
+    console_token_file: Option<String>,
+    console_remote: bool,
 }
 
 impl Default for RawSupervisor {
@@ -75,6 +79,9 @@ impl Default for RawSupervisor {
             ipc_config: None,
             log_dir: None,
             vehicles: vec![1],
+            console_token: None,
+            console_token_file: None,
+            console_remote: false,
         }
     }
 }
@@ -149,6 +156,8 @@ pub struct Settings {
     /// MAVLink system ids of the vehicles whose `skymesh_vehicle_*` gauges
     /// `/metrics` exports (crate::vehicles), ascending.
     pub vehicles: Vec<u8>,
+    /// The web console's token (its actions) and reach (crate::console).
+    pub console: ConsoleSettings,
     /// Enabled services in start order (every service after the ones it names in `after`).
     pub services: Vec<ServiceSpec>,
     /// Names of services configured with `enabled = false`.
@@ -304,6 +313,13 @@ impl Settings {
         Ok(self)
     }
 
+    /// Reads `supervisor.console_token_file`, if set (a separate step: `skymesh
+    /// status` loads the config too and needs no secret it may not be allowed to read).
+    pub fn read_console_token(mut self) -> Result<Settings, ConfigError> {
+        self.console.read_token_file()?;
+        Ok(self)
+    }
+
     pub fn service(&self, name: &str) -> Option<&ServiceSpec> {
         self.services.iter().find(|s| s.name == name)
     }
@@ -349,6 +365,12 @@ impl RawConfig {
         let ipc_config = s.ipc_config.as_deref().map(|p| resolve(base, p));
         let log_dir = s.log_dir.as_deref().map(|p| resolve(base, p));
         let vehicles = vehicle_ids(&s.vehicles)?;
+        let console = ConsoleSettings::from_raw(
+            s.console_token.as_deref(),
+            s.console_token_file.as_deref(),
+            s.console_remote,
+            base,
+        )?;
         let default_policy = self.restart.apply("restart", RestartPolicy::default())?;
 
         let all_names: Vec<&str> = self.services.iter().map(|s| s.name.as_str()).collect();
@@ -476,6 +498,7 @@ impl RawConfig {
             ipc_config,
             log_dir,
             vehicles,
+            console,
             services,
             disabled,
         })
@@ -631,6 +654,7 @@ mod tests {
         assert_eq!(s.heartbeat, Duration::from_millis(500));
         assert_eq!(s.ipc_config, None);
         assert_eq!(s.vehicles, [1]);
+        assert_eq!(s.console, ConsoleSettings::default());
     }
 
     #[test]
@@ -703,6 +727,9 @@ mod tests {
             ("[supervisor]\nmetrics = \"nope\"", "supervisor.metrics"),
             ("[supervisor]\nheartbeat_ms = 1", "supervisor.heartbeat_ms"),
             ("[supervisor]\nbogus = 1", "bogus"),
+            ("[supervisor]\nconsole_token = \"short\"", "supervisor.console_token"),
+            ("[supervisor]\nconsole_token = \"0123456789abcdef\"\nconsole_token_file = \"t\"", "supervisor.console_token_file"),
+            ("[supervisor]\nconsole_remote = \"yes\"", "console_remote"),
             ("[restart]\nmode = \"never\"", "restart.mode"),
             ("[restart]\ninitial_backoff_ms = 500\nmax_backoff_ms = 100", "restart.max_backoff_ms"),
             ("[[service]]\nname = \"a/b\"\nbinary = \"x\"", "service[0].name"),

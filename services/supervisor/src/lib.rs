@@ -16,12 +16,15 @@
 //! [`child`] (spawn/stop/reap), [`adopt`] (finding and watching survivors), [`monitor`] (heartbeats and stats), [`supervise`]
 //! (one task per service), [`state`] (the shared view), [`procfs`], [`metrics`]
 //! (the Prometheus collector, `skymesh_build_info`), [`http`], [`health`] (the 0/1/2 and
-//! 200/503 verdict of `skymesh status` and `/healthz`), [`table`], [`status_cmd`].
+//! 200/503 verdict of `skymesh status` and `/healthz`), [`table`], [`status_cmd`],
+//! [`vehicles`] (the vehicles' topics: gauges and the console's view), [`console`]
+//! (the web console at `/`).
 #![forbid(unsafe_code)]
 
 pub mod adopt;
 pub mod child;
 pub mod config;
+pub mod console;
 pub mod health;
 pub mod http;
 pub mod metrics;
@@ -207,6 +210,13 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
             vehicles::Collect::new(vehicles.clone()).context("describing the vehicle gauges")?,
         ))
         .context("registering the vehicle gauges")?;
+    let restarts = Arc::new(supervise::RestartRequests::new(services.len()));
+    let console = Arc::new(console::Console::new(
+        mesh.clone(),
+        vehicles.clone(),
+        (!monitor_only).then(|| restarts.clone()),
+        settings.console.clone(),
+    ));
     if let Output::Files(dir) = &output {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating log directory {}", dir.display()))?;
@@ -220,7 +230,9 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         monitor_only,
         version = VERSION,
         git = GIT,
-        "skymesh supervisor listening on http://{addr} (/metrics, /status, /healthz)"
+        console_actions = settings.console.actions(),
+        console_remote = settings.console.remote,
+        "skymesh supervisor listening on http://{addr} (the console at /; /metrics, /status, /healthz)"
     );
     for name in &settings.disabled {
         tracing::info!(service = %name, "disabled in the config; not started");
@@ -235,10 +247,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     let http_tasks = TaskTracker::new();
     let server = tokio::spawn(http::serve(
         listener,
-        http::App {
-            mesh: mesh.clone(),
-            registry,
-        },
+        http::App::new(mesh.clone(), registry, console.clone()),
         http_stop.clone(),
         http_tasks.clone(),
     ));
@@ -258,7 +267,10 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
         .context("subscribing to service heartbeats")?;
     vehicles
         .attach(&bus)
-        .context("subscribing to the vehicles' state and status")?;
+        .context("subscribing to the vehicles' topics")?;
+    console
+        .attach(&bus)
+        .context("opening the console's command publishers")?;
 
     if let Some(f) = &status_file {
         write_status_file(f, addr)
@@ -289,6 +301,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
             rule,
             grace: settings.grace,
             shutdown: shutdown.clone(),
+            restarts: restarts.clone(),
         });
         // Services an earlier supervisor of this domain started and left running.
         let specs = settings.services.clone();
@@ -382,6 +395,7 @@ pub async fn run_up(up: Up, shutdown: CancellationToken) -> anyhow::Result<()> {
     // Our own node must be gone before asking whether any node of the domain is alive
     // (the vehicle gauges' subscribers hold it too).
     vehicles.detach();
+    console.detach();
     drop(bus);
     // An adopted service that stopped is reaped by its parent (init), not by us, and
     // iceoryx2 takes a zombie's node for alive: give init a moment (it may reap only

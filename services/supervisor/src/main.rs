@@ -141,6 +141,7 @@ fn up(args: UpArgs, log_format: &str, explicit_log_format: Option<String>) -> Ex
             let exe_dir = exe.parent().unwrap_or(Path::new("/")).to_path_buf();
             settings.locate_files(&exe_dir)?
         };
+        let settings = settings.read_console_token()?;
         let domain = Domain::from_env(settings.ipc_config.as_deref())?;
         Ok((settings, domain))
     });

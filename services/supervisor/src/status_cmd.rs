@@ -142,10 +142,14 @@ mod tests {
         use tokio_util::task::TaskTracker;
 
         let mesh = Arc::new(Mesh::new(&[("a".into(), true), ("b".into(), false)], false));
-        let app = crate::http::App {
-            registry: crate::metrics::registry(mesh.clone()).unwrap(),
-            mesh: mesh.clone(),
-        };
+        let vehicles = Arc::new(crate::vehicles::VehicleGauges::new(&[]));
+        let console =
+            crate::console::Console::new(mesh.clone(), vehicles, None, Default::default());
+        let app = crate::http::App::new(
+            mesh.clone(),
+            crate::metrics::registry(mesh.clone()).unwrap(),
+            Arc::new(console),
+        );
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         let stop = CancellationToken::new();

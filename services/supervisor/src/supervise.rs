@@ -5,6 +5,12 @@
 //! Two tokens: `shutdown` (the whole mesh is going down: start nothing new) and `stop`
 //! (stop this service's process now). The caller cancels `shutdown` first, then each
 //! service's `stop` in reverse start order.
+//!
+//! An operator (the web console) may ask for a restart ([`RestartRequests`]): a
+//! running process is stopped like on `stop` (SIGTERM, grace, SIGKILL) and started
+//! again at once; a service in backoff starts now; a service the supervisor gave up
+//! on (failed, config error, exited cleanly) starts again with a fresh budget. Each
+//! counts as a restart, none against the crash budget.
 
 use std::ops::ControlFlow;
 use std::sync::Arc;
@@ -32,6 +38,37 @@ pub struct Shared {
     pub grace: Duration,
     /// Cancelled when the mesh shuts down: nothing is started or restarted after it.
     pub shutdown: CancellationToken,
+    /// Restarts asked for by an operator; the console holds the other end.
+    pub restarts: Arc<RestartRequests>,
+}
+
+/// One restart request slot per service (by index in start order). A request made
+/// while nobody waits is kept until the service's task looks (one at most).
+#[derive(Debug)]
+pub struct RestartRequests {
+    slots: Vec<tokio::sync::Notify>,
+}
+
+impl RestartRequests {
+    /// Slots for `services` services.
+    pub fn new(services: usize) -> Self {
+        RestartRequests {
+            slots: (0..services).map(|_| tokio::sync::Notify::new()).collect(),
+        }
+    }
+
+    /// Asks for a restart of service `idx`; false if there is no such service.
+    pub fn request(&self, idx: usize) -> bool {
+        self.slots.get(idx).map(|n| n.notify_one()).is_some()
+    }
+
+    /// Resolves when a restart of `idx` is asked for (never for an unknown index).
+    pub(crate) async fn requested(&self, idx: usize) {
+        match self.slots.get(idx) {
+            Some(n) => n.notified().await,
+            None => std::future::pending().await,
+        }
+    }
 }
 
 /// Removes the stale resources of every dead node of the domain (blocking file work,
@@ -123,21 +160,38 @@ enum Outcome {
     Exited(std::io::Result<std::process::ExitStatus>),
     Hung(Liveness),
     Stop,
+    Restart,
 }
 
-/// Runs one start of the service until it ends. `None` means it was stopped on request.
+/// How one run of a service ended.
+#[derive(Debug, Clone, Copy)]
+enum RunEnd {
+    /// By itself (or killed as hung): the restart policy decides.
+    Ended(Ending),
+    /// Stopped on request (the mesh or the service is stopping).
+    Stopped,
+    /// Stopped for an operator's restart: start again now.
+    Restart,
+}
+
+/// Runs one start of the service until it ends.
 async fn run_once(
     sh: &Shared,
     idx: usize,
     spec: &ServiceSpec,
     run: &mut Running,
     stop: &CancellationToken,
-) -> Option<Ending> {
+) -> RunEnd {
     let outcome = tokio::select! {
         r = run.child.wait() => Outcome::Exited(r),
         verdict = hang_watch(sh, &sh.rule, idx, spec.heartbeat) => Outcome::Hung(verdict),
         _ = stop.cancelled() => Outcome::Stop,
+        () = sh.restarts.requested(idx) => Outcome::Restart,
     };
+    let restart = matches!(outcome, Outcome::Restart);
+    if restart {
+        tracing::info!(service = %spec.name, pid = run.pid, "restart asked for by an operator: stopping (SIGTERM)");
+    }
     let ending = match outcome {
         Outcome::Exited(Ok(status)) => child::ending(&status),
         Outcome::Exited(Err(e)) => {
@@ -160,7 +214,7 @@ async fn run_once(
             }
             Ending::Hung
         }
-        Outcome::Stop => {
+        Outcome::Stop | Outcome::Restart => {
             sh.mesh.set_phase(idx, Phase::Stopping);
             match child::stop(run, sh.grace).await {
                 Ok(status) => {
@@ -173,12 +227,16 @@ async fn run_once(
                     tracing::error!(service = %spec.name, pid = run.pid, error = %e, "stopping failed")
                 }
             }
-            return None;
+            return if restart {
+                RunEnd::Restart
+            } else {
+                RunEnd::Stopped
+            };
         }
     };
     // Anything the child forked dies with it, so no orphan keeps its shared memory.
     child::signal_group(run.pid, Signal::SIGKILL);
-    Some(ending)
+    RunEnd::Ended(ending)
 }
 
 fn log_ending(spec: &ServiceSpec, pid: Option<u32>, ending: Ending, ran_for: Duration) {
@@ -199,15 +257,15 @@ fn log_ending(spec: &ServiceSpec, pid: Option<u32>, ending: Ending, ran_for: Dur
     }
 }
 
-/// Runs an adopted process (started by an earlier supervisor) until it ends. `None`
-/// means it was stopped on request. Returns the ending and how long it ran under us.
+/// Runs an adopted process (started by an earlier supervisor) until it ends.
+/// Returns how it ended and how long it ran under us.
 async fn run_adopted(
     sh: &Shared,
     idx: usize,
     spec: &ServiceSpec,
     adopted: Adopted,
     stop: &CancellationToken,
-) -> Option<(Ending, Duration)> {
+) -> (RunEnd, Duration) {
     let pid = adopted.pid;
     let since = Instant::now();
     tracing::info!(
@@ -241,13 +299,19 @@ async fn run_adopted(
         Exited,
         Hung(Liveness),
         Stop,
+        Restart,
     }
     let seen = tokio::select! {
         () = adopted.exited() => Seen::Exited,
         verdict = hang_watch(sh, &rule, idx, spec.heartbeat) => Seen::Hung(verdict),
         _ = stop.cancelled() => Seen::Stop,
+        () = sh.restarts.requested(idx) => Seen::Restart,
     };
     let stopping = matches!(seen, Seen::Stop);
+    let restart = matches!(seen, Seen::Restart);
+    if restart {
+        tracing::info!(service = %spec.name, pid, "restart asked for by an operator: stopping the adopted process (SIGTERM)");
+    }
     let ending = match seen {
         Seen::Exited => Some(Ending::Lost),
         Seen::Hung(verdict) => {
@@ -261,7 +325,7 @@ async fn run_adopted(
             }
             Some(Ending::Hung)
         }
-        Seen::Stop => {
+        Seen::Stop | Seen::Restart => {
             sh.mesh.set_phase(idx, Phase::Stopping);
             adopted.signal_group(Signal::SIGTERM);
             if tokio::time::timeout(sh.grace, adopted.exited())
@@ -299,7 +363,12 @@ async fn run_adopted(
         }
     });
     clean_dead_nodes(&sh.domain, &sh.mesh).await;
-    ending.map(|e| (e, since.elapsed()))
+    let end = match ending {
+        Some(e) => RunEnd::Ended(e),
+        None if restart => RunEnd::Restart,
+        None => RunEnd::Stopped,
+    };
+    (end, since.elapsed())
 }
 
 /// Supervises service `idx` until `stop` is cancelled (or it reaches a state it is
@@ -320,70 +389,104 @@ pub async fn supervise(
     }
     let mut tracker = RestartTracker::new(spec.restart);
     loop {
-        if let Some(a) = adopted.take() {
-            let pid = a.pid;
-            let Some((ending, ran_for)) = run_adopted(&sh, idx, &spec, a, &stop).await else {
+        let (end, ran_for, pid) = match adopted.take() {
+            Some(a) => {
+                let pid = a.pid;
+                let (end, ran_for) = run_adopted(&sh, idx, &spec, a, &stop).await;
+                (end, ran_for, Some(pid))
+            }
+            None => run_new(&sh, idx, &spec, &stop).await,
+        };
+        let next = match end {
+            RunEnd::Stopped => {
                 sh.mesh.set_phase(idx, Phase::Stopped);
                 return;
-            };
-            let next = decide(
-                &sh,
-                idx,
-                &spec,
-                &mut tracker,
-                &stop,
-                ending,
-                ran_for,
-                Some(pid),
-            );
-            match next.await {
-                ControlFlow::Continue(()) => continue,
-                ControlFlow::Break(()) => return,
             }
-        }
-        sh.mesh.update(idx, |e| {
-            e.phase = Phase::Starting;
-            e.pid = None;
-            e.heartbeat = None;
-            e.stats = None;
-        });
-        let (ending, ran_for, pid) = match child::spawn(&spec, &sh.env) {
-            Err(e) => {
-                tracing::error!(service = %spec.name, program = %spec.program.display(), error = %e, "cannot start");
-                (Ending::SpawnFailed, Duration::ZERO, None)
+            RunEnd::Restart if stop.is_cancelled() || sh.shutdown.is_cancelled() => {
+                sh.mesh.set_phase(idx, Phase::Stopped);
+                return;
             }
-            Ok(mut run) => {
-                tracing::info!(service = %spec.name, pid = run.pid, program = %spec.program.display(), "started");
-                sh.mesh.update(idx, |e| {
-                    e.pid = Some(run.pid);
-                    e.started_at = Some(run.started);
-                    e.spawned_ns = run.spawned_ns;
-                    if !spec.heartbeat {
-                        e.phase = Phase::Running;
-                    }
-                });
-                let ended = run_once(&sh, idx, &spec, &mut run, &stop).await;
-                let ran_for = run.started.elapsed();
-                sh.mesh.update(idx, |e| {
-                    e.pid = None;
-                    e.started_at = None;
-                    e.stats = None;
-                    if let Some(code) = ended.and_then(Ending::exit_code) {
-                        e.last_exit_code = Some(code);
-                    }
-                });
-                // The process is reaped: iceoryx2 can now see its node as dead.
-                clean_dead_nodes(&sh.domain, &sh.mesh).await;
-                let Some(ending) = ended else {
-                    sh.mesh.set_phase(idx, Phase::Stopped);
-                    return;
-                };
-                (ending, ran_for, Some(run.pid))
+            RunEnd::Restart => {
+                sh.mesh.update(idx, |e| e.restarts += 1);
+                continue;
+            }
+            RunEnd::Ended(ending) => {
+                decide(&sh, idx, &spec, &mut tracker, &stop, ending, ran_for, pid).await
             }
         };
-        let next = decide(&sh, idx, &spec, &mut tracker, &stop, ending, ran_for, pid);
-        if next.await.is_break() {
-            return;
+        if next.is_break() {
+            // Not restarted by the policy: only an operator's restart starts it again.
+            if !wait_for_operator(&sh, idx, &spec, &stop).await {
+                return;
+            }
+            tracker = RestartTracker::new(spec.restart);
+            sh.mesh.update(idx, |e| e.restarts += 1);
+        }
+    }
+}
+
+/// Starts a new process of the service and runs it until it ends; returns how it
+/// ended, how long it ran and its pid.
+async fn run_new(
+    sh: &Shared,
+    idx: usize,
+    spec: &ServiceSpec,
+    stop: &CancellationToken,
+) -> (RunEnd, Duration, Option<u32>) {
+    sh.mesh.update(idx, |e| {
+        e.phase = Phase::Starting;
+        e.pid = None;
+        e.heartbeat = None;
+        e.stats = None;
+    });
+    let mut run = match child::spawn(spec, &sh.env) {
+        Err(e) => {
+            tracing::error!(service = %spec.name, program = %spec.program.display(), error = %e, "cannot start");
+            return (RunEnd::Ended(Ending::SpawnFailed), Duration::ZERO, None);
+        }
+        Ok(run) => run,
+    };
+    tracing::info!(service = %spec.name, pid = run.pid, program = %spec.program.display(), "started");
+    sh.mesh.update(idx, |e| {
+        e.pid = Some(run.pid);
+        e.started_at = Some(run.started);
+        e.spawned_ns = run.spawned_ns;
+        if !spec.heartbeat {
+            e.phase = Phase::Running;
+        }
+    });
+    let end = run_once(sh, idx, spec, &mut run, stop).await;
+    let ran_for = run.started.elapsed();
+    sh.mesh.update(idx, |e| {
+        e.pid = None;
+        e.started_at = None;
+        e.stats = None;
+        if let RunEnd::Ended(ending) = end {
+            if let Some(code) = ending.exit_code() {
+                e.last_exit_code = Some(code);
+            }
+        }
+    });
+    // The process is reaped: iceoryx2 can now see its node as dead.
+    clean_dead_nodes(&sh.domain, &sh.mesh).await;
+    (end, ran_for, Some(run.pid))
+}
+
+/// A service the policy does not restart (failed, config error, clean exit) waits
+/// here for an operator's restart. False when told to stop instead.
+async fn wait_for_operator(
+    sh: &Shared,
+    idx: usize,
+    spec: &ServiceSpec,
+    stop: &CancellationToken,
+) -> bool {
+    tokio::select! {
+        biased;
+        _ = stop.cancelled() => false,
+        _ = sh.shutdown.cancelled() => false,
+        () = sh.restarts.requested(idx) => {
+            tracing::info!(service = %spec.name, "restart asked for by an operator: starting again with a fresh restart budget");
+            true
         }
     }
 }
@@ -417,6 +520,9 @@ async fn decide(
                 _ = tokio::time::sleep(after) => {}
                 _ = stop.cancelled() => return stopped(Phase::Stopped),
                 _ = sh.shutdown.cancelled() => return stopped(Phase::Stopped),
+                () = sh.restarts.requested(idx) => {
+                    tracing::info!(service = %spec.name, "restart asked for by an operator: starting now");
+                }
             }
             sh.mesh.update(idx, |e| e.restarts += 1);
             ControlFlow::Continue(())

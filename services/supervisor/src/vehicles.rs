@@ -9,15 +9,24 @@
 //! vehicle in `supervisor.vehicles` is exported from the first scrape on, before
 //! any sample (values unknown until then: NaN, link 0, mode `unknown`), so alert
 //! rules see the series from the start.
+//!
+//! The same read feeds the web console (crate::console): each vehicle's authority,
+//! its arbiter's recent events and command decisions, and the altitude/speed
+//! history of its plot ([`VehicleLog`]), taken whenever `/metrics` is scraped or
+//! the console asks.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use prometheus::core::{Collector, Desc};
 use prometheus::proto::{self, LabelPair, Metric, MetricFamily, MetricType};
-use skymesh_ipc_types::{topics, FlightMode, VehicleState, VehicleStatus};
+use skymesh_ipc_types::{
+    topics, ArbiterEvent, AuthorityState, CommandAck, FlightMode, VehicleState, VehicleStatus,
+};
 use skymesh_runtime::clock::monotonic_ns;
 use skymesh_runtime::{Bus, IpcError, Subscriber};
+
+pub use crate::console::feed::VehicleLog;
 
 /// A status older than this means the autopilot link stopped publishing (it
 /// publishes on change and at least once a second): the link counts as down.
@@ -44,17 +53,42 @@ pub const FAMILIES: [(&str, &str); 9] = [
 pub struct Latest {
     pub state: Option<VehicleState>,
     pub status: Option<VehicleStatus>,
+    pub authority: Option<AuthorityState>,
 }
 
 struct Ports {
     state: Subscriber<VehicleState>,
     status: Subscriber<VehicleStatus>,
+    authority: Subscriber<AuthorityState>,
+    /// Drained at each read; the log keeps the newest few.
+    events: Subscriber<ArbiterEvent>,
+    acks: Subscriber<CommandAck>,
+}
+
+impl Ports {
+    /// Takes everything pending into `latest` and `log`.
+    fn drain(&self, latest: &mut Latest, log: &mut VehicleLog) -> Result<(), IpcError> {
+        if let Some(s) = self.state.latest()? {
+            latest.state = Some(s);
+            log.record(&s);
+        }
+        latest.status = self.status.latest()?.or(latest.status);
+        latest.authority = self.authority.latest()?.or(latest.authority);
+        while let Some(e) = self.events.try_recv()? {
+            log.event(e);
+        }
+        while let Some(a) = self.acks.try_recv()? {
+            log.ack(a);
+        }
+        Ok(())
+    }
 }
 
 struct Inner {
     /// Per vehicle, once the bus is open.
     ports: Option<Vec<Ports>>,
     latest: Vec<Latest>,
+    logs: Vec<VehicleLog>,
     /// A receive failure already logged (once, not per scrape).
     warned: bool,
 }
@@ -81,21 +115,36 @@ impl VehicleGauges {
             inner: Mutex::new(Inner {
                 ports: None,
                 latest: vec![Latest::default(); ids.len()],
+                logs: vec![VehicleLog::default(); ids.len()],
                 warned: false,
             }),
         }
     }
 
-    /// Subscribes to every vehicle's state and status on `bus`.
+    /// Subscribes to every vehicle's state, status, authority, arbiter events and
+    /// command acks on `bus`.
     pub fn attach(&self, bus: &Bus) -> Result<(), IpcError> {
         let mut ports = Vec::with_capacity(self.ids.len());
         for &id in &self.ids {
             let mut state = bus.subscriber::<VehicleState>(&topics::vehicle_state(id))?;
             let mut status = bus.subscriber::<VehicleStatus>(&topics::vehicle_status(id))?;
-            // Read at scrape time: samples overwritten in between are by design.
+            let mut authority = bus.subscriber::<AuthorityState>(&topics::vehicle_authority(id))?;
+            let mut events = bus.subscriber::<ArbiterEvent>(&topics::vehicle_arbiter_events(id))?;
+            let mut acks = bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(id))?;
+            // Read at scrape (or console) time: samples overwritten in between are
+            // by design (the console shows the newest events and decisions only).
             state.set_newest_only();
             status.set_newest_only();
-            ports.push(Ports { state, status });
+            authority.set_newest_only();
+            events.set_newest_only();
+            acks.set_newest_only();
+            ports.push(Ports {
+                state,
+                status,
+                authority,
+                events,
+                acks,
+            });
         }
         self.lock().ports = Some(ports);
         Ok(())
@@ -111,31 +160,70 @@ impl VehicleGauges {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Takes the newest pending samples into `latest` and returns a copy.
-    fn refresh(&self) -> Vec<Latest> {
-        let mut inner = self.lock();
+    /// Takes the pending samples into `latest` and the logs.
+    fn drain(inner: &mut Inner) {
         let Inner {
             ports,
             latest,
+            logs,
             warned,
-        } = &mut *inner;
+        } = inner;
         if let Some(ports) = ports {
-            for (p, l) in ports.iter().zip(latest.iter_mut()) {
-                let read = p.state.latest().and_then(|s| Ok((s, p.status.latest()?)));
-                match read {
-                    Ok((state, status)) => {
-                        l.state = state.or(l.state);
-                        l.status = status.or(l.status);
-                    }
+            for ((p, l), log) in ports.iter().zip(latest.iter_mut()).zip(logs.iter_mut()) {
+                match p.drain(l, log) {
+                    Ok(()) => {}
                     Err(e) if !*warned => {
                         *warned = true;
-                        tracing::warn!(error = %e, "reading vehicle state for /metrics failed");
+                        tracing::warn!(error = %e, "reading the vehicles' topics failed");
                     }
                     Err(_) => {}
                 }
             }
         }
-        latest.clone()
+    }
+
+    /// Takes the newest pending samples into `latest` and returns a copy.
+    fn refresh(&self) -> Vec<Latest> {
+        let mut inner = self.lock();
+        Self::drain(&mut inner);
+        inner.latest.clone()
+    }
+
+    /// Every vehicle with its newest samples and its log, read now (the console).
+    pub fn snapshot(&self) -> Vec<(u8, Latest, VehicleLog)> {
+        let mut inner = self.lock();
+        Self::drain(&mut inner);
+        self.ids
+            .iter()
+            .zip(&inner.latest)
+            .zip(&inner.logs)
+            .map(|((id, l), log)| (*id, *l, log.clone()))
+            .collect()
+    }
+
+    /// The answer to command `command_id` of `source` for the vehicle at `idx`
+    /// (of [`VehicleGauges::ids`]), if it has arrived (reads the topics now).
+    pub fn find_ack(
+        &self,
+        idx: usize,
+        source: skymesh_ipc_types::CommandSource,
+        command_id: u32,
+    ) -> Option<CommandAck> {
+        let mut inner = self.lock();
+        Self::drain(&mut inner);
+        inner
+            .logs
+            .get(idx)?
+            .acks
+            .iter()
+            .rev()
+            .copied()
+            .find(|a| a.source == source.to_wire() && a.command_id == command_id)
+    }
+
+    /// The configured vehicle ids, ascending.
+    pub fn ids(&self) -> &[u8] {
+        &self.ids
     }
 }
 
@@ -316,6 +404,7 @@ mod tests {
                 battery_voltage_v: 15.9,
                 ..VehicleStatus::default()
             }),
+            authority: None,
         }
     }
 
