@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Installs what CI's later steps use and a fresh machine lacks, each only if missing:
-# promtool and mosquitto (apt-get, one call), pymavlink and paho-mqtt 2 (pip),
-# cargo-deny, and for the fuzz step the nightly toolchain and cargo-fuzz. .ci/run
-# starts it in the background during the test build: the downloads then overlap the
-# compile instead of holding it up (they ran before it, mostly waiting on the
-# network). The scripts that use a tool still install it themselves when run alone.
+# promtool, mosquitto, Chromium and chromedriver (apt-get, one call), pymavlink and
+# paho-mqtt 2 (pip), cargo-deny, and for the fuzz step the nightly toolchain and
+# cargo-fuzz. .ci/run starts it in the background during the test build: the
+# downloads then overlap the compile instead of holding it up (they ran before it,
+# mostly waiting on the network). The scripts that use a tool still install it
+# themselves when run alone.
 # cargo-fuzz is built unoptimised (`--debug`): it only drives cargo, and that halves
 # its install (32 s against 59 s wall here). So is cargo-deny (the supply-chain
 # step): half the CPU of an optimised install (3.4 against 6.9 CPU-minutes), for a
@@ -20,6 +21,10 @@ if ! command -v promtool >/dev/null 2>&1 || ! command -v prometheus >/dev/null 2
 fi
 if ! command -v mosquitto >/dev/null 2>&1 && [ ! -x /usr/sbin/mosquitto ]; then
   packages+=(mosquitto)
+fi
+# The web console's browser test (tests/tests/console.rs) drives headless Chromium.
+if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then
+  packages+=(chromium chromium-driver)
 fi
 if [ ${#packages[@]} -gt 0 ]; then
   apt-get update -qq &&
