@@ -38,6 +38,9 @@ python3 -c 'import pymavlink' 2>/dev/null ||
   python3 -m pip install --quiet --disable-pip-version-check pymavlink || true
 python3 -c 'import paho.mqtt.client as m; m.CallbackAPIVersion.VERSION2' 2>/dev/null ||
   python3 -m pip install --quiet --disable-pip-version-check 'paho-mqtt>=2,<3' || true
+# tests/tests/record.rs reads `skymesh record`'s MCAP files with a second implementation.
+python3 -c 'import mcap.reader' 2>/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check mcap || true
 
 if ! rustup toolchain list | grep -q '^nightly'; then
   rustup toolchain install nightly --profile minimal || true
