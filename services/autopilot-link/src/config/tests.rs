@@ -433,7 +433,9 @@ fn the_shipped_commented_tlog_table_parses_to_the_defaults() {
         }
     }
     let s = parse_str(&text).unwrap().tlog.unwrap();
-    let mut defaults = RawTlog::default();
-    defaults.dir = "/var/log/skymesh/tlog".into();
+    let defaults = RawTlog {
+        dir: "/var/log/skymesh/tlog".into(),
+        ..RawTlog::default()
+    };
     assert_eq!(s, defaults.validate(1).unwrap());
 }

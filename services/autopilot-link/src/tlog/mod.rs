@@ -83,6 +83,8 @@ pub enum Direction {
 }
 
 /// One frame for the writer: when, which recording, the bytes.
+// Frames are most entries, and boxing them would allocate on the link's threads.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 pub(crate) enum Entry {
     Frame {

@@ -77,7 +77,7 @@ pub fn finished_logs(dir: &Path, vehicle: u8) -> io::Result<Vec<(PathBuf, u64)>>
 /// Free bytes for unprivileged users on the file system holding `dir`.
 pub fn free_bytes(dir: &Path) -> io::Result<u64> {
     let s = nix::sys::statvfs::statvfs(dir).map_err(io::Error::from)?;
-    Ok(u64::from(s.blocks_available()).saturating_mul(u64::from(s.fragment_size())))
+    Ok(s.blocks_available().saturating_mul(s.fragment_size()))
 }
 
 /// What [`enforce`] did.
