@@ -79,7 +79,9 @@ fn a_take_off_is_recorded_in_a_tlog_every_reader_parses() {
     let dir = tempfile::tempdir().unwrap();
     let opts = MeshOptions {
         autopilot_link_extra: format!(
-            "[tlog]\ndir = \"{}\"\nmode = \"arming\"\n",
+            // No free-space floor: the temp dir may be a small tmpfs (retention is
+            // unit-tested in autopilot-link).
+            "[tlog]\ndir = \"{}\"\nmode = \"arming\"\nmin_free_mb = 0\n",
             dir.path().display()
         ),
         ..MeshOptions::default()
