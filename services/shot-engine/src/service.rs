@@ -282,8 +282,18 @@ fn handle_inbound(
 }
 
 fn publish(ports: &mut Ports, out: Outputs) -> Result<(), IpcError> {
-    for c in out.commands {
-        ports.commands.publish(c)?;
+    // Two wake-ups for a batch of commands, not one per command: the first is
+    // notified (autopilot-link, a higher real-time priority on the same CPU, takes
+    // it at once), the middle ones go out quietly, and the last one's notification
+    // wakes autopilot-link again, which then takes them all in order. Notifying
+    // each would switch to autopilot-link and back once per command.
+    let last = out.commands.len().saturating_sub(1);
+    for (i, c) in out.commands.into_iter().enumerate() {
+        if i == 0 || i == last {
+            ports.commands.publish(c)?;
+        } else {
+            ports.commands.publish_quiet(c)?;
+        }
     }
     for m in &out.to_app {
         ports.to_app.publish(ShotEventSample::new(0, m))?;
