@@ -1,6 +1,7 @@
 //! The autopilot's byte transports: TCP, UDP and serial, each split into a reading
 //! and a writing half. The writing half is used by the link's writer thread
-//! (blocking); a socket's reading half is waited on in tokio's reactor
+//! (blocking) and, for a socket, by the sending task through a non-blocking second
+//! handle ([`DirectWriter`]); a socket's reading half is waited on in tokio's reactor
 //! ([`SocketReader`]: one wake-up per arriving datagram, on the thread that then
 //! handles it), a serial port's by the link's reader thread (blocking).
 //!
@@ -212,6 +213,72 @@ impl Writer {
                     Err(e) => Err(e),
                 }
             }
+        }
+    }
+}
+
+impl Writer {
+    /// A second, non-blocking handle on a socket's writing half, for writes made
+    /// straight from the task that produced the message ([`DirectWriter`]); `None`
+    /// for a serial port (its writes take milliseconds at telemetry baud rates and
+    /// stay on the writer thread).
+    pub fn direct(&self) -> io::Result<Option<DirectWriter>> {
+        Ok(match self {
+            Writer::Tcp(s) => Some(DirectWriter::Tcp(s.try_clone()?)),
+            Writer::Udp {
+                socket,
+                destination,
+            } => Some(DirectWriter::Udp {
+                socket: socket.try_clone()?,
+                destination: destination.clone(),
+            }),
+            Writer::Serial(_) => None,
+        })
+    }
+}
+
+/// A socket's writing half that never waits: each write sends what the socket
+/// takes now (`MSG_DONTWAIT`) and says how much that was.
+#[derive(Debug)]
+pub enum DirectWriter {
+    Tcp(TcpStream),
+    Udp {
+        socket: UdpSocket,
+        destination: Destination,
+    },
+}
+
+impl DirectWriter {
+    /// Sends `frame` without waiting: the bytes taken (a stream may take part of
+    /// it), or `WouldBlock` if the socket takes none now. A datagram with no
+    /// destination yet, or refused by the peer, counts as sent, as on the writer
+    /// thread ([`Writer::write_frame`]).
+    pub fn try_write(&self, frame: &[u8]) -> io::Result<usize> {
+        use nix::errno::Errno;
+        use nix::sys::socket::{self, MsgFlags, SockaddrStorage};
+        let flags = MsgFlags::MSG_DONTWAIT | MsgFlags::MSG_NOSIGNAL;
+        loop {
+            let r = match self {
+                DirectWriter::Tcp(s) => socket::send(s.as_raw_fd(), frame, flags),
+                DirectWriter::Udp {
+                    socket,
+                    destination,
+                } => {
+                    let Some(to) = *lock(destination) else {
+                        return Ok(frame.len());
+                    };
+                    let to = SockaddrStorage::from(to);
+                    match socket::sendto(socket.as_raw_fd(), frame, &to, flags) {
+                        Err(Errno::ECONNREFUSED) => return Ok(frame.len()),
+                        r => r,
+                    }
+                }
+            };
+            return match r {
+                Ok(n) => Ok(n),
+                Err(Errno::EINTR) => continue,
+                Err(e) => Err(io::Error::from(e)),
+            };
         }
     }
 }

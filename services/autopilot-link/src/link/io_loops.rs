@@ -17,7 +17,7 @@ use crate::router::{AckLedger, AckOwner};
 use crate::transport::{self, Received};
 use mavlink_frame::{message_info, FrameParser, RawFrame};
 
-use super::outbox::Outgoing;
+use super::outbox::{Outgoing, SendContext};
 use super::{LinkEvent, Outbox, READ_BUFFER};
 
 pub(super) fn lock_ledger(ledger: &Mutex<AckLedger>) -> MutexGuard<'_, AckLedger> {
@@ -216,45 +216,33 @@ pub(super) fn decode_for_service(
     Some(msg)
 }
 
-/// What the writer thread needs besides the transport.
-pub(super) struct WriteContext<'a> {
-    pub(super) header: MavHeader,
-    pub(super) outbox: &'a Outbox,
-    pub(super) hub: &'a Hub,
-    pub(super) ledger: &'a Mutex<AckLedger>,
-    pub(super) metrics: &'a Metrics,
-}
-
+/// The writer thread: writes what the [`Outbox`] hands it until the outbox closes
+/// or a write fails.
 pub(super) fn write_loop(
     writer: &mut transport::Writer,
-    ctx: &WriteContext<'_>,
+    outbox: &Outbox,
+    ctx: &SendContext,
     stop: &AtomicBool,
 ) -> String {
-    let mut sequence: u8 = 0;
     while !stop.load(Ordering::Relaxed) {
-        match ctx.outbox.next() {
-            Some(Outgoing::Own(msg)) => {
-                let header = MavHeader {
-                    sequence,
-                    ..ctx.header
-                };
-                sequence = sequence.wrapping_add(1);
-                let frame = RawFrame::encode(header, &msg);
-                // Recorded before writing: the answer may come back at once.
-                if let Some(command) = frame.command() {
-                    lock_ledger(ctx.ledger).sent(command, true, Instant::now());
-                }
+        match outbox.next() {
+            Some(Outgoing::Own(msg, sequence)) => {
+                let frame = ctx.encode(&msg, sequence);
                 if let Err(e) = writer.write_frame(frame.as_bytes()) {
                     return format!("write failed: {e}");
                 }
-                ctx.metrics.sent(msg.message_name());
-                if let MavMessage::HEARTBEAT(_) = msg {
-                    ctx.hub.from_local(&frame);
+                ctx.written(msg.message_name(), &frame);
+            }
+            Some(Outgoing::Rest(p)) => {
+                let rest = p.frame.as_bytes().get(p.written..).unwrap_or_default();
+                if let Err(e) = writer.write_frame(rest) {
+                    return format!("write failed: {e}");
                 }
+                ctx.written(p.name, &p.frame);
             }
             Some(Outgoing::Forwarded(frame)) => {
                 if let Some(command) = frame.command() {
-                    lock_ledger(ctx.ledger).sent(command, false, Instant::now());
+                    lock_ledger(&ctx.ledger).sent(command, false, Instant::now());
                 }
                 if let Err(e) = writer.write_frame(frame.as_bytes()) {
                     return format!("write failed: {e}");

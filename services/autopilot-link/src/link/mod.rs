@@ -7,12 +7,16 @@
 //! (tokio's blocking pool) that drains the [`Outbox`]: our own messages (queued
 //! through [`LinkWriter`], serialised with our header and sequence) before frames
 //! the router forwards from endpoints, each kind bounded on its own so
-//! ground-station traffic can never crowd out our commands. A TCP or UDP socket
-//! is read on the runtime (tokio's reactor says when it is readable: one wake-up
-//! per telemetry batch, on the thread that also runs the service); a serial port
-//! by a blocking thread that polls a stop flag at least every [`POLL`], so a
-//! shutdown or a reconnect never waits on a blocked read. The writer sleeps until
-//! there is something to write or the outbox is closed (which every stop does).
+//! ground-station traffic can never crowd out our commands. On a socket, our own
+//! message is written by the task that sends it when nothing is queued ahead of it
+//! (a non-blocking send: a decided command leaves in the same wake-up, see
+//! `outbox.rs`); the writer thread takes what the socket does not take at once. A
+//! TCP or UDP socket is read on the runtime (tokio's reactor says when it is
+//! readable: one wake-up per telemetry batch, on the thread that also runs the
+//! service); a serial port by a blocking thread that polls a stop flag at least
+//! every [`POLL`], so a shutdown or a reconnect never waits on a blocked read. The
+//! writer sleeps until there is something to write or the outbox is closed (which
+//! every stop does).
 //!
 //! COMMAND_ACKs that answer an endpoint's command (decided by the
 //! [`AckLedger`], fed by the writer) are forwarded but not given to the service.
@@ -25,7 +29,7 @@
 //! | file | holds |
 //! |---|---|
 //! | `mod.rs` | the events, connecting, supervising, reconnecting |
-//! | `outbox.rs` | what the writer sends: [`LinkWriter`] and the [`Outbox`] |
+//! | `outbox.rs` | what is sent: [`LinkWriter`] (direct writes) and the [`Outbox`] |
 //! | `io_loops.rs` | the reader (frames in, events out) and the writer loop |
 
 mod io_loops;
@@ -54,7 +58,8 @@ use crate::metrics::Metrics;
 use crate::router::AckLedger;
 use crate::transport;
 
-use io_loops::{read_loop, read_socket, write_loop, WriteContext};
+use io_loops::{read_loop, read_socket, write_loop};
+use outbox::SendContext;
 pub use outbox::{LinkWriter, Outbox};
 
 pub use crate::transport::POLL;
@@ -224,14 +229,33 @@ async fn serve(
     stop: &Arc<AtomicBool>,
     shutdown: &CancellationToken,
 ) -> String {
-    let outbox = Arc::new(Outbox::default());
+    let me = (config.system_id, config.component_id);
+    let ctx = Arc::new(SendContext {
+        header: MavHeader {
+            system_id: u32::from(config.system_id),
+            component_id: config.component_id,
+            sequence: 0,
+        },
+        ledger: Arc::new(Mutex::new(AckLedger::new(me))),
+        metrics: metrics.clone(),
+        hub: hub.clone(),
+    });
+    // Without a second handle our messages all go through the writer thread,
+    // which is slower but complete.
+    let direct = writer.direct().unwrap_or_else(|e| {
+        tracing::warn!(error = %e, "no direct writes on the MAVLink socket; using the writer thread");
+        None
+    });
+    let outbox = Arc::new(Outbox::with_direct(direct));
     if events
         .send(LinkEvent::Connected(LinkWriter {
             outbox: outbox.clone(),
+            ctx: ctx.clone(),
         }))
         .await
         .is_err()
     {
+        outbox.close();
         return "service stopped".to_string();
     }
     hub.attach(outbox.clone());
@@ -242,8 +266,7 @@ async fn serve(
         outbox: outbox.clone(),
         hub: hub.clone(),
     };
-    let me = (config.system_id, config.component_id);
-    let ledger = Arc::new(Mutex::new(AckLedger::new(me)));
+    let ledger = ctx.ledger.clone();
     let silence = config
         .silence_reconnect
         .filter(|_| config.endpoint.is_stream());
@@ -289,23 +312,10 @@ async fn serve(
             }
         };
     let mut writer = {
-        let (metrics, hub, stop, outbox) =
-            (metrics.clone(), hub.clone(), stop.clone(), outbox.clone());
-        let header = MavHeader {
-            system_id: u32::from(config.system_id),
-            component_id: config.component_id,
-            sequence: 0,
-        };
+        let (stop, outbox) = (stop.clone(), outbox.clone());
         let mut writer_half = writer;
         tokio::task::spawn_blocking(move || {
-            let ctx = WriteContext {
-                header,
-                outbox: &outbox,
-                hub: &hub,
-                ledger: &ledger,
-                metrics: &metrics,
-            };
-            let reason = write_loop(&mut writer_half, &ctx, &stop);
+            let reason = write_loop(&mut writer_half, &outbox, &ctx, &stop);
             outbox.close();
             reason
         })

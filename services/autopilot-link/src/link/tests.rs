@@ -292,3 +292,74 @@ async fn udpin_replies_go_to_the_last_sender() {
         .unwrap()
         .unwrap();
 }
+
+/// A peer that stops reading: our messages fill the socket (direct writes), then the
+/// writer thread's queue, until a send is refused as congested. Once the peer reads
+/// again, every accepted message arrives whole, in order, with consecutive sequence
+/// numbers: a direct write never overtakes or splits a queued one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_socket_keeps_our_frames_whole_and_in_order() {
+    let server = TcpListener::bind("127.0.0.1:0").unwrap();
+    // A small receive window (inherited by the accepted socket): the socket fills
+    // after a few thousand frames rather than megabytes.
+    nix::sys::socket::setsockopt(&server, nix::sys::socket::sockopt::RcvBuf, &4096).unwrap();
+    let port = server.local_addr().unwrap().port();
+    let stats = Stats::new();
+    let shutdown = CancellationToken::new();
+    let endpoint = Endpoint::TcpOut {
+        host: "127.0.0.1".into(),
+        port,
+    };
+    let (mut rx, task) = spawn(
+        config(endpoint),
+        Metrics::new(&stats),
+        hub(),
+        shutdown.clone(),
+    );
+    let (peer, _) = tokio::task::spawn_blocking(move || server.accept().unwrap())
+        .await
+        .unwrap();
+    let LinkEvent::Connected(writer) = next(&mut rx).await else {
+        panic!("expected Connected")
+    };
+    let mut accepted = 0usize;
+    loop {
+        match writer.send(heartbeat()) {
+            Ok(()) => accepted += 1,
+            Err(WriteError::Congested) => break,
+            Err(e) => panic!("send failed: {e}"),
+        }
+        assert!(accepted < 10_000_000, "the socket never filled");
+    }
+    assert!(accepted > WRITE_QUEUE, "{accepted}");
+    let sequences = tokio::task::spawn_blocking(move || {
+        let mut peer = peer;
+        peer.set_read_timeout(Some(Duration::from_secs(20)))
+            .unwrap();
+        let mut parser = FrameParser::new();
+        let mut buf = vec![0u8; 65536];
+        let mut sequences = Vec::with_capacity(accepted);
+        while sequences.len() < accepted {
+            let n = std::io::Read::read(&mut peer, &mut buf).expect("the rest within 20 s");
+            assert!(n > 0, "closed after {} frames", sequences.len());
+            parser.push(&buf[..n]);
+            while let Some(frame) = parser.next_frame() {
+                assert_eq!(frame.decode().unwrap(), heartbeat());
+                sequences.push(frame.header().sequence);
+            }
+        }
+        assert_eq!(parser.take_malformed(), 0);
+        sequences
+    })
+    .await
+    .unwrap();
+    assert_eq!(sequences.len(), accepted);
+    for (i, s) in sequences.iter().enumerate() {
+        assert_eq!(usize::from(*s), i % 256, "frame {i}");
+    }
+    shutdown.cancel();
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
+}
