@@ -12,9 +12,9 @@
 //!    need payload authority → else `PAYLOAD_AUTHORITY_REQUIRED`. Payload methods
 //!    that turn the aircraft (camera_look_at, locked aim and drag) need both.
 //!
-//! While a panorama runs ([`crate::pano_task`]) it owns the camera and gimbal:
-//! camera_photo_stop ends it, every other payload method (a second
-//! camera_photo_take too) is refused `WRONG_STATE`.
+//! While a panorama runs (asked of the shot engine's task runner, [`crate::pano`])
+//! it owns the camera and gimbal: camera_photo_stop ends it, every other payload
+//! method (a second camera_photo_take too) is refused `WRONG_STATE`.
 
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::Duration;
@@ -26,7 +26,6 @@ use tokio::sync::Mutex;
 use crate::config::Settings;
 use crate::drc::Drc;
 use crate::link::Snapshot;
-use crate::pano_task::{self, PanoControl, PanoHandle};
 use crate::payload::{self, PayloadMemory, Plan};
 use crate::progress::Heights;
 use crate::shared::{failure_code, run_commands, Shared};
@@ -99,14 +98,13 @@ pub fn check_speed(speed: f64, max: f64) -> Result<f64, u32> {
     }
 }
 
-/// The services side's state: the task runner's client (flight tasks, POI), the
-/// panorama, the DRC link, payload memory.
+/// The services side's state: the task runner's client (flight tasks, POI,
+/// panorama), the DRC link, payload memory.
 #[derive(Debug)]
 pub struct Dispatcher {
     shared: Shared,
     drc: Arc<Mutex<Drc>>,
     tasks: TaskClient,
-    pano: Option<PanoHandle>,
     /// Locked briefly by `handle` and by a camera_mode_switch once acknowledged
     /// (never across an await).
     memory: Arc<StdMutex<PayloadMemory>>,
@@ -118,7 +116,6 @@ impl Dispatcher {
             shared,
             drc: Arc::new(Mutex::new(drc)),
             tasks,
-            pano: None,
             memory: Arc::default(),
         }
     }
@@ -132,7 +129,7 @@ impl Dispatcher {
     }
 
     pub fn pano_active(&self) -> bool {
-        self.pano.as_ref().is_some_and(PanoHandle::is_running)
+        self.tasks.pano_active()
     }
 
     fn reply(&self, env: Envelope, code: u32) {
@@ -277,25 +274,27 @@ impl Dispatcher {
     }
 
     fn payload(&mut self, env: Envelope, req: &ServiceRequest, snap: &Snapshot) {
-        let env = match self.pano.as_ref().filter(|p| p.is_running()) {
-            None => env,
-            Some(p) => match req {
-                ServiceRequest::CameraPhotoStop { .. } => {
-                    match p.control.send(PanoControl::Stop { request: env }) {
-                        // The panorama replies once stopped.
-                        Ok(()) => return,
-                        // It ended meanwhile: an ordinary capture stop.
-                        Err(e) => match e.0 {
-                            PanoControl::Stop { request } => request,
-                        },
-                    }
-                }
-                _ => {
-                    tracing::info!(method = %env.method, "a panorama is running (camera_photo_stop ends it): refused");
-                    return self.reply(env, codes::WRONG_STATE);
-                }
-            },
-        };
+        if self.tasks.pano_active() {
+            if let ServiceRequest::CameraPhotoStop { .. } = req {
+                // The runner replies once stopped; if the panorama ended meanwhile,
+                // an ordinary capture stop.
+                let shared = self.shared.clone();
+                let stop = Command::CameraCaptureStop {
+                    camera: shared.settings.payload.camera,
+                };
+                return self.tasks.pano_stop(
+                    env,
+                    Box::new(move |env| {
+                        tokio::spawn(async move {
+                            let code = run_commands(&shared.link, &env.method, &[stop]).await;
+                            shared.emit.reply(env, code);
+                        });
+                    }),
+                );
+            }
+            tracing::info!(method = %env.method, "a panorama is running (camera_photo_stop ends it): refused");
+            return self.reply(env, codes::WRONG_STATE);
+        }
         let heights = self.heights(snap);
         let plan = {
             let mut memory = self.memory.lock().unwrap_or_else(|p| p.into_inner());
@@ -327,9 +326,7 @@ impl Dispatcher {
                     shared.emit.reply(env, code);
                 });
             }
-            Plan::Panorama { pano, clear_roi } => {
-                self.pano = Some(pano_task::spawn(self.shared.clone(), pano, clear_roi, env));
-            }
+            Plan::Panorama { clear_roi } => self.tasks.pano_start(env, clear_roi),
             Plan::Commands {
                 needs_flight,
                 commands,

@@ -3,8 +3,9 @@
 //! cloud written for the DJI Cloud API talks MQTT to "the dock" `gateway_sn`; this
 //! gateway answers as that dock and flies a MAVLink aircraft through skymesh's
 //! arbiter (source `dji_drc`): directly for authority, payload and DRC sticks, and
-//! through the shot engine's task runner for takeoff_to_point, fly_to_point and POI
-//! (the flight logic is the engine's; the gateway translates).
+//! through the shot engine's task runner for takeoff_to_point, fly_to_point, POI
+//! and the panorama sweep (the flight logic is the engine's; the gateway
+//! translates).
 //!
 //! | module | role |
 //! |---|---|
@@ -14,10 +15,10 @@
 //! | [`inbound`] | the checks of one inbound message, in order (pure) |
 //! | `gateway` | the one loop: MQTT in/out, replies and events, authority keep-alive |
 //! | [`dispatch`] | the checks every service shares (gateway, payload_index, authority) and each method's execution |
-//! | [`tasks`] | takeoff_to_point, fly_to_point, POI ↔ the shot engine's task runner (`TaskRequest` / `TaskEvent`) |
+//! | [`tasks`] | takeoff_to_point, fly_to_point, POI, panorama ↔ the shot engine's task runner (`TaskRequest` / `TaskEvent`) |
 //! | [`progress`] | DJI ellipsoid heights ↔ above home, the planned path points |
 //! | [`payload`] | payload methods → camera/gimbal commands (pure) |
-//! | [`pano`], [`pano_task`] | panorama capture (camera_mode_switch 3 + camera_photo_take): pure station plan and progress, and the running gimbal sweep |
+//! | [`pano`] | panorama capture (camera_mode_switch 3 + camera_photo_take): the runner's Pano events → camera_photo_take_progress |
 //! | [`shared`] | what tasks share: settings, vehicle link, reply/event emitter, result-code mapping |
 //! | [`link`] | the bus: vehicle samples and commands with their acks |
 //! | [`drc`] | the DRC link (drc/down, drc/up on the broker `drc_mode_enter` names) |
@@ -38,7 +39,6 @@ pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
 pub mod pano;
-pub mod pano_task;
 pub mod payload;
 pub mod progress;
 pub mod ratelimit;

@@ -1,42 +1,31 @@
-//! Panorama capture, pure: the station plan, the order of the steps and the
-//! progress they report. [`crate::pano_task`] runs it against the vehicle.
+//! The DJI side of a panorama capture. `camera_mode_switch` 3 puts the gateway's
+//! payload in panorama mode (the MAVLink camera itself stays in image mode);
+//! `camera_photo_take` then asks the shot engine's task runner for a panorama
+//! sweep ([`crate::tasks`], `PanoStart`): the runner turns the gimbal through the
+//! stations from where it points (`[payload] pano_stations`, default 8 — DJI's own
+//! full-circle panorama takes 8 — at `pano_pitch_deg`, each reached within
+//! `pano_settle_timeout_ms`), takes one photo at each and turns it back. Its Pano
+//! events become `camera_photo_take_progress` here ([`progress`]).
 //!
-//! `camera_mode_switch` 3 puts the gateway's payload in panorama mode (the MAVLink
-//! camera itself stays in image mode); `camera_photo_take` then turns the gimbal
-//! (payload authority only: the aircraft does not move) through the stations and
-//! takes one photo at each.
+//! | runner | event | need_reply |
+//! |---|---|---|
+//! | reply ok | camera_photo_take answered 0 with `output.status` `in_progress` | |
+//! | `InProgress` (started, after each photo) | `in_progress`, current_step 3002, the runner's percent | 0 (a lost one is superseded by the next) |
+//! | `Done` | `ok`, current_step 3000, 100 % | 1, re-sent until the cloud answers |
+//! | `Stopped` (camera_photo_stop, answered 0) | `fail`, **result 0** (stopped on request, not an error), 3000, the percent reached | 1 |
+//! | `Failed` | `fail`, the result's DJI code (314013 the gimbal never reached a station, 314012 link down, 314010 payload authority lost), 3000, the percent reached | 1 |
 //!
-//! **Station plan.** `n` stations (`[payload] pano_stations`, default 8 — DJI's own
-//! full-circle panorama takes 8) spread evenly over the full circle, `360/n`° apart
-//! in yaw at pitch `pano_pitch_deg` (default 0, the horizon), the first at the
-//! gimbal's yaw when the capture starts. Yaws are relative to the nose and wrapped
-//! into the mount's travel (−180°, 180°]; a mount cannot turn through its back, so
-//! the stations are visited as a sweep: clockwise from the start up to the last one
-//! before the back, then counter-clockwise through the rest. Afterwards the gimbal
-//! returns to where it started (pitch and yaw).
-//!
-//! **Steps.** At each station: `Gimbal` to it, wait until `PayloadState` shows the
-//! gimbal within [`SETTLE_TOLERANCE_DEG`] (in pitch and in yaw), `CameraCapture`
-//! (acknowledged), then a progress event. Close to straight down
-//! ([`YAW_UNOBSERVABLE_BELOW_DEG`]) the gimbal's yaw cannot be observed: only the
-//! pitch is compared there.
-//!
-//! **Progress.** Each capture is one step and the return to the start the last:
-//! after `k` of `n` captures `percent = ⌊100·k / (n + 1)⌋` (0 before the first),
-//! `current_step` 3002; the end is `ok` with `current_step` 3000 and 100 %. skymesh
-//! does not stitch: the `n` photos stay on the camera (there is no 3005
+//! skymesh does not stitch: the photos stay on the camera (there is no 3005
 //! "synthesizing" step); the cloud, or a desktop tool, stitches them.
 
-use dji_proto::{CameraPhotoTakeProgress, PhotoTakeExt, PhotoTakeOutput, PhotoTakeProgress};
-use skymesh_ipc_types::Command;
+use dji_proto::{codes, CameraPhotoTakeProgress, PhotoTakeExt, PhotoTakeOutput, PhotoTakeProgress};
+use skymesh_ipc_types::task::PanoTaskStatus;
+use skymesh_ipc_types::TaskEvent;
 
-use crate::payload::{wrap180, GIMBAL_PITCH_RANGE};
+use crate::tasks::result_code;
 
-/// The gimbal has reached a station when within this many degrees of it.
-pub const SETTLE_TOLERANCE_DEG: f64 = 2.0;
-/// Below this pitch (degrees, down negative) the gimbal's yaw is not observable
-/// (the attitude's Euler angles degenerate at straight down): only pitch counts.
-pub const YAW_UNOBSERVABLE_BELOW_DEG: f64 = -85.0;
+/// The event method of a panorama's progress.
+pub const METHOD: &str = "camera_photo_take_progress";
 /// `current_step`: "Panorama photo capturing is not started or is finished".
 pub const STEP_IDLE: u16 = 3000;
 /// `current_step`: "Panorama photo is capturing".
@@ -44,305 +33,61 @@ pub const STEP_CAPTURING: u16 = 3002;
 /// `ext.camera_mode` of every panorama event.
 pub const CAMERA_MODE_PANORAMA: u8 = 3;
 
-/// Where the gimbal points: pitch (down negative) and yaw relative to the nose
-/// (clockwise positive), degrees.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Aim {
-    pub pitch_deg: f64,
-    pub yaw_deg: f64,
-}
-
-impl Aim {
-    /// The bus command that turns the gimbal here.
-    pub fn command(&self) -> Command {
-        Command::Gimbal {
-            pitch_deg: self
-                .pitch_deg
-                .clamp(GIMBAL_PITCH_RANGE.0, GIMBAL_PITCH_RANGE.1) as f32,
-            yaw_deg: wrap180(self.yaw_deg) as f32,
-        }
-    }
-
-    /// True when a gimbal at `pitch`, `yaw` is within `tol` degrees of this aim (yaw
-    /// compared around the circle; not at all near straight down).
-    pub fn reached_by(&self, pitch: f64, yaw: f64, tol: f64) -> bool {
-        let pitch_ok = (pitch - self.pitch_deg).abs() <= tol;
-        let yaw_ok =
-            self.pitch_deg < YAW_UNOBSERVABLE_BELOW_DEG || wrap180(yaw - self.yaw_deg).abs() <= tol;
-        pitch_ok && yaw_ok
-    }
-}
-
-/// The `n` stations of a panorama starting at yaw `start_yaw_deg`, in the order they
-/// are visited (see the module docs). `n` ≥ 1.
-pub fn stations(start_yaw_deg: f64, n: usize, pitch_deg: f64) -> Vec<Aim> {
-    let step = 360.0 / n.max(1) as f64;
-    let first = wrap180(start_yaw_deg);
-    let mut yaws: Vec<f64> = (0..n.max(1))
-        .map(|i| wrap180(start_yaw_deg + i as f64 * step))
-        .collect();
-    yaws.sort_by(f64::total_cmp);
-    // Clockwise from the start (inclusive), then back counter-clockwise.
-    let (mut ccw, cw): (Vec<f64>, Vec<f64>) = yaws.into_iter().partition(|y| *y < first);
-    ccw.reverse();
-    cw.into_iter()
-        .chain(ccw)
-        .map(|yaw_deg| Aim { pitch_deg, yaw_deg })
-        .collect()
-}
-
-/// Percent done after `captured` of `stations` photos: the return to the start is
-/// the last step, so only the end reports 100.
-pub fn percent(captured: usize, stations: usize) -> u8 {
-    let p = captured.min(stations) * 100 / (stations + 1);
-    p.min(99) as u8
-}
-
-/// What the panorama is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Stage {
-    /// Turning to station `i` (0-based) and waiting for the gimbal to get there.
-    Aiming(usize),
-    /// At station `i`: taking its photo.
-    Capturing(usize),
-    /// Every photo taken: turning back to where the gimbal started.
-    Returning,
-    /// Back at the start.
-    Done,
-}
-
-/// The `output.status` of a progress event.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Status {
-    InProgress,
-    Ok,
-    Fail,
-}
-
-impl Status {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Status::InProgress => "in_progress",
-            Status::Ok => "ok",
-            Status::Fail => "fail",
-        }
-    }
-}
-
-/// One panorama: its stations, where it started and how far it got.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Panorama {
-    start: Aim,
-    stations: Vec<Aim>,
-    stage: Stage,
-}
-
-impl Panorama {
-    /// A panorama from the gimbal at `start`: `n` stations at `pitch_deg`.
-    pub fn new(start: Aim, n: usize, pitch_deg: f64) -> Self {
-        Panorama {
-            start,
-            stations: stations(start.yaw_deg, n, pitch_deg),
-            stage: Stage::Aiming(0),
-        }
-    }
-
-    pub fn stage(&self) -> Stage {
-        self.stage
-    }
-
-    pub fn start(&self) -> Aim {
-        self.start
-    }
-
-    pub fn stations(&self) -> &[Aim] {
-        &self.stations
-    }
-
-    /// Where the gimbal must be for the current stage (`None` once done).
-    pub fn target(&self) -> Option<Aim> {
-        match self.stage {
-            Stage::Aiming(i) | Stage::Capturing(i) => self.stations.get(i).copied(),
-            Stage::Returning => Some(self.start),
-            Stage::Done => None,
-        }
-    }
-
-    /// Photos taken so far.
-    pub fn captured(&self) -> usize {
-        match self.stage {
-            Stage::Aiming(i) | Stage::Capturing(i) => i,
-            Stage::Returning | Stage::Done => self.stations.len(),
-        }
-    }
-
-    pub fn percent(&self) -> u8 {
-        match self.stage {
-            Stage::Done => 100,
-            _ => percent(self.captured(), self.stations.len()),
-        }
-    }
-
-    /// The gimbal reached the target: a station's photo is next, or the panorama
-    /// is done. No effect in the other stages.
-    pub fn on_settled(&mut self) {
-        self.stage = match self.stage {
-            Stage::Aiming(i) => Stage::Capturing(i),
-            Stage::Returning => Stage::Done,
-            other => other,
-        };
-    }
-
-    /// The current station's photo was taken: the next station, or back to the
-    /// start after the last. No effect in the other stages.
-    pub fn on_captured(&mut self) {
-        self.stage = match self.stage {
-            Stage::Capturing(i) if i + 1 < self.stations.len() => Stage::Aiming(i + 1),
-            Stage::Capturing(_) => Stage::Returning,
-            other => other,
-        };
-    }
-
-    /// `camera_photo_take_progress` data: `in_progress` at the current percent;
-    /// `ok` at 100; `fail` at the percent reached, with `result`.
-    pub fn progress(&self, status: Status, result: u32) -> CameraPhotoTakeProgress {
-        let (current_step, percent) = match status {
-            Status::InProgress => (STEP_CAPTURING, self.percent()),
-            Status::Ok => (STEP_IDLE, 100),
-            Status::Fail => (STEP_IDLE, self.percent()),
-        };
-        CameraPhotoTakeProgress {
-            output: PhotoTakeOutput {
-                status: status.as_str(),
-                progress: PhotoTakeProgress {
-                    current_step,
-                    percent,
-                },
-                ext: PhotoTakeExt {
-                    camera_mode: CAMERA_MODE_PANORAMA,
-                },
+/// `camera_photo_take_progress` data of a Pano event, and whether it ends the
+/// panorama (then it needs a reply); `None` for an unknown status.
+pub fn progress(e: &TaskEvent) -> Option<(CameraPhotoTakeProgress, bool)> {
+    let percent = e.pano_percent.min(100);
+    let (status, current_step, percent, result) = match e.pano_status().ok()? {
+        PanoTaskStatus::InProgress => ("in_progress", STEP_CAPTURING, percent, codes::OK),
+        PanoTaskStatus::Done => ("ok", STEP_IDLE, 100, codes::OK),
+        PanoTaskStatus::Stopped => ("fail", STEP_IDLE, percent, codes::OK),
+        PanoTaskStatus::Failed => (
+            "fail",
+            STEP_IDLE,
+            percent,
+            e.result().map_or(codes::INTERNAL, result_code),
+        ),
+    };
+    let data = CameraPhotoTakeProgress {
+        output: PhotoTakeOutput {
+            status,
+            progress: PhotoTakeProgress {
+                current_step,
+                percent,
             },
-            result,
-        }
-    }
+            ext: PhotoTakeExt {
+                camera_mode: CAMERA_MODE_PANORAMA,
+            },
+        },
+        result,
+    };
+    Some((data, status != "in_progress"))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use serde_json::json;
+    use skymesh_ipc_types::{TaskEventKind, TaskResult};
 
-    fn yaws(s: &[Aim]) -> Vec<f64> {
-        s.iter()
-            .map(|a| (a.yaw_deg * 10.0).round() / 10.0)
-            .collect()
-    }
-
-    #[test]
-    fn eight_stations_sweep_clockwise_then_back() {
-        let s = stations(0.0, 8, 0.0);
-        assert_eq!(
-            yaws(&s),
-            [0.0, 45.0, 90.0, 135.0, 180.0, -45.0, -90.0, -135.0]
-        );
-        assert!(s.iter().all(|a| a.pitch_deg == 0.0));
-        // Started a little left of the nose: the station behind is −179.7 and is
-        // reached counter-clockwise, never through the mount's back.
-        let s = stations(0.3, 8, -10.0);
-        assert_eq!(
-            yaws(&s),
-            [0.3, 45.3, 90.3, 135.3, -44.7, -89.7, -134.7, -179.7]
-        );
-        assert!(s.iter().all(|a| a.pitch_deg == -10.0));
-        // Every leg stays inside (−180, 180]: consecutive yaws never jump by more than
-        // a sweep can turn without crossing the back.
-        for start in [-180.0, -179.0, -100.0, -0.3, 0.0, 10.0, 170.0, 180.0] {
-            let s = stations(start, 8, 0.0);
-            assert_eq!(s.len(), 8);
-            assert!((s[0].yaw_deg - wrap180(start)).abs() < 1e-9, "{start}");
-            for a in &s {
-                assert!(a.yaw_deg > -180.0 && a.yaw_deg <= 180.0, "{start}: {a:?}");
-            }
-            let mut sorted = yaws(&s);
-            sorted.sort_by(f64::total_cmp);
-            for w in sorted.windows(2) {
-                assert!((w[1] - w[0] - 45.0).abs() < 0.11, "{start}: {sorted:?}");
-            }
-            // Clockwise first (increasing), then counter-clockwise (decreasing).
-            let turn = s.windows(2).position(|w| w[1].yaw_deg < w[0].yaw_deg);
-            if let Some(t) = turn {
-                assert!(
-                    s[t + 1..].windows(2).all(|w| w[1].yaw_deg < w[0].yaw_deg),
-                    "{start}: {:?}",
-                    yaws(&s)
-                );
-            }
+    fn event(status: PanoTaskStatus, result: TaskResult, percent: u8) -> TaskEvent {
+        TaskEvent {
+            kind: TaskEventKind::Pano.to_wire(),
+            status: status.to_wire(),
+            result: result.to_wire(),
+            pano_photos: 1,
+            pano_stations: 8,
+            pano_percent: percent,
+            ..Default::default()
         }
-    }
-
-    #[test]
-    fn other_station_counts() {
-        assert_eq!(yaws(&stations(0.0, 4, 0.0)), [0.0, 90.0, 180.0, -90.0]);
-        assert_eq!(yaws(&stations(90.0, 3, 0.0)), [90.0, -30.0, -150.0]);
-        assert_eq!(stations(0.0, 12, 0.0).len(), 12);
-    }
-
-    #[test]
-    fn percent_rises_and_only_the_end_is_100() {
-        let seq: Vec<u8> = (0..=8).map(|k| percent(k, 8)).collect();
-        assert_eq!(seq, [0, 11, 22, 33, 44, 55, 66, 77, 88]);
-        assert_eq!(percent(2, 2), 66);
-        assert_eq!(percent(99, 2), 66, "never past the photos");
-    }
-
-    #[test]
-    fn stages_go_station_by_station_then_return() {
-        let start = Aim {
-            pitch_deg: -30.0,
-            yaw_deg: 10.0,
-        };
-        let mut p = Panorama::new(start, 3, 0.0);
-        assert_eq!(p.stage(), Stage::Aiming(0));
-        assert_eq!(p.target(), Some(p.stations()[0]));
-        // Out-of-order events change nothing.
-        p.on_captured();
-        assert_eq!(p.stage(), Stage::Aiming(0));
-        let mut seen = Vec::new();
-        for i in 0..3 {
-            p.on_settled();
-            assert_eq!(p.stage(), Stage::Capturing(i));
-            p.on_settled();
-            assert_eq!(p.stage(), Stage::Capturing(i), "settled twice");
-            seen.push(p.target().unwrap());
-            p.on_captured();
-            assert_eq!(p.captured(), i + 1);
-        }
-        assert_eq!(seen, p.stations());
-        assert_eq!(p.stage(), Stage::Returning);
-        assert_eq!(p.target(), Some(start));
-        assert_eq!(p.percent(), 75);
-        p.on_captured();
-        assert_eq!(p.stage(), Stage::Returning);
-        p.on_settled();
-        assert_eq!(p.stage(), Stage::Done);
-        assert_eq!((p.target(), p.percent()), (None, 100));
     }
 
     #[test]
     fn progress_events_have_the_documented_shape() {
-        let mut p = Panorama::new(
-            Aim {
-                pitch_deg: 0.0,
-                yaw_deg: 0.0,
-            },
-            8,
-            0.0,
-        );
-        p.on_settled();
-        p.on_captured();
-        let v = serde_json::to_value(p.progress(Status::InProgress, 0)).unwrap();
+        let (d, end) = progress(&event(PanoTaskStatus::InProgress, TaskResult::Ok, 11)).unwrap();
+        assert!(!end);
         assert_eq!(
-            v,
+            serde_json::to_value(d).unwrap(),
             json!({
                 "output": {
                     "status": "in_progress",
@@ -352,44 +97,35 @@ mod tests {
                 "result": 0,
             })
         );
-        let fail = serde_json::to_value(p.progress(Status::Fail, 314013)).unwrap();
+        let (fail, end) =
+            progress(&event(PanoTaskStatus::Failed, TaskResult::WrongState, 11)).unwrap();
+        let fail = serde_json::to_value(fail).unwrap();
+        assert!(end);
         assert_eq!(fail["output"]["status"], "fail");
         assert_eq!(fail["output"]["progress"]["current_step"], 3000);
         assert_eq!(fail["output"]["progress"]["percent"], 11);
         assert_eq!(fail["result"], 314013);
-        let ok = serde_json::to_value(p.progress(Status::Ok, 0)).unwrap();
+        let (stopped, end) = progress(&event(PanoTaskStatus::Stopped, TaskResult::Ok, 22)).unwrap();
+        let stopped = serde_json::to_value(stopped).unwrap();
+        assert!(end);
+        assert_eq!(stopped["output"]["status"], "fail");
+        assert_eq!(
+            (
+                stopped["result"].clone(),
+                stopped["output"]["progress"]["percent"].clone()
+            ),
+            (json!(0), json!(22))
+        );
+        let (ok, end) = progress(&event(PanoTaskStatus::Done, TaskResult::Ok, 88)).unwrap();
+        let ok = serde_json::to_value(ok).unwrap();
+        assert!(end);
         assert_eq!(ok["output"]["status"], "ok");
         assert_eq!(ok["output"]["progress"]["percent"], 100);
         assert_eq!(ok["output"]["progress"]["current_step"], 3000);
-    }
-
-    #[test]
-    fn reached_compares_around_the_circle() {
-        let a = Aim {
-            pitch_deg: 0.0,
-            yaw_deg: 180.0,
-        };
-        assert!(a.reached_by(1.0, -179.0, 2.0));
-        assert!(a.reached_by(-1.9, 178.5, 2.0));
-        assert!(!a.reached_by(2.5, 180.0, 2.0));
-        assert!(!a.reached_by(0.0, 177.0, 2.0));
-        // Straight down: the yaw cannot be seen, only the pitch counts.
-        let down = Aim {
-            pitch_deg: -90.0,
-            yaw_deg: 40.0,
-        };
-        assert!(down.reached_by(-89.0, -120.0, 2.0));
-        assert!(!down.reached_by(-80.0, 40.0, 2.0));
-        assert_eq!(
-            Aim {
-                pitch_deg: -120.0,
-                yaw_deg: 190.0
-            }
-            .command(),
-            Command::Gimbal {
-                pitch_deg: -90.0,
-                yaw_deg: -170.0
-            }
-        );
+        assert!(progress(&TaskEvent {
+            status: 9,
+            ..Default::default()
+        })
+        .is_none());
     }
 }

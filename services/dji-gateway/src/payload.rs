@@ -5,7 +5,7 @@
 //! | method | commands |
 //! |---|---|
 //! | camera_mode_switch | 0 → `CameraMode Image`, 1 → `CameraMode Video`, 3 (panorama) → `CameraMode Image` and the gateway's panorama mode (remembered once acknowledged; 0/1 leave it); 2 (low light) unsupported |
-//! | camera_photo_take / camera_photo_stop | `CameraCapture` / `CameraCaptureStop`; in panorama mode a panorama ([`crate::pano`]; photo_stop ends a running one) |
+//! | camera_photo_take / camera_photo_stop | `CameraCapture` / `CameraCaptureStop`; in panorama mode a panorama, swept by the shot engine ([`crate::pano`]; photo_stop ends a running one) |
 //! | camera_recording_start / _stop | `RecordStart` / `RecordStop` |
 //! | camera_screen_drag | `GimbalRate` (pitch, yaw); locked: the gimbal only pitches and the aircraft turns (`SetYaw` relative, yaw_speed × [`DRAG_STEP_S`]) |
 //! | camera_aim | pinhole angles from hfov/vfov → `Gimbal` = current gimbal + offset; locked: `Gimbal` pitch and the aircraft yaws by the offset |
@@ -21,7 +21,6 @@ use skymesh_ipc_types::{CameraModeKind, Command, FocusMode, ZoomMode};
 
 use crate::config::PayloadSettings;
 use crate::link::Snapshot;
-use crate::pano::{Aim, Panorama};
 use crate::progress::Heights;
 
 /// A locked screen drag turns the aircraft by `yaw_speed × DRAG_STEP_S` per message:
@@ -67,9 +66,10 @@ pub enum Plan {
     /// camera_mode_switch: send `command`; once it succeeded the gateway's payload
     /// is in panorama mode or not ([`PayloadMemory::panorama`]).
     SwitchMode { command: Command, panorama: bool },
-    /// camera_photo_take in panorama mode: run `pano` (after `ClearRoi` when
-    /// `clear_roi`: camera_look_at's ROI would hold the gimbal).
-    Panorama { pano: Panorama, clear_roi: bool },
+    /// camera_photo_take in panorama mode: a panorama from where the gimbal points
+    /// (after `ClearRoi` when `clear_roi`: camera_look_at's ROI would hold the
+    /// gimbal).
+    Panorama { clear_roi: bool },
     /// No MAVLink equivalent on this aircraft: `PAYLOAD_UNSUPPORTED`, with why.
     Unsupported(&'static str),
     /// Refused with this code and reason.
@@ -173,22 +173,9 @@ fn plan_one(
                 panorama,
             }
         }
-        S::CameraPhotoTake { .. } if mem.panorama => {
-            let Some((pitch, yaw)) = gimbal(snap) else {
-                return Plan::Reject(
-                    codes::WRONG_STATE,
-                    "the gimbal attitude is unknown: a panorama cannot check its stations".into(),
-                );
-            };
-            let start = Aim {
-                pitch_deg: pitch,
-                yaw_deg: yaw,
-            };
-            Plan::Panorama {
-                pano: Panorama::new(start, p.pano_stations, p.pano_pitch_deg),
-                clear_roi: false,
-            }
-        }
+        // The runner checks the gimbal's attitude (it starts there) and plans the
+        // stations.
+        S::CameraPhotoTake { .. } if mem.panorama => Plan::Panorama { clear_roi: false },
         S::CameraPhotoTake { .. } => cmds(vec![Command::CameraCapture]),
         S::CameraPhotoStop { .. } => cmds(vec![Command::CameraCaptureStop { camera }]),
         S::CameraRecordingStart { .. } => cmds(vec![Command::RecordStart]),
@@ -451,7 +438,7 @@ mod tests {
     }
 
     #[test]
-    fn photo_take_in_panorama_mode_plans_a_panorama_from_the_gimbal() {
+    fn photo_take_in_panorama_mode_plans_a_panorama() {
         use skymesh_ipc_types::{AuthorityState, CommandSource};
         let take = ServiceRequest::CameraPhotoTake {
             payload_index: pi(),
@@ -464,34 +451,20 @@ mod tests {
             "not in panorama mode"
         );
         mem.panorama = true;
-        match plan(&take, &settings(), &s, None, &mut mem) {
-            Plan::Panorama { pano, clear_roi } => {
-                assert!(!clear_roi);
-                let start = pano.start();
-                assert_eq!((start.pitch_deg, start.yaw_deg), (-30.0, 20.0));
-                assert_eq!(pano.stations().len(), 8);
-                assert_eq!(pano.stations()[0].yaw_deg, 20.0);
-                assert!(pano.stations().iter().all(|a| a.pitch_deg == 0.0));
-            }
-            other => panic!("{other:?}"),
-        }
-        assert!(matches!(
-            plan(&take, &settings(), &Snapshot::default(), None, &mut mem),
-            Plan::Reject(codes::WRONG_STATE, _)
-        ));
+        assert_eq!(
+            plan(&take, &settings(), &s, None, &mut mem),
+            Plan::Panorama { clear_roi: false }
+        );
         // An ROI from camera_look_at would hold the gimbal: cleared first.
         s.authority = Some(AuthorityState {
             flight_holder: CommandSource::DjiDrc.to_wire(),
             ..Default::default()
         });
         mem.look_at_active = true;
-        assert!(matches!(
+        assert_eq!(
             plan(&take, &settings(), &s, None, &mut mem),
-            Plan::Panorama {
-                clear_roi: true,
-                ..
-            }
-        ));
+            Plan::Panorama { clear_roi: true }
+        );
         assert!(!mem.look_at_active);
     }
 

@@ -10,16 +10,11 @@
 //! configured `[flight] geoid_undulation_m` only while the autopilot reports none.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
 
 use dji_proto::PathPoint;
 use skymesh_ipc_types::TaskPoint;
 
 use crate::link::Snapshot;
-
-/// A failure condition (mode, authority, link, disarm) must hold this long before a
-/// task ends: status and authority samples may lag a command just accepted.
-pub const FAILURE_DEBOUNCE: Duration = Duration::from_millis(1500);
 
 /// Converts between DJI ellipsoid heights and heights above home.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,5 +1,6 @@
-//! takeoff_to_point, fly_to_point (stop, update) and POI mode, translated: the
-//! flying is done by the shot engine's task runner, reached over the bus
+//! takeoff_to_point, fly_to_point (stop, update), POI mode and the panorama
+//! capture, translated: the flying (and the gimbal sweep) is done by the shot
+//! engine's task runner, reached over the bus
 //! ([`TaskRequest`] / [`TaskEvent`], `skymesh/task/{id}/{request,event}`). The
 //! runner commands the vehicle as this gateway's source (`dji_drc`), so authority,
 //! refusals and acks read as if the gateway had sent the commands.
@@ -9,8 +10,8 @@
 //! [`BACKEND_WAIT`] (the shot engine is not running), or when a reply does not come
 //! within [`TaskClient::reply_timeout`]. The runner's events become
 //! `takeoff_to_point_progress` / `fly_to_point_progress` (the DJI ids and the
-//! ellipsoid heights are the gateway's: kept per task here) and
-//! `poi_status_notify`.
+//! ellipsoid heights are the gateway's: kept per task here), `poi_status_notify`
+//! and `camera_photo_take_progress` ([`crate::pano`]).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -31,6 +32,7 @@ use skymesh_runtime::{Bus, CancellationToken, Publisher};
 
 use crate::config::Settings;
 use crate::link::SOURCE;
+use crate::pano;
 use crate::progress::{path_points, round1, Heights};
 use crate::shared::Emitter;
 
@@ -57,16 +59,40 @@ enum Starts {
     Nothing,
     Flight(FlightInfo),
     Poi,
+    Pano,
+}
+
+/// What the reply to a request becomes.
+pub enum OnReply {
+    /// The DJI code of the runner's result.
+    Code,
+    /// camera_photo_take of a panorama: ok is 0 with `output.status` `in_progress`.
+    PanoStarted,
+    /// The runner has no such task (`NO_TASK`): this handles the request instead
+    /// (camera_photo_stop of a panorama that ended meanwhile: an ordinary stop).
+    OrElse(Box<dyn FnOnce(Envelope) + Send>),
+}
+
+impl std::fmt::Debug for OnReply {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            OnReply::Code => "Code",
+            OnReply::PanoStarted => "PanoStarted",
+            OnReply::OrElse(_) => "OrElse",
+        })
+    }
 }
 
 #[derive(Debug, Default)]
 struct State {
     /// Requests waiting for their reply.
-    pending: HashMap<u32, Envelope>,
+    pending: HashMap<u32, (Envelope, OnReply)>,
     /// Flight tasks asked for and not ended, by their request id.
     flights: HashMap<u32, FlightInfo>,
     /// Orbits asked for and not ended.
     pois: HashSet<u32>,
+    /// Panoramas asked for and not ended.
+    panos: HashSet<u32>,
 }
 
 /// Cheap to clone.
@@ -208,6 +234,11 @@ impl TaskClient {
         !lock(&self.state).pois.is_empty()
     }
 
+    /// True while a panorama asked for has not ended.
+    pub fn pano_active(&self) -> bool {
+        !lock(&self.state).panos.is_empty()
+    }
+
     /// How long a request waits for the runner's reply: the runner sends up to
     /// three commands before it answers, each waiting up to the ack timeout.
     pub fn reply_timeout(&self) -> Duration {
@@ -316,16 +347,42 @@ impl TaskClient {
         self.request(env, self.base(TaskRequestKind::PoiExit), Starts::Nothing);
     }
 
+    /// camera_photo_take in panorama mode (`clear_roi`: camera_look_at's ROI would
+    /// hold the gimbal).
+    pub fn pano_start(&self, env: Envelope, clear_roi: bool) {
+        let p = &self.settings.payload;
+        let req = TaskRequest {
+            pano_stations: u8::try_from(p.pano_stations).unwrap_or(u8::MAX),
+            pano_pitch_deg: p.pano_pitch_deg as f32,
+            pano_settle_timeout_ms: u32::try_from(p.pano_settle_timeout.as_millis())
+                .unwrap_or(u32::MAX),
+            pano_clear_roi: u8::from(clear_roi),
+            ..self.base(TaskRequestKind::PanoStart)
+        };
+        self.send(env, req, Starts::Pano, OnReply::PanoStarted);
+    }
+
+    /// camera_photo_stop of a running panorama; `otherwise` handles it if the
+    /// panorama ended meanwhile.
+    pub fn pano_stop(&self, env: Envelope, otherwise: Box<dyn FnOnce(Envelope) + Send>) {
+        let req = self.base(TaskRequestKind::PanoStop);
+        self.send(env, req, Starts::Nothing, OnReply::OrElse(otherwise));
+    }
+
     fn runner_reads(&self) -> bool {
         lock(&self.requests).subscribers() > 0
     }
 
-    fn request(&self, env: Envelope, mut req: TaskRequest, starts: Starts) {
+    fn request(&self, env: Envelope, req: TaskRequest, starts: Starts) {
+        self.send(env, req, starts, OnReply::Code);
+    }
+
+    fn send(&self, env: Envelope, mut req: TaskRequest, starts: Starts, on: OnReply) {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         req.request_id = id;
         {
             let mut s = lock(&self.state);
-            s.pending.insert(id, env);
+            s.pending.insert(id, (env, on));
             match starts {
                 Starts::Nothing => {}
                 Starts::Flight(info) => {
@@ -333,6 +390,9 @@ impl TaskClient {
                 }
                 Starts::Poi => {
                     s.pois.insert(id);
+                }
+                Starts::Pano => {
+                    s.panos.insert(id);
                 }
             }
         }
@@ -355,6 +415,11 @@ impl TaskClient {
                         "no task runner (is the shot engine running?): answered internal error"
                     );
                     c.answer(id, codes::INTERNAL);
+                    // Without a runner no task runs: none is waited for any more.
+                    let mut s = lock(&c.state);
+                    s.flights.clear();
+                    s.pois.clear();
+                    s.panos.clear();
                 }
             });
         }
@@ -379,16 +444,24 @@ impl TaskClient {
     /// Replies `code` to request `id` if it still waits; a refused request starts
     /// nothing.
     fn answer(&self, id: u32, code: u32) {
-        let env = {
+        let waiting = {
             let mut s = lock(&self.state);
             if code != codes::OK {
                 s.flights.remove(&id);
                 s.pois.remove(&id);
+                s.panos.remove(&id);
             }
             s.pending.remove(&id)
         };
-        if let Some(env) = env {
-            self.emit.reply(env, code);
+        match waiting {
+            None => {}
+            Some((env, OnReply::PanoStarted)) if code == codes::OK => self.emit.reply_with_output(
+                env,
+                code,
+                serde_json::json!({ "status": "in_progress" }),
+            ),
+            Some((env, OnReply::OrElse(otherwise))) if code == codes::NO_TASK => otherwise(env),
+            Some((env, _)) => self.emit.reply(env, code),
         }
     }
 
@@ -414,8 +487,30 @@ impl TaskClient {
                 }
                 self.emit.event("poi_status_notify", n, true);
             }
+            Ok(TaskEventKind::Pano) => self.on_pano(e),
             Err(err) => tracing::warn!(error = %err, "unknown task event"),
         }
+    }
+
+    fn on_pano(&self, e: &TaskEvent) {
+        let Some((data, ends)) = pano::progress(e) else {
+            return tracing::warn!(?e, "panorama event with an unknown status");
+        };
+        {
+            let mut s = lock(&self.state);
+            let known = if ends {
+                s.panos.remove(&e.request_id)
+            } else {
+                s.panos.contains(&e.request_id)
+            };
+            if !known {
+                return tracing::debug!(
+                    id = e.request_id,
+                    "event of a panorama not asked for here"
+                );
+            }
+        }
+        self.emit.event(pano::METHOD, data, ends);
     }
 
     fn on_flight(&self, e: &TaskEvent) {
