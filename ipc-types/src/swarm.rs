@@ -529,7 +529,11 @@ pub struct SwarmState {
     pub reserved: [u8; 6],
     /// Seconds since the swarm-queue started (the broadcast's timestamp).
     pub time_s: f64,
-    #[cfg_attr(feature = "serde", serde(with = "crate::json::big_array"), schemars(with = "crate::json::BigArray<SwarmDrone, SWARM_MAX_DRONES>"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(with = "crate::json::big_array"),
+        schemars(with = "crate::json::BigArray<SwarmDrone, SWARM_MAX_DRONES>")
+    )]
     pub drones: [SwarmDrone; SWARM_MAX_DRONES],
 }
 crate::assert_layout!(
