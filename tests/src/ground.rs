@@ -4,8 +4,8 @@
 use std::time::{Duration, Instant};
 
 use skymesh_ipc_types::{
-    topics, AuthorityState, Command, CommandAck, CommandSource, VehicleCommand, VehicleState,
-    VehicleStatus,
+    topics, AckResult, AuthorityState, Command, CommandAck, CommandSource, FlightMode,
+    VehicleCommand, VehicleState, VehicleStatus,
 };
 use skymesh_runtime::{Publisher, Subscriber};
 
@@ -36,6 +36,8 @@ pub struct Ground {
     next_id: u32,
     /// Acks read while waiting for another, with when they were read.
     pub early: Vec<(Instant, CommandAck)>,
+    /// When [`Ground::keep_authority`] last grabbed flight authority.
+    last_grab: Option<Instant>,
 }
 
 impl Ground {
@@ -51,6 +53,7 @@ impl Ground {
             _bus: bus,
             next_id: 100,
             early: Vec::new(),
+            last_grab: None,
         }
     }
 
@@ -97,6 +100,35 @@ impl Ground {
     pub async fn command(&mut self, source: CommandSource, cmd: &Command) -> CommandAck {
         let id = self.send(source, cmd);
         self.ack(id).await
+    }
+
+    /// Sends `cmd` as the operator and asserts that the arbiter accepted it.
+    pub async fn operator_accepted(&mut self, cmd: &Command) {
+        let ack = self.command(CommandSource::Operator, cmd).await;
+        assert_eq!(ack.result(), Some(AckResult::Accepted), "{cmd:?} → {ack:?}");
+    }
+
+    /// The operator's take-off: guided, arm, take off to `alt_rel_m`, each accepted.
+    /// While the take-off flies, call [`Ground::keep_authority`] in the watch loop.
+    pub async fn take_off(&mut self, alt_rel_m: f32) {
+        self.operator_accepted(&Command::SetMode(FlightMode::Guided))
+            .await;
+        self.operator_accepted(&Command::Arm { force: false }).await;
+        self.operator_accepted(&Command::Takeoff { alt_rel_m })
+            .await;
+    }
+
+    /// Renews the operator's flight authority once its last grab is a second old, as
+    /// a source flying a position target must (the acks are not awaited).
+    pub fn keep_authority(&mut self) {
+        if self
+            .last_grab
+            .is_some_and(|t| t.elapsed() < Duration::from_secs(1))
+        {
+            return;
+        }
+        self.last_grab = Some(Instant::now());
+        self.send(CommandSource::Operator, &Command::GrabFlightAuthority);
     }
 
     /// The next VehicleState that satisfies `ok`.

@@ -16,11 +16,8 @@ use std::process::{Child, Command as Process, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
+use skymesh_e2e::ground::{runtime, Ground};
 use skymesh_e2e::{free_port, Mesh, MeshOptions};
-use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
-};
-use skymesh_runtime::{Publisher, Subscriber};
 
 const TOKEN: &str = "e2e-console-token-0123456789";
 const STARTUP: Duration = Duration::from_secs(30);
@@ -338,36 +335,6 @@ fn chromium() -> Result<PathBuf, String> {
 
 // ---- the mesh side -------------------------------------------------------------
 
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
-
-/// Publishes `cmd` as the operator and waits for its acceptance.
-async fn command(
-    cmds: &mut Publisher<VehicleCommand>,
-    acks: &mut Subscriber<CommandAck>,
-    id: u32,
-    cmd: &Command,
-) {
-    cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd).unwrap())
-        .unwrap();
-    let ack = loop {
-        let a = acks
-            .recv_timeout(Duration::from_secs(10))
-            .await
-            .unwrap()
-            .expect("no CommandAck within 10 s");
-        if a.command_id == id {
-            break a;
-        }
-    };
-    assert_eq!(ack.result(), Some(AckResult::Accepted), "{cmd:?} → {ack:?}");
-}
-
 const ALTITUDE: &str = "const e = document.querySelector('#vehicle-1 [data-f=alt]'); \
      return e && e.dataset.value !== '' && e.dataset.value !== undefined ? Number(e.dataset.value) : null;";
 
@@ -419,15 +386,7 @@ fn the_console_shows_the_mesh_in_a_real_browser_and_its_actions_need_the_token()
     );
 
     let rt = runtime();
-    let bus = rt.block_on(async { mesh.bus("e2e-console") }).unwrap();
-    let (mut cmds, mut acks) = rt.block_on(async {
-        (
-            bus.publisher::<VehicleCommand>(&topics::vehicle_command(1))
-                .unwrap(),
-            bus.subscriber::<CommandAck>(&topics::vehicle_command_ack(1))
-                .unwrap(),
-        )
-    });
+    let mut operator = rt.block_on(async { Ground::new(&mesh, "e2e-console") });
 
     // On the ground: the page shows a position and an altitude near 0.
     let alt0 = browser.wait(
@@ -438,28 +397,10 @@ fn the_console_shows_the_mesh_in_a_real_browser_and_its_actions_need_the_token()
     );
     let alt0 = alt0.as_f64().unwrap();
     assert!(alt0.abs() < 1.0, "on the ground: {alt0} m");
-    rt.block_on(async {
-        command(
-            &mut cmds,
-            &mut acks,
-            100,
-            &Command::SetMode(FlightMode::Guided),
-        )
-        .await;
-        command(&mut cmds, &mut acks, 101, &Command::Arm { force: false }).await;
-        command(
-            &mut cmds,
-            &mut acks,
-            102,
-            &Command::Takeoff { alt_rel_m: 10.0 },
-        )
-        .await;
-    });
+    rt.block_on(operator.take_off(10.0));
     // The operator keeps its flight authority while the take-off flies (a grab
     // about every second), as a source flying a position target must.
     let deadline = Instant::now() + FLIGHT;
-    let mut keep_id = 200;
-    let mut last_grab = Instant::now();
     let alt = loop {
         let alt = browser.js(ALTITUDE).as_f64().unwrap_or(f64::NAN);
         if alt > 5.0 {
@@ -470,17 +411,7 @@ fn the_console_shows_the_mesh_in_a_real_browser_and_its_actions_need_the_token()
             "the page's altitude never passed 5 m (last {alt})\n{}",
             mesh.output()
         );
-        if last_grab.elapsed() >= Duration::from_secs(1) {
-            last_grab = Instant::now();
-            keep_id += 1;
-            let keep = VehicleCommand::new(
-                1,
-                CommandSource::Operator,
-                keep_id,
-                &Command::GrabFlightAuthority,
-            );
-            cmds.publish(keep.unwrap()).unwrap();
-        }
+        operator.keep_authority();
         std::thread::sleep(Duration::from_millis(250));
     };
     println!("altitude in the page: {alt0:.2} m on the ground, {alt:.2} m in the take-off");
@@ -604,5 +535,5 @@ fn the_console_shows_the_mesh_in_a_real_browser_and_its_actions_need_the_token()
         |v| *v == true,
     );
     drop(browser);
-    drop(bus);
+    drop(operator);
 }

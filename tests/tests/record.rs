@@ -14,12 +14,9 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use serde_json::Value;
+use skymesh_e2e::ground::{runtime, Ground};
 use skymesh_e2e::{bin_dir, binary, free_port, free_udp_port, repo_root, Mesh, MeshOptions};
-use skymesh_ipc_types::{
-    topics, AckResult, Command as VCommand, CommandAck, CommandSource, FlightMode, VehicleCommand,
-    VehicleState,
-};
-use skymesh_runtime::{Domain, Publisher, Subscriber};
+use skymesh_runtime::Domain;
 
 const STARTUP: Duration = Duration::from_secs(30);
 /// Generous bounds for events, never for how fast they come.
@@ -28,14 +25,6 @@ const FLIGHT: Duration = Duration::from_secs(120);
 const RECORD_FOR: Duration = Duration::from_secs(20);
 const STATE: &str = "skymesh/vehicle/1/state";
 const SWARM: &str = "skymesh/swarm/state";
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 /// Kills a child process on drop (a failed test leaves nothing running).
 struct Reaped(Option<Child>);
@@ -91,28 +80,6 @@ fn read(path: &Path) -> String {
     std::fs::read_to_string(path).unwrap_or_default()
 }
 
-/// Publishes `cmd` and waits for its acceptance.
-async fn command(
-    cmds: &mut Publisher<VehicleCommand>,
-    acks: &mut Subscriber<CommandAck>,
-    id: u32,
-    cmd: &VCommand,
-) {
-    cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd).unwrap())
-        .unwrap();
-    let ack = loop {
-        let a = acks
-            .recv_timeout(Duration::from_secs(10))
-            .await
-            .unwrap()
-            .expect("no CommandAck within 10 s");
-        if a.command_id == id {
-            break a;
-        }
-    };
-    assert_eq!(ack.result(), Some(AckResult::Accepted), "{cmd:?} → {ack:?}");
-}
-
 /// Records the mesh's vehicle topics and swarm state while vehicle 1 takes off;
 /// returns the recording's path (in `dir`).
 fn record_a_takeoff(dir: &Path) -> PathBuf {
@@ -155,53 +122,23 @@ fn record_a_takeoff(dir: &Path) -> PathBuf {
 
     let rt = runtime();
     rt.block_on(async {
-        let bus = mesh.bus("e2e-record").unwrap();
-        let mut acks = bus
-            .subscriber::<CommandAck>(&topics::vehicle_command_ack(1))
-            .unwrap();
-        let mut cmds = bus
-            .publisher::<VehicleCommand>(&topics::vehicle_command(1))
-            .unwrap();
-        let mut state = bus
-            .subscriber::<VehicleState>(&topics::vehicle_state(1))
-            .unwrap();
-        command(
-            &mut cmds,
-            &mut acks,
-            100,
-            &VCommand::SetMode(FlightMode::Guided),
-        )
-        .await;
-        command(&mut cmds, &mut acks, 101, &VCommand::Arm { force: false }).await;
-        command(
-            &mut cmds,
-            &mut acks,
-            102,
-            &VCommand::Takeoff { alt_rel_m: 10.0 },
-        )
-        .await;
+        let mut operator = Ground::new(&mesh, "e2e-record");
+        operator.take_off(10.0).await;
         // Keep flight authority while the take-off flies (a grab a second), until
         // the vehicle is above 5 m and the recording is RECORD_FOR long.
         let deadline = Instant::now() + FLIGHT;
-        let mut keep_id = 200;
-        let mut last_grab = Instant::now();
         let mut top = 0.0f32;
         while top <= 5.0 || started.elapsed() < RECORD_FOR {
             assert!(Instant::now() < deadline, "no climb above 5 m: top {top} m");
-            if let Some(s) = state.recv_timeout(Duration::from_secs(1)).await.unwrap() {
+            if let Some(s) = operator
+                .state
+                .recv_timeout(Duration::from_secs(1))
+                .await
+                .unwrap()
+            {
                 top = top.max(s.alt_rel_m);
             }
-            if last_grab.elapsed() >= Duration::from_secs(1) {
-                last_grab = Instant::now();
-                keep_id += 1;
-                let keep = VehicleCommand::new(
-                    1,
-                    CommandSource::Operator,
-                    keep_id,
-                    &VCommand::GrabFlightAuthority,
-                );
-                cmds.publish(keep.unwrap()).unwrap();
-            }
+            operator.keep_authority();
         }
         println!("climbed to {top:.2} m while recording");
     });

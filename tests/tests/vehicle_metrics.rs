@@ -4,11 +4,9 @@
 
 use std::time::{Duration, Instant};
 
+use skymesh_e2e::ground::{runtime, Ground};
 use skymesh_e2e::{find_metric, Mesh, MeshOptions};
-use skymesh_ipc_types::{
-    topics, AckResult, Command, CommandAck, CommandSource, FlightMode, VehicleCommand,
-};
-use skymesh_runtime::{Publisher, Subscriber};
+use skymesh_ipc_types::FlightMode;
 
 const STARTUP: Duration = Duration::from_secs(30);
 /// Generous: a take-off to 10 m takes about 10 s on an idle machine.
@@ -25,14 +23,6 @@ const FAMILIES: [&str; 9] = [
     "skymesh_vehicle_telemetry_age_seconds",
     "skymesh_vehicle_status_age_seconds",
 ];
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 fn gauge(metrics: &str, name: &str) -> Option<f64> {
     find_metric(metrics, &format!("{name}{{vehicle=\"1\"}}"))
@@ -71,28 +61,6 @@ async fn scrape_until(
         between();
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
-}
-
-/// Publishes `cmd` and waits for its acceptance.
-async fn command(
-    cmds: &mut Publisher<VehicleCommand>,
-    acks: &mut Subscriber<CommandAck>,
-    id: u32,
-    cmd: &Command,
-) {
-    cmds.publish(VehicleCommand::new(1, CommandSource::Operator, id, cmd).unwrap())
-        .unwrap();
-    let ack = loop {
-        let a = acks
-            .recv_timeout(Duration::from_secs(10))
-            .await
-            .unwrap()
-            .expect("no CommandAck within 10 s");
-        if a.command_id == id {
-            break a;
-        }
-    };
-    assert_eq!(ack.result(), Some(AckResult::Accepted), "{cmd:?} → {ack:?}");
 }
 
 #[test]
@@ -140,50 +108,16 @@ fn the_supervisor_exports_the_vehicle_gauges_and_they_follow_a_takeoff() {
         let speed = gauge(&ground, "skymesh_vehicle_ground_speed_meters_per_second").unwrap();
         assert!(speed.is_finite() && speed >= 0.0, "{ground}");
 
-        let bus = mesh.bus("e2e-gauges").unwrap();
-        let mut acks = bus
-            .subscriber::<CommandAck>(&topics::vehicle_command_ack(1))
-            .unwrap();
-        let mut cmds = bus
-            .publisher::<VehicleCommand>(&topics::vehicle_command(1))
-            .unwrap();
-        command(
-            &mut cmds,
-            &mut acks,
-            100,
-            &Command::SetMode(FlightMode::Guided),
-        )
-        .await;
-        command(&mut cmds, &mut acks, 101, &Command::Arm { force: false }).await;
-        command(
-            &mut cmds,
-            &mut acks,
-            102,
-            &Command::Takeoff { alt_rel_m: 10.0 },
-        )
-        .await;
+        let mut operator = Ground::new(&mesh, "e2e-gauges");
+        operator.take_off(10.0).await;
 
         // The operator keeps its flight authority while the take-off flies (a grab
         // about every second), as a source flying a position target must.
-        let mut keep_id = 200;
-        let mut last_grab = Instant::now();
         let flying = scrape_until(
             &mesh,
             FLIGHT,
             "altitude above 5 m, armed, guided",
-            || {
-                if last_grab.elapsed() >= Duration::from_secs(1) {
-                    last_grab = Instant::now();
-                    keep_id += 1;
-                    let keep = VehicleCommand::new(
-                        1,
-                        CommandSource::Operator,
-                        keep_id,
-                        &Command::GrabFlightAuthority,
-                    );
-                    cmds.publish(keep.unwrap()).unwrap();
-                }
-            },
+            || operator.keep_authority(),
             |m| {
                 gauge(m, "skymesh_vehicle_altitude_meters").is_some_and(|a| a > 5.0)
                     && gauge(m, "skymesh_vehicle_armed") == Some(1.0)
