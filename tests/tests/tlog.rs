@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use mavlink::dialects::ardupilotmega::MavMessage;
+use mavlink::dialects::ardupilotmega::{MavCmd, MavMessage};
 use mavlink::MavlinkReader;
 use skymesh_e2e::ground::{runtime, Ground, PATIENCE};
 use skymesh_e2e::{Mesh, MeshOptions};
@@ -131,6 +131,7 @@ fn a_take_off_is_recorded_in_a_tlog_every_reader_parses() {
     let path = &found[0];
     let recs = records(&std::fs::read(path).unwrap());
     let mut heartbeats = 0;
+    let mut own_rate_requests = 0;
     let mut rel_alt_mm = Vec::new();
     for (i, r) in recs.iter().enumerate() {
         assert!(
@@ -145,11 +146,22 @@ fn a_take_off_is_recorded_in_a_tlog_every_reader_parses() {
         match msg {
             MavMessage::HEARTBEAT(_) => heartbeats += 1,
             MavMessage::GLOBAL_POSITION_INT(p) => rel_alt_mm.push(p.relative_alt),
+            // autopilot-link's own frames are in the log too: the armed vehicle's
+            // 50 Hz ATTITUDE request follows the armed HEARTBEAT that opened the log.
+            MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL && c.param2 == 20_000.0 =>
+            {
+                own_rate_requests += 1
+            }
             _ => {}
         }
     }
     assert!(heartbeats > 0, "no HEARTBEAT in {} records", recs.len());
     assert!(!rel_alt_mm.is_empty(), "no GLOBAL_POSITION_INT");
+    assert!(
+        own_rate_requests > 0,
+        "autopilot-link's armed-rate SET_MESSAGE_INTERVAL is not in the log"
+    );
     let first = rel_alt_mm[0];
     let top = *rel_alt_mm.iter().max().unwrap();
     assert!(first < 1000, "the log starts on the ground: {first} mm");

@@ -380,6 +380,14 @@ impl Hub {
         }
     }
 
+    /// One of our own frames (a command, a setpoint, a stream request) written to
+    /// the autopilot: into the flight log only; the endpoints see the vehicle's answers.
+    pub fn own_written(&self, frame: &RawFrame) {
+        if let Some(tlog) = self.tlog.get() {
+            tlog.to_autopilot(frame);
+        }
+    }
+
     fn to_autopilot(&self, frame: &RawFrame) {
         let outbox = lock(&self.autopilot).clone();
         let result = match outbox {

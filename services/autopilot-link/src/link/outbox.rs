@@ -69,11 +69,14 @@ impl SendContext {
         frame
     }
 
-    /// Counts a message written, and shows our HEARTBEAT to the endpoints.
+    /// Counts a message written, shows our HEARTBEAT to the endpoints (and the
+    /// flight log), and puts every other frame of ours in the flight log.
     pub(super) fn written(&self, name: &'static str, frame: &RawFrame) {
         self.metrics.sent(name);
         if frame.message_id() == HEARTBEAT_ID {
             self.hub.from_local(frame);
+        } else {
+            self.hub.own_written(frame);
         }
     }
 }
